@@ -1,0 +1,207 @@
+//! Robust fits of the DoF depth model δ(Z) to per-pixel (Z, σ) estimates.
+//!
+//! Both forms are fitted by iteratively reweighted least squares with Huber
+//! weights (scale = 1.4826·MAD, k = 1.345: 95% efficiency on Gaussian residuals,
+//! bounded influence of the outliers that depth edges and textureless leftovers
+//! produce):
+//! * quadratic δ = aZ² + bZ + c (the paper's; linear in its coefficients);
+//! * thin lens δ = k·|u − u_f| + c0 with u the inverse depth: for each candidate
+//!   focus u_f the model is linear in (k, c0); u_f is found by a grid over the
+//!   sample range and golden-section refinement.
+//! The form with the lower mean Huber loss wins; the thin lens wins ties within 1%
+//! because it stays bounded outside the fitted range. A curve whose variation over
+//! the range is below 3 standard errors (or 0.05 px) is replaced by a constant.
+
+use crate::model::{DepthUnits, DofCurve};
+use nalgebra::{DMatrix, DVector};
+
+const HUBER_K: f64 = 1.345;
+
+#[derive(Clone, Debug)]
+pub struct CurveFit {
+    pub curve: DofCurve,
+    /// Mean Huber loss of the chosen form (px²).
+    pub loss: f64,
+    /// Robust residual scale (px).
+    pub scale: f64,
+    /// Approximate RMS standard error of the curve over the samples: scale·√(p/N).
+    pub stderr_px: f64,
+    pub quadratic: Option<DofCurve>,
+    pub thin_lens: Option<DofCurve>,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn robust_scale(res: &[f64]) -> f64 {
+    let mut a: Vec<f64> = res.iter().map(|r| r.abs()).collect();
+    (1.4826 * median(&mut a)).max(1e-6)
+}
+
+fn huber_loss(res: &[f64], scale: f64) -> f64 {
+    let k = HUBER_K * scale;
+    res.iter().map(|&r| if r.abs() <= k { 0.5 * r * r } else { k * (r.abs() - 0.5 * k) }).sum::<f64>()
+        / res.len().max(1) as f64
+}
+
+/// IRLS for y ≈ X β with Huber weights. Returns (β, residuals) or None if singular.
+fn irls(x: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, Vec<f64>)> {
+    let n = y.len();
+    let mut w = vec![1.0f64; n];
+    let mut beta = DVector::zeros(x.ncols());
+    for _ in 0..15 {
+        let mut xtwx = DMatrix::<f64>::zeros(x.ncols(), x.ncols());
+        let mut xtwy = DVector::<f64>::zeros(x.ncols());
+        for i in 0..n {
+            let row = x.row(i);
+            xtwx += w[i] * row.transpose() * row;
+            xtwy += w[i] * y[i] * row.transpose();
+        }
+        // Tiny ridge: keeps a degenerate design (all samples at one depth) solvable;
+        // the flatness test then turns it into a constant.
+        for d in 0..x.ncols() {
+            xtwx[(d, d)] += 1e-9 * (1.0 + xtwx[(d, d)]);
+        }
+        beta = xtwx.cholesky()?.solve(&xtwy);
+        let res: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &beta)[0]).collect();
+        let s = robust_scale(&res);
+        for i in 0..n {
+            let a = res[i].abs() / s;
+            w[i] = if a <= HUBER_K { 1.0 } else { HUBER_K / a };
+        }
+    }
+    let res: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &beta)[0]).collect();
+    beta.iter().all(|b| b.is_finite()).then_some((beta, res))
+}
+
+fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
+    // Centre and scale Z for conditioning, then map back to raw coefficients.
+    let zm = z.iter().sum::<f64>() / z.len() as f64;
+    let zs = (z.iter().map(|v| (v - zm).powi(2)).sum::<f64>() / z.len() as f64).sqrt().max(1e-9);
+    let x = DMatrix::from_fn(z.len(), 3, |i, j| ((z[i] - zm) / zs).powi(2 - j as i32));
+    let (b, res) = irls(&x, &DVector::from_column_slice(s))?;
+    // δ = b0 t² + b1 t + b2 with t = (Z − zm)/zs.
+    let a = b[0] / (zs * zs);
+    let bb = b[1] / zs - 2.0 * b[0] * zm / (zs * zs);
+    let c = b[0] * zm * zm / (zs * zs) - b[1] * zm / zs + b[2];
+    let curve = DofCurve::Quadratic { a: a as f32, b: bb as f32, c: c as f32 };
+    let ok = [a, bb, c].iter().all(|v| v.is_finite());
+    ok.then_some((curve, res))
+}
+
+fn fit_thin_lens_at(u: &[f64], s: &[f64], uf: f64) -> Option<(f64, f64, Vec<f64>)> {
+    let x = DMatrix::from_fn(u.len(), 2, |i, j| if j == 0 { (u[i] - uf).abs() } else { 1.0 });
+    let (b, res) = irls(&x, &DVector::from_column_slice(s))?;
+    Some((b[0], b[1], res))
+}
+
+fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, Vec<f64>)> {
+    let lo = u.iter().cloned().fold(f64::INFINITY, f64::min);
+    let hi = u.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    if !(hi > lo) {
+        return None;
+    }
+    let loss_at = |uf: f64| -> f64 {
+        match fit_thin_lens_at(u, s, uf) {
+            Some((k, _, res)) if k >= 0.0 => huber_loss(&res, robust_scale(&res)),
+            _ => f64::INFINITY,
+        }
+    };
+    // Grid (the focus may lie just outside the sampled range), then golden section.
+    let span = hi - lo;
+    let n = 32;
+    let grid: Vec<f64> = (0..=n).map(|i| lo - 0.1 * span + 1.2 * span * i as f64 / n as f64).collect();
+    let losses: Vec<f64> = grid.iter().map(|&g| loss_at(g)).collect();
+    let best = (0..grid.len()).min_by(|&a, &b| losses[a].total_cmp(&losses[b]))?;
+    let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n)]);
+    let g = 0.618_033_988_75;
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (loss_at(c), loss_at(d));
+    for _ in 0..40 {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - g * (b - a);
+            fc = loss_at(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + g * (b - a);
+            fd = loss_at(d);
+        }
+    }
+    let uf = 0.5 * (a + b);
+    let (k, c0, res) = fit_thin_lens_at(u, s, uf)?;
+    if !(k >= 0.0) {
+        return None;
+    }
+    // Back from inverse depth to the depth value of the focal plane.
+    let focus_depth = match units {
+        DepthUnits::MetricM => {
+            if uf <= 0.0 {
+                return None; // focused "beyond infinity": not a thin lens
+            }
+            1.0 / uf
+        }
+        DepthUnits::RelativeInverse => uf,
+    };
+    let curve = DofCurve::ThinLens { k: k as f32, focus_depth: focus_depth as f32, c0: c0 as f32 };
+    [k, focus_depth, c0].iter().all(|v| v.is_finite()).then_some((curve, res))
+}
+
+/// Fit δ(Z) to samples `(depth, sigma_px)` over `depth_range`. None if too few.
+pub fn fit_dof_curve(depth: &[f32], sigma_px: &[f32], units: DepthUnits, depth_range: [f32; 2]) -> Option<CurveFit> {
+    if depth.len() < 8 {
+        return None;
+    }
+    let z: Vec<f64> = depth.iter().map(|&v| v as f64).collect();
+    let s: Vec<f64> = sigma_px.iter().map(|&v| v as f64).collect();
+    let u: Vec<f64> = depth.iter().map(|&v| units.inverse_depth(v) as f64).collect();
+    let quad = fit_quadratic(&z, &s);
+    let thin = fit_thin_lens(&u, &s, units);
+    let score = |r: &Option<(DofCurve, Vec<f64>)>| r.as_ref().map(|(_, res)| huber_loss(res, robust_scale(res)));
+    let (lq, lt) = (score(&quad), score(&thin));
+    let pick_thin = match (lq, lt) {
+        (Some(q), Some(t)) => t <= q * 1.01,
+        (None, Some(_)) => true,
+        _ => false,
+    };
+    let (curve, res) = if pick_thin { thin.clone()? } else { quad.clone()? };
+    let scale = robust_scale(&res);
+    let loss = huber_loss(&res, scale);
+    let stderr_px = scale * (3.0 / z.len() as f64).sqrt();
+    // Flatness: variation of the curve over the range vs its uncertainty.
+    let evals: Vec<f32> = (0..=64)
+        .map(|i| {
+            let zz = depth_range[0] + (depth_range[1] - depth_range[0]) * i as f32 / 64.0;
+            curve.sigma_px(units, zz)
+        })
+        .collect();
+    let (mn, mx) = evals.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    let curve = if ((mx - mn) as f64) < (3.0 * stderr_px).max(0.05) {
+        let mut sv = s.clone();
+        DofCurve::Constant { c: (median(&mut sv) as f32).clamp(0.0, crate::model::MAX_DOF_SIGMA_PX) }
+    } else {
+        curve
+    };
+    Some(CurveFit {
+        curve,
+        loss,
+        scale,
+        stderr_px,
+        quadratic: quad.map(|(c, _)| c),
+        thin_lens: thin.map(|(c, _)| c),
+    })
+}

@@ -1,0 +1,284 @@
+//! Estimators: image(s) in, `CameraModel` + diagnostics out. No I/O, no panics.
+//!
+//! Two tiers per effect:
+//! * `accurate` (the paper's OPTIMIZATION setting): the frame I plus the frame
+//!   with that effect removed (I_noNoise / I_noMB / I_noDoF), depth Z and flow F;
+//! * `fast` (blind): the frame alone (plus Z for DoF and F for MB), cheap enough
+//!   for a headset to rerun every few seconds.
+//!
+//! Each effect is fitted independently and reported `present` only when it passes
+//! the test stated in its module.
+
+mod aggregate;
+mod curve;
+mod dof;
+mod motion_blur;
+mod noise;
+
+pub use aggregate::aggregate_models;
+pub use curve::{fit_dof_curve, CurveFit};
+pub use dof::DofPlotData;
+pub use motion_blur::MbPlotData;
+pub use noise::NoisePlotData;
+
+use crate::image::{Flow, Plane, Rgb};
+use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, MotionBlur, Noise, SCHEMA};
+use std::time::Instant;
+
+/// Which estimator to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tier {
+    /// Blind: the frame alone (with depth / flow where the effect needs them).
+    Fast,
+    /// Reference images with the effect removed are required.
+    Accurate,
+}
+
+/// Which effects to fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Effects {
+    pub noise: bool,
+    pub motion_blur: bool,
+    pub depth_of_field: bool,
+}
+
+impl Effects {
+    pub const ALL: Effects = Effects { noise: true, motion_blur: true, depth_of_field: true };
+}
+
+/// Everything an estimator may use. References are per effect (paper Tab. 1).
+#[derive(Clone, Copy, Debug)]
+pub struct FitInputs<'a> {
+    pub image: &'a Rgb,
+    pub denoised: Option<&'a Rgb>,
+    pub motion_deblurred: Option<&'a Rgb>,
+    pub defocus_deblurred: Option<&'a Rgb>,
+    pub depth: Option<&'a Plane>,
+    pub depth_units: DepthUnits,
+    pub flow: Option<&'a Flow>,
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// `None`: accurate where the effect's reference image is given, fast otherwise.
+    pub tier: Option<Tier>,
+    pub effects: Effects,
+    /// Noise sample stride at level 0 in pixels, halved per level (paper: 32).
+    pub noise_stride_px: usize,
+    /// DoF stack node spacing for the per-pixel σ search, px.
+    pub dof_node_spacing_px: f32,
+    /// Upper end of the per-pixel σ search, px (paper: 10).
+    pub dof_max_sigma_px: f32,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            tier: None,
+            effects: Effects::ALL,
+            noise_stride_px: noise::DEFAULT_STRIDE_PX,
+            dof_node_spacing_px: dof::DEFAULT_NODE_SPACING_PX,
+            dof_max_sigma_px: crate::model::MAX_DOF_SIGMA_PX,
+        }
+    }
+}
+
+/// Bad input: each names the input and what is wrong with it.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum FitError {
+    #[error("input `{input}` is empty (0×0)")]
+    Empty { input: &'static str },
+    #[error("input `{input}` is {got_w}×{got_h} but the image is {want_w}×{want_h}")]
+    SizeMismatch { input: &'static str, want_w: usize, want_h: usize, got_w: usize, got_h: usize },
+    #[error("input `{input}` has a non-finite value ({value}) at x={x}, y={y}, channel {channel}")]
+    NonFinite { input: &'static str, x: usize, y: usize, channel: usize, value: f32 },
+    #[error("the accurate tier for {effect} needs `{input}`, which was not given")]
+    MissingReference { effect: &'static str, input: &'static str },
+    #[error("no frames to aggregate")]
+    NoFrames,
+    #[error("invalid option `{option}`: {problem}")]
+    Option { option: &'static str, problem: String },
+}
+
+/// Data behind the plots (`--plots`).
+#[derive(Clone, Debug, Default)]
+pub struct PlotData {
+    pub noise: Option<NoisePlotData>,
+    pub motion_blur: Option<MbPlotData>,
+    pub depth_of_field: Option<DofPlotData>,
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOutput {
+    pub model: CameraModel,
+    pub plots: PlotData,
+}
+
+fn check_rgb(input: &'static str, img: &Rgb, w: usize, h: usize) -> Result<(), FitError> {
+    if img.width != w || img.height != h {
+        return Err(FitError::SizeMismatch { input, want_w: w, want_h: h, got_w: img.width, got_h: img.height });
+    }
+    if let Some((x, y, c)) = img.first_non_finite() {
+        let value = img.channels[c][y * w + x];
+        return Err(FitError::NonFinite { input, x, y, channel: c, value });
+    }
+    Ok(())
+}
+
+fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
+    let (w, h) = (inp.image.width, inp.image.height);
+    if w == 0 || h == 0 {
+        return Err(FitError::Empty { input: "image" });
+    }
+    check_rgb("image", inp.image, w, h)?;
+    for (name, r) in [
+        ("denoised", inp.denoised),
+        ("motion-deblurred", inp.motion_deblurred),
+        ("defocus-deblurred", inp.defocus_deblurred),
+    ] {
+        if let Some(r) = r {
+            check_rgb(name, r, w, h)?;
+        }
+    }
+    // Depth may mark invalid pixels with NaN/Inf/≤0 (Middlebury, KITTI): they are
+    // skipped, not rejected. Only the size must match.
+    if let Some(z) = inp.depth {
+        if z.width != w || z.height != h {
+            return Err(FitError::SizeMismatch { input: "depth", want_w: w, want_h: h, got_w: z.width, got_h: z.height });
+        }
+    }
+    if let Some(f) = inp.flow {
+        if f.width != w || f.height != h {
+            return Err(FitError::SizeMismatch { input: "flow", want_w: w, want_h: h, got_w: f.width, got_h: f.height });
+        }
+        for (i, (&dx, &dy)) in f.dx.iter().zip(&f.dy).enumerate() {
+            for (channel, value) in [(0, dx), (1, dy)] {
+                if !value.is_finite() {
+                    return Err(FitError::NonFinite { input: "flow", x: i % w, y: i / w, channel, value });
+                }
+            }
+        }
+    }
+    if !(opts.dof_node_spacing_px > 0.0 && opts.dof_node_spacing_px <= 2.0) {
+        return Err(FitError::Option {
+            option: "dof_node_spacing_px",
+            problem: format!("must be in (0, 2], got {}", opts.dof_node_spacing_px),
+        });
+    }
+    if !(opts.dof_max_sigma_px > 0.0 && opts.dof_max_sigma_px <= crate::model::MAX_DOF_SIGMA_PX) {
+        return Err(FitError::Option {
+            option: "dof_max_sigma_px",
+            problem: format!("must be in (0, {}], got {}", crate::model::MAX_DOF_SIGMA_PX, opts.dof_max_sigma_px),
+        });
+    }
+    if opts.noise_stride_px == 0 {
+        return Err(FitError::Option { option: "noise_stride_px", problem: "must be ≥ 1".into() });
+    }
+    Ok(())
+}
+
+/// Which tier an effect runs at, or the missing-reference error.
+fn tier_for(
+    opts: &FitOptions,
+    reference: Option<&Rgb>,
+    effect: &'static str,
+    input: &'static str,
+) -> Result<Tier, FitError> {
+    match (opts.tier, reference) {
+        (Some(Tier::Accurate), None) => Err(FitError::MissingReference { effect, input }),
+        (Some(t), _) => Ok(t),
+        (None, Some(_)) => Ok(Tier::Accurate),
+        (None, None) => Ok(Tier::Fast),
+    }
+}
+
+fn not_identifiable(method: &str, reason: impl Into<String>, started: Instant) -> Diagnostics {
+    Diagnostics {
+        status: crate::model::Status::NotIdentifiable,
+        reason: reason.into(),
+        method: method.to_string(),
+        residual_before: None,
+        residual_after: None,
+        samples_used: 0,
+        fit_time_s: started.elapsed().as_secs_f64(),
+        stderr: None,
+    }
+}
+
+/// Fit the camera model of one frame.
+pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
+    check_inputs(inp, opts)?;
+    let (w, h) = (inp.image.width, inp.image.height);
+    let mut model = CameraModel {
+        schema: SCHEMA.to_string(),
+        ..CameraModel::empty(w as u32, h as u32)
+    };
+    model.depth_of_field.units = inp.depth_units;
+    let mut plots = PlotData::default();
+
+    if opts.effects.noise {
+        let (noise, data) = match tier_for(opts, inp.denoised, "noise", "denoised")? {
+            Tier::Accurate => noise::fit_accurate(inp.image, inp.denoised.unwrap_or(inp.image), opts),
+            Tier::Fast => noise::fit_fast(inp.image, opts),
+        };
+        model.noise = noise;
+        plots.noise = Some(data);
+    } else {
+        model.noise = Noise::absent(Diagnostics::not_fitted("not requested (--only)"));
+    }
+
+    if opts.effects.motion_blur {
+        let started = Instant::now();
+        let tier = tier_for(opts, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
+        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
+        match inp.flow {
+            None => {
+                model.motion_blur =
+                    MotionBlur::absent(not_identifiable(method, "no flow map given: exposure not identifiable", started))
+            }
+            Some(flow) => {
+                let (mb, data) = match (tier, inp.motion_deblurred) {
+                    (Tier::Accurate, Some(sharp)) => motion_blur::fit_accurate(inp.image, sharp, flow),
+                    _ => motion_blur::fit_fast(inp.image, flow),
+                };
+                model.motion_blur = mb;
+                plots.motion_blur = data;
+            }
+        }
+    } else {
+        model.motion_blur = MotionBlur::absent(Diagnostics::not_fitted("not requested (--only)"));
+    }
+
+    if opts.effects.depth_of_field {
+        let started = Instant::now();
+        let tier = tier_for(opts, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
+        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
+        match inp.depth {
+            None => {
+                model.depth_of_field = DepthOfField::absent(
+                    inp.depth_units,
+                    not_identifiable(method, "no depth map given: δ(Z) not identifiable", started),
+                )
+            }
+            Some(depth) => {
+                let (dof, data) = match (tier, inp.defocus_deblurred) {
+                    (Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
+                    _ => dof::fit_fast(inp.image, depth, inp.depth_units, opts),
+                };
+                model.depth_of_field = dof;
+                plots.depth_of_field = data;
+            }
+        }
+    } else {
+        model.depth_of_field =
+            DepthOfField::absent(inp.depth_units, Diagnostics::not_fitted("not requested (--only)"));
+    }
+
+    // Estimators only produce finite, in-range values; this is the last guard
+    // before anything is written or uploaded.
+    if let Err(e) = model.validate() {
+        log::error!("fitted model failed validation ({e}); effects reset to absent");
+        return Err(FitError::Option { option: "model", problem: e.to_string() });
+    }
+    Ok(FitOutput { model, plots })
+}

@@ -1,0 +1,199 @@
+//! CPU image operations shared by `synth` and `fit`: planar float images, luma,
+//! Burt–Adelson pyramids, discrete-Gaussian blurs and bilinear sampling.
+//!
+//! Conventions: values are linear floats (nominally [0,1] for colour), row-major,
+//! `(x, y)` with `x` along a row. Borders are clamp-to-edge everywhere, so every
+//! operation is defined for any size down to 1×1.
+
+mod blur;
+mod pyramid;
+
+pub use blur::{blur_separable, discrete_gaussian_kernel};
+pub use pyramid::{expand, gaussian_pyramid, laplacian_pyramid, reduce, LaplacianPyramid};
+
+/// One channel of floats.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plane {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<f32>,
+}
+
+impl Plane {
+    pub fn new(width: usize, height: usize, fill: f32) -> Self {
+        Self { width, height, data: vec![fill; width * height] }
+    }
+
+    pub fn from_vec(width: usize, height: usize, data: Vec<f32>) -> Self {
+        debug_assert_eq!(data.len(), width * height);
+        Self { width, height, data }
+    }
+
+    #[inline]
+    pub fn get(&self, x: usize, y: usize) -> f32 {
+        self.data[y * self.width + x]
+    }
+
+    /// Clamp-to-edge read with signed coordinates.
+    #[inline]
+    pub fn get_clamped(&self, x: isize, y: isize) -> f32 {
+        let xc = x.clamp(0, self.width as isize - 1) as usize;
+        let yc = y.clamp(0, self.height as isize - 1) as usize;
+        self.data[yc * self.width + xc]
+    }
+
+    /// Bilinear sample at continuous pixel coordinates (pixel centres at integers),
+    /// clamp-to-edge outside the image.
+    #[inline]
+    pub fn sample_bilinear(&self, x: f32, y: f32) -> f32 {
+        let xf = x.floor();
+        let yf = y.floor();
+        let fx = x - xf;
+        let fy = y - yf;
+        let x0 = xf as isize;
+        let y0 = yf as isize;
+        let a = self.get_clamped(x0, y0);
+        let b = self.get_clamped(x0 + 1, y0);
+        let c = self.get_clamped(x0, y0 + 1);
+        let d = self.get_clamped(x0 + 1, y0 + 1);
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        top + (bottom - top) * fy
+    }
+}
+
+/// Three planar colour channels (R, G, B) of equal size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rgb {
+    pub width: usize,
+    pub height: usize,
+    pub channels: [Vec<f32>; 3],
+}
+
+/// Rec. 601 luma weights, as the paper's "Y channel of YCbCr".
+pub const LUMA_WEIGHTS: [f32; 3] = [0.299, 0.587, 0.114];
+
+impl Rgb {
+    pub fn new(width: usize, height: usize, fill: [f32; 3]) -> Self {
+        let n = width * height;
+        Self { width, height, channels: [vec![fill[0]; n], vec![fill[1]; n], vec![fill[2]; n]] }
+    }
+
+    pub fn len(&self) -> usize {
+        self.width * self.height
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn plane(&self, c: usize) -> Plane {
+        Plane::from_vec(self.width, self.height, self.channels[c].clone())
+    }
+
+    pub fn from_planes(planes: [Plane; 3]) -> Self {
+        let [r, g, b] = planes;
+        Self { width: r.width, height: r.height, channels: [r.data, g.data, b.data] }
+    }
+
+    /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
+    pub fn luma(&self) -> Plane {
+        let [r, g, b] = &self.channels;
+        let data = r
+            .iter()
+            .zip(g)
+            .zip(b)
+            .map(|((r, g), b)| LUMA_WEIGHTS[0] * r + LUMA_WEIGHTS[1] * g + LUMA_WEIGHTS[2] * b)
+            .collect();
+        Plane::from_vec(self.width, self.height, data)
+    }
+
+    /// First non-finite value as `(x, y, channel)`, if any.
+    pub fn first_non_finite(&self) -> Option<(usize, usize, usize)> {
+        for (c, ch) in self.channels.iter().enumerate() {
+            if let Some(i) = ch.iter().position(|v| !v.is_finite()) {
+                return Some((i % self.width.max(1), i / self.width.max(1), c));
+            }
+        }
+        None
+    }
+
+    /// Per-pixel map over all channels.
+    pub fn map(&self, f: impl Fn(f32) -> f32) -> Rgb {
+        let ch = |c: &Vec<f32>| c.iter().map(|&v| f(v)).collect::<Vec<_>>();
+        Rgb {
+            width: self.width,
+            height: self.height,
+            channels: [ch(&self.channels[0]), ch(&self.channels[1]), ch(&self.channels[2])],
+        }
+    }
+}
+
+/// Per-pixel optical flow in pixels per frame interval (x then y).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Flow {
+    pub width: usize,
+    pub height: usize,
+    pub dx: Vec<f32>,
+    pub dy: Vec<f32>,
+}
+
+impl Flow {
+    pub fn uniform(width: usize, height: usize, dx: f32, dy: f32) -> Self {
+        Self { width, height, dx: vec![dx; width * height], dy: vec![dy; width * height] }
+    }
+}
+
+/// Central-difference luma gradient squared magnitude, clamp-to-edge.
+pub fn gradient_sq(p: &Plane) -> Plane {
+    let mut out = Plane::new(p.width, p.height, 0.0);
+    for y in 0..p.height {
+        for x in 0..p.width {
+            let (xi, yi) = (x as isize, y as isize);
+            let gx = 0.5 * (p.get_clamped(xi + 1, yi) - p.get_clamped(xi - 1, yi));
+            let gy = 0.5 * (p.get_clamped(xi, yi + 1) - p.get_clamped(xi, yi - 1));
+            out.data[y * p.width + x] = gx * gx + gy * gy;
+        }
+    }
+    out
+}
+
+/// Summed-area table with one row/column of zero padding, for O(1) box counts.
+pub struct IntegralImage {
+    width: usize,
+    height: usize,
+    sums: Vec<f64>,
+}
+
+impl IntegralImage {
+    pub fn new(p: &Plane) -> Self {
+        let (w, h) = (p.width, p.height);
+        let mut sums = vec![0.0f64; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let mut row = 0.0f64;
+            for x in 0..w {
+                row += p.get(x, y) as f64;
+                sums[(y + 1) * (w + 1) + x + 1] = sums[y * (w + 1) + x + 1] + row;
+            }
+        }
+        Self { width: w, height: h, sums }
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// Sum over the box of half-size `r` centred on `(x, y)`, clipped to the image.
+    pub fn box_sum(&self, x: usize, y: usize, r: usize) -> f64 {
+        let x0 = x.saturating_sub(r);
+        let y0 = y.saturating_sub(r);
+        let x1 = (x + r + 1).min(self.width);
+        let y1 = (y + r + 1).min(self.height);
+        let w = self.width + 1;
+        self.sums[y1 * w + x1] - self.sums[y0 * w + x1] - self.sums[y1 * w + x0] + self.sums[y0 * w + x0]
+    }
+}

@@ -1,0 +1,12 @@
+//! blind-augment: blind estimation of a camera's noise, motion blur and depth of
+//! field (Prakash et al., "Blind Augmentation", TVCG 2025) and their CPU reference
+//! synthesis. See ARCHITECTURE.md for the module map and invariants.
+// The CPU core has no `unsafe`; only `gpu` and `xr` (to come) may opt out, per module.
+#![deny(unsafe_code)]
+
+pub mod fit;
+pub mod image;
+pub mod io;
+pub mod model;
+pub mod plots;
+pub mod synth;

@@ -1,0 +1,290 @@
+//! The camera model: plain data, one versioned JSON document
+//! (`"schema": "blind-augment/camera-model/1"`), with validation on load so that
+//! no NaN, Inf or out-of-range parameter can reach a renderer.
+//!
+//! Every effect carries `present` (the renderer skips absent effects) and
+//! `diagnostics` (how sure the estimator is, how it got there).
+
+mod validate;
+
+use serde::{Deserialize, Serialize};
+pub use validate::ModelError;
+
+pub const SCHEMA: &str = "blind-augment/camera-model/1";
+/// Band-pass levels of the noise pyramid (the paper's 4; the official code's 3 is
+/// what the paper calls a mistake-prone simplification: see README).
+pub const NOISE_LEVELS: usize = 4;
+/// Largest DoF blur std the estimators search and the model may express, in
+/// reference pixels (the paper searches [0, 10]).
+pub const MAX_DOF_SIGMA_PX: f32 = 10.0;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraModel {
+    pub schema: String,
+    pub reference: Reference,
+    pub noise: Noise,
+    pub motion_blur: MotionBlur,
+    pub depth_of_field: DepthOfField,
+}
+
+/// The frames the model was fitted on, so a renderer can convert camera pixels and
+/// frame intervals into its own pixels and seconds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Reference {
+    pub width: u32,
+    pub height: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixels_per_radian: Option<f32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_interval_s: Option<f32>,
+}
+
+/// How the per-level maps read: `linear_std`: std = intercept + slope·Y (the paper);
+/// `affine_variance`: std² = intercept + slope·Y (Poisson–Gaussian sensor noise).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseForm {
+    LinearStd,
+    AffineVariance,
+}
+
+/// One pyramid level's map from luma Y to R, G, B noise.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseLevel {
+    pub slope: [f32; 3],
+    pub intercept: [f32; 3],
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Noise {
+    pub present: bool,
+    pub form: NoiseForm,
+    /// Band-pass levels 0..4, finest first.
+    pub levels: Vec<NoiseLevel>,
+    /// The low-pass residual's map (fitted like a band; `null` if not modelled).
+    pub lowpass: Option<NoiseLevel>,
+    /// Luma range fitted on; evaluation clamps Y into it (no extrapolation into
+    /// clipped highlights or crushed blacks).
+    pub luminance_range: [f32; 2],
+    pub diagnostics: Diagnostics,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionBlur {
+    pub present: bool,
+    /// λ ∈ [0, 1]: fraction of the frame interval the shutter is open; flow is in
+    /// pixels per frame interval and the window is centred on the frame time.
+    /// `null` when not identifiable.
+    pub exposure: Option<f32>,
+    pub diagnostics: Diagnostics,
+}
+
+/// How the depth map's values are to be read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DepthUnits {
+    /// Metric depth Z in metres along the optical axis (larger = farther).
+    MetricM,
+    /// Relative inverse depth as monocular networks (MiDaS/DPT) produce: affine in
+    /// 1/Z, larger = nearer. The thin-lens form is then linear in the value itself.
+    RelativeInverse,
+}
+
+impl DepthUnits {
+    /// The quantity in which defocus is linear (thin lens: blur ∝ |1/Z − 1/Z_f|).
+    #[inline]
+    pub fn inverse_depth(self, z: f32) -> f32 {
+        match self {
+            DepthUnits::MetricM => 1.0 / z,
+            DepthUnits::RelativeInverse => z,
+        }
+    }
+}
+
+/// δ(Z), the Gaussian blur std in reference pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "form", rename_all = "snake_case", deny_unknown_fields)]
+pub enum DofCurve {
+    /// δ = a·Z² + b·Z + c (the paper).
+    Quadratic { a: f32, b: f32, c: f32 },
+    /// δ = k·|u(Z) − u(Z_f)| + c0, u = inverse depth (`DepthUnits::inverse_depth`);
+    /// bounded as Z → ∞.
+    ThinLens { k: f32, focus_depth: f32, c0: f32 },
+    /// δ = c: the fitted curve was flat within its uncertainty.
+    Constant { c: f32 },
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthOfField {
+    pub present: bool,
+    pub units: DepthUnits,
+    /// `null` when not identifiable.
+    pub curve: Option<DofCurve>,
+    /// Depth range fitted on; evaluation clamps Z into it.
+    pub depth_range: [f32; 2],
+    pub diagnostics: Diagnostics,
+}
+
+/// What an estimator concluded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Fitted, and the fit explains the data better than "no effect" by more than the
+    /// noise floor.
+    Present,
+    /// Identifiable, but the effect is within the noise floor of zero.
+    Absent,
+    /// The data cannot tell (no flow, no texture, no depth, no reference...).
+    NotIdentifiable,
+    /// Not asked for (`--only`).
+    NotFitted,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Diagnostics {
+    pub status: Status,
+    /// Human-readable reason for the status.
+    pub reason: String,
+    /// `accurate` (clean reference images) or `fast` (blind, frame only).
+    pub method: String,
+    /// Fit objective with no effect and with the fitted effect (units per effect,
+    /// stated in `reason`/README).
+    pub residual_before: Option<f64>,
+    pub residual_after: Option<f64>,
+    pub samples_used: u64,
+    /// Wall time of the fit alone, without file I/O.
+    pub fit_time_s: f64,
+    /// One-sigma uncertainty of the headline parameter (λ; δ RMS over the range in px;
+    /// relative std of the level-0 noise std at mid-range luma).
+    pub stderr: Option<f64>,
+}
+
+impl Diagnostics {
+    pub fn not_fitted(reason: &str) -> Self {
+        Self {
+            status: Status::NotFitted,
+            reason: reason.to_string(),
+            method: String::new(),
+            residual_before: None,
+            residual_after: None,
+            samples_used: 0,
+            fit_time_s: 0.0,
+            stderr: None,
+        }
+    }
+}
+
+impl NoiseLevel {
+    pub const ZERO: NoiseLevel = NoiseLevel { slope: [0.0; 3], intercept: [0.0; 3] };
+
+    /// Noise std of channel `c` at luma `y` (already clamped), never negative.
+    #[inline]
+    pub fn std(&self, form: NoiseForm, c: usize, y: f32) -> f32 {
+        let v = self.intercept[c] + self.slope[c] * y;
+        match form {
+            NoiseForm::LinearStd => v.max(0.0),
+            NoiseForm::AffineVariance => v.max(0.0).sqrt(),
+        }
+    }
+}
+
+impl Noise {
+    pub fn absent(diagnostics: Diagnostics) -> Self {
+        Self {
+            present: false,
+            form: NoiseForm::AffineVariance,
+            levels: vec![NoiseLevel::ZERO; NOISE_LEVELS],
+            lowpass: None,
+            luminance_range: [0.0, 1.0],
+            diagnostics,
+        }
+    }
+
+    #[inline]
+    pub fn clamp_luma(&self, y: f32) -> f32 {
+        y.clamp(self.luminance_range[0], self.luminance_range[1])
+    }
+}
+
+impl DofCurve {
+    /// δ at depth `z` (already clamped to the range), clamped to [0, MAX_DOF_SIGMA_PX].
+    pub fn sigma_px(&self, units: DepthUnits, z: f32) -> f32 {
+        let d = match *self {
+            DofCurve::Quadratic { a, b, c } => (a * z + b) * z + c,
+            DofCurve::ThinLens { k, focus_depth, c0 } => {
+                k * (units.inverse_depth(z) - units.inverse_depth(focus_depth)).abs() + c0
+            }
+            DofCurve::Constant { c } => c,
+        };
+        if d.is_finite() {
+            d.clamp(0.0, MAX_DOF_SIGMA_PX)
+        } else {
+            0.0
+        }
+    }
+}
+
+impl DepthOfField {
+    pub fn absent(units: DepthUnits, diagnostics: Diagnostics) -> Self {
+        Self { present: false, units, curve: None, depth_range: [0.0, 0.0], diagnostics }
+    }
+
+    /// δ(Z) in reference pixels; 0 for absent effects and invalid depth. Z is clamped
+    /// to the fitted range first.
+    pub fn sigma_px(&self, z: f32) -> f32 {
+        match (&self.curve, self.present) {
+            (Some(curve), true) if z.is_finite() => {
+                curve.sigma_px(self.units, z.clamp(self.depth_range[0], self.depth_range[1]))
+            }
+            _ => 0.0,
+        }
+    }
+}
+
+impl MotionBlur {
+    pub fn absent(diagnostics: Diagnostics) -> Self {
+        Self { present: false, exposure: None, diagnostics }
+    }
+
+    /// λ the renderer should use: 0 when absent or unknown.
+    pub fn exposure_or_zero(&self) -> f32 {
+        if self.present {
+            self.exposure.unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    }
+}
+
+impl CameraModel {
+    /// A model with every effect absent, for the given reference frame size.
+    pub fn empty(width: u32, height: u32) -> Self {
+        Self {
+            schema: SCHEMA.to_string(),
+            reference: Reference { width, height, pixels_per_radian: None, frame_interval_s: None },
+            noise: Noise::absent(Diagnostics::not_fitted("not fitted")),
+            motion_blur: MotionBlur::absent(Diagnostics::not_fitted("not fitted")),
+            depth_of_field: DepthOfField::absent(DepthUnits::MetricM, Diagnostics::not_fitted("not fitted")),
+        }
+    }
+
+    /// Parse and validate a JSON document.
+    pub fn from_json(text: &str) -> Result<Self, ModelError> {
+        let model: CameraModel = serde_json::from_str(text).map_err(|e| ModelError::Parse(e.to_string()))?;
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// Validate, then pretty-print.
+    pub fn to_json(&self) -> Result<String, ModelError> {
+        self.validate()?;
+        serde_json::to_string_pretty(self).map_err(|e| ModelError::Parse(e.to_string()))
+    }
+}
