@@ -13,7 +13,6 @@
 //! the range is below 3 standard errors (or 0.05 px) is replaced by a constant.
 
 use crate::model::{DepthUnits, DofCurve};
-use nalgebra::{DMatrix, DVector};
 
 const HUBER_K: f64 = 1.345;
 
@@ -54,33 +53,42 @@ fn huber_loss(res: &[f64], scale: f64) -> f64 {
         / res.len().max(1) as f64
 }
 
-/// IRLS for y ≈ X β with Huber weights. Returns (β, residuals) or None if singular.
-fn irls(x: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, Vec<f64>)> {
-    let n = y.len();
+/// IRLS for y ≈ X β with Huber weights, X given row by row through `row(i)`
+/// (P ≤ 3 columns; normal equations accumulated in place, solved by Cholesky).
+/// Returns (β, residuals) or None if singular.
+fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], iters: usize) -> Option<([f64; P], Vec<f64>)> {
     let mut w = vec![1.0f64; n];
-    let mut beta = DVector::zeros(x.ncols());
-    for _ in 0..15 {
-        let mut xtwx = DMatrix::<f64>::zeros(x.ncols(), x.ncols());
-        let mut xtwy = DVector::<f64>::zeros(x.ncols());
+    let mut beta = [0.0f64; P];
+    let mut res = vec![0.0f64; n];
+    for _ in 0..iters {
+        let mut xtwx = nalgebra::SMatrix::<f64, P, P>::zeros();
+        let mut xtwy = nalgebra::SVector::<f64, P>::zeros();
         for i in 0..n {
-            let row = x.row(i);
-            xtwx += w[i] * row.transpose() * row;
-            xtwy += w[i] * y[i] * row.transpose();
+            let r = row(i);
+            for a in 0..P {
+                xtwy[a] += w[i] * r[a] * y[i];
+                for b in 0..P {
+                    xtwx[(a, b)] += w[i] * r[a] * r[b];
+                }
+            }
         }
         // Tiny ridge: keeps a degenerate design (all samples at one depth) solvable;
         // the flatness test then turns it into a constant.
-        for d in 0..x.ncols() {
+        for d in 0..P {
             xtwx[(d, d)] += 1e-9 * (1.0 + xtwx[(d, d)]);
         }
-        beta = xtwx.cholesky()?.solve(&xtwy);
-        let res: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &beta)[0]).collect();
+        let sol = xtwx.cholesky()?.solve(&xtwy);
+        beta.copy_from_slice(sol.as_slice());
+        for i in 0..n {
+            let r = row(i);
+            res[i] = y[i] - (0..P).map(|a| r[a] * beta[a]).sum::<f64>();
+        }
         let s = robust_scale(&res);
         for i in 0..n {
             let a = res[i].abs() / s;
             w[i] = if a <= HUBER_K { 1.0 } else { HUBER_K / a };
         }
     }
-    let res: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &beta)[0]).collect();
     beta.iter().all(|b| b.is_finite()).then_some((beta, res))
 }
 
@@ -88,8 +96,15 @@ fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
     // Centre and scale Z for conditioning, then map back to raw coefficients.
     let zm = z.iter().sum::<f64>() / z.len() as f64;
     let zs = (z.iter().map(|v| (v - zm).powi(2)).sum::<f64>() / z.len() as f64).sqrt().max(1e-9);
-    let x = DMatrix::from_fn(z.len(), 3, |i, j| ((z[i] - zm) / zs).powi(2 - j as i32));
-    let (b, res) = irls(&x, &DVector::from_column_slice(s))?;
+    let (b, res) = irls(
+        z.len(),
+        |i| {
+            let t = (z[i] - zm) / zs;
+            [t * t, t, 1.0]
+        },
+        s,
+        15,
+    )?;
     // δ = b0 t² + b1 t + b2 with t = (Z − zm)/zs.
     let a = b[0] / (zs * zs);
     let bb = b[1] / zs - 2.0 * b[0] * zm / (zs * zs);
@@ -99,9 +114,8 @@ fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
     ok.then_some((curve, res))
 }
 
-fn fit_thin_lens_at(u: &[f64], s: &[f64], uf: f64) -> Option<(f64, f64, Vec<f64>)> {
-    let x = DMatrix::from_fn(u.len(), 2, |i, j| if j == 0 { (u[i] - uf).abs() } else { 1.0 });
-    let (b, res) = irls(&x, &DVector::from_column_slice(s))?;
+fn fit_thin_lens_at(u: &[f64], s: &[f64], uf: f64, iters: usize) -> Option<(f64, f64, Vec<f64>)> {
+    let (b, res) = irls(u.len(), |i| [(u[i] - uf).abs(), 1.0], s, iters)?;
     Some((b[0], b[1], res))
 }
 
@@ -111,8 +125,12 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
     if !(hi > lo) {
         return None;
     }
+    // The focus search runs on at most 2048 evenly spread samples with 6 IRLS steps;
+    // the final fit uses all samples and 15 steps.
+    let step = u.len().div_ceil(2048);
+    let (us, ss): (Vec<f64>, Vec<f64>) = (0..u.len()).step_by(step).map(|i| (u[i], s[i])).unzip();
     let loss_at = |uf: f64| -> f64 {
-        match fit_thin_lens_at(u, s, uf) {
+        match fit_thin_lens_at(&us, &ss, uf, 6) {
             Some((k, _, res)) if k >= 0.0 => huber_loss(&res, robust_scale(&res)),
             _ => f64::INFINITY,
         }
@@ -143,7 +161,7 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
         }
     }
     let uf = 0.5 * (a + b);
-    let (k, c0, res) = fit_thin_lens_at(u, s, uf)?;
+    let (k, c0, res) = fit_thin_lens_at(u, s, uf, 15)?;
     if !(k >= 0.0) {
         return None;
     }

@@ -24,9 +24,9 @@ use crate::image::{Flow, Plane, Rgb};
 use crate::model::{Diagnostics, MotionBlur, Status};
 use std::time::Instant;
 
-const PROFILE_SPACING_PX: f32 = 0.25;
+const PROFILE_SPACING_PX: f32 = 0.2;
 const MIN_SAMPLES: usize = 64;
-const MAX_SAMPLES: usize = 32_768;
+const MAX_SAMPLES: usize = 16_384;
 
 #[derive(Clone, Debug, Default)]
 pub struct MbPlotData {
@@ -81,54 +81,51 @@ impl Profiles {
 
 fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow) -> Profiles {
     let (w, h) = (image.width, image.height);
-    // Stride-2 grid, thinned further if the image is large.
-    let candidates = (w * h).div_ceil(4);
-    let stride = if candidates > MAX_SAMPLES * 2 { 3 } else { 2 };
-    let mut p = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
-    for y in (0..h).step_by(stride) {
-        for x in (0..w).step_by(stride) {
+    // Cheap pre-filter: the sharp luma must change along the flow within one frame
+    // interval (|∇Y·F| ≥ 2e-3, half an 8-bit step), then thin deterministically to
+    // MAX_SAMPLES before the (costlier) profiles are built.
+    let mut cand = vec![];
+    for y in (0..h).step_by(2) {
+        for x in (0..w).step_by(2) {
             let i = y * w + x;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
-            let speed = (fx * fx + fy * fy).sqrt();
-            if speed < 0.05 {
+            if fx * fx + fy * fy < 0.05 * 0.05 {
                 continue;
             }
-            let m = ((speed / PROFILE_SPACING_PX).ceil() as usize).max(4);
-            let start = p.f.len();
-            let mut cum = 0.0f32;
-            for j in 0..=m {
-                let t = j as f32 / m as f32 - 0.5;
-                let v = sharp.sample_bilinear(x as f32 + t * fx, y as f32 + t * fy);
-                if j > 0 {
-                    cum += 0.5 * (p.f[start + j - 1] + v) / m as f32;
-                }
-                p.f.push(v);
-                p.c.push(cum);
+            let (xi, yi) = (x as isize, y as isize);
+            let gx = 0.5 * (sharp.get_clamped(xi + 1, yi) - sharp.get_clamped(xi - 1, yi));
+            let gy = 0.5 * (sharp.get_clamped(xi, yi + 1) - sharp.get_clamped(xi, yi - 1));
+            if (gx * fx + gy * fy).abs() >= 2e-3 {
+                cand.push((x, y));
             }
-            // Informative: a full-exposure streak visibly changes this pixel.
-            let full = cum; // integral over [−½, ½] = mean
-            let centre = sharp.get(x, y);
-            if (full - centre).abs() < 1e-3 {
-                p.f.truncate(start);
-                p.c.truncate(start);
-                continue;
-            }
-            p.offsets.push(p.f.len());
-            p.target.push(image.get(x, y));
         }
     }
-    // Thin to MAX_SAMPLES by keeping every k-th (deterministic).
-    if p.len() > MAX_SAMPLES {
-        let k = p.len().div_ceil(MAX_SAMPLES);
-        let mut q = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
-        for i in (0..p.len()).step_by(k) {
-            let (o0, o1) = (p.offsets[i], p.offsets[i + 1]);
-            q.f.extend_from_slice(&p.f[o0..o1]);
-            q.c.extend_from_slice(&p.c[o0..o1]);
-            q.offsets.push(q.f.len());
-            q.target.push(p.target[i]);
+    let keep = cand.len().div_ceil(MAX_SAMPLES).max(1);
+    let mut p = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
+    for &(x, y) in cand.iter().step_by(keep) {
+        let i = y * w + x;
+        let (fx, fy) = (flow.dx[i], flow.dy[i]);
+        let speed = (fx * fx + fy * fy).sqrt();
+        let m = ((speed / PROFILE_SPACING_PX).ceil() as usize).max(8);
+        let start = p.f.len();
+        let mut cum = 0.0f32;
+        for j in 0..=m {
+            let t = j as f32 / m as f32 - 0.5;
+            let v = sharp.sample_bilinear(x as f32 + t * fx, y as f32 + t * fy);
+            if j > 0 {
+                cum += 0.5 * (p.f[start + j - 1] + v) / m as f32;
+            }
+            p.f.push(v);
+            p.c.push(cum);
         }
-        return q;
+        // Informative: a full-exposure streak changes this pixel by ≥ 1e-3.
+        if (cum - sharp.get(x, y)).abs() < 1e-3 {
+            p.f.truncate(start);
+            p.c.truncate(start);
+            continue;
+        }
+        p.offsets.push(p.f.len());
+        p.target.push(image.get(x, y));
     }
     p
 }
@@ -234,15 +231,40 @@ fn box_along(p: &Plane, x: f32, y: f32, fx: f32, fy: f32, m: usize) -> f32 {
     acc / m as f32
 }
 
+/// Effective width W = h / peak gradient of the edge through (x, y) along unit
+/// direction u, measured as L0·g_reblur/g with a box of length L0 along u
+/// (valid while L0 ≥ the edge's width). None unless (x, y) is a strong edge along u
+/// and a local maximum of the directional gradient.
+fn edge_width(y: &Plane, x: f32, yy: f32, ux: f32, uy: f32, l0: f32) -> Option<f32> {
+    let g = |d: f32| {
+        0.5 * (y.sample_bilinear(x + (d + 1.0) * ux, yy + (d + 1.0) * uy)
+            - y.sample_bilinear(x + (d - 1.0) * ux, yy + (d - 1.0) * uy))
+    };
+    let g0 = g(0.0).abs();
+    if g0 < 0.02 || g0 < g(-1.0).abs() || g0 < g(1.0).abs() {
+        return None;
+    }
+    let m = ((l0 / 0.5).ceil() as usize).max(2);
+    let (fx, fy) = (ux * l0, uy * l0);
+    let gr = 0.5 * (box_along(y, x + ux, yy + uy, fx, fy, m) - box_along(y, x - ux, yy - uy, fx, fy, m));
+    Some(l0 * (gr.abs() / g0).clamp(0.0, 1.0))
+}
+
 /// Fast tier: frame and flow only (edge spread along the flow).
+///
+/// A box streak of length L = λ|F| convolved with the scene's own edge profile
+/// (optics, demosaicing, the photo's softness) has an effective width W with
+/// W² ≈ L² + W0². W0 is measured on edges whose normal is perpendicular to the
+/// flow (motion does not widen them), W on edges whose normal is along the flow;
+/// λ_i = √max(W_i² − median(W0²), 0) / |F_i|, median over edges.
 pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let y = image.luma();
     let (w, h) = (y.width, y.height);
-    let mut ratios = vec![];
     let stride = if w * h > 400_000 { 2 } else { 1 };
-    for py in (1..h.saturating_sub(1)).step_by(stride) {
-        for px in (1..w.saturating_sub(1)).step_by(stride) {
+    let (mut along, mut across) = (vec![], vec![]);
+    for py in (2..h.saturating_sub(2)).step_by(stride) {
+        for px in (2..w.saturating_sub(2)).step_by(stride) {
             let i = py * w + px;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
             let speed = (fx * fx + fy * fy).sqrt();
@@ -250,31 +272,43 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
                 continue;
             }
             let (ux, uy) = (fx / speed, fy / speed);
-            let (xf, yf) = (px as f32, py as f32);
-            let g = |dx: f32| 0.5 * (y.sample_bilinear(xf + dx * ux + ux, yf + dx * uy + uy) - y.sample_bilinear(xf + dx * ux - ux, yf + dx * uy - uy));
-            let g0 = g(0.0).abs();
-            // An edge across the flow: strong, and a local maximum along it.
-            if g0 < 0.02 || g0 < g(-1.0).abs() || g0 < g(1.0).abs() {
+            let gx = 0.5 * (y.get(px + 1, py) - y.get(px - 1, py));
+            let gy = 0.5 * (y.get(px, py + 1) - y.get(px, py - 1));
+            let gm = (gx * gx + gy * gy).sqrt();
+            if gm < 0.02 {
                 continue;
             }
-            let m = ((speed / 0.5).ceil() as usize).max(2);
-            let gr = 0.5
-                * (box_along(&y, xf + ux, yf + uy, fx, fy, m) - box_along(&y, xf - ux, yf - uy, fx, fy, m));
-            let r = (gr.abs() / g0).clamp(0.0, 1.0);
-            ratios.push(r);
+            let cos = (gx * ux + gy * uy).abs() / gm;
+            let (xf, yf) = (px as f32, py as f32);
+            if cos > 0.9 {
+                if let Some(wd) = edge_width(&y, xf, yf, ux, uy, speed) {
+                    along.push((wd, speed));
+                }
+            } else if cos < 0.3 {
+                if let Some(wd) = edge_width(&y, xf, yf, -uy, ux, speed) {
+                    across.push(wd * wd);
+                }
+            }
         }
     }
-    let n = ratios.len();
-    if n < MIN_SAMPLES {
-        let reason =
-            format!("only {n} edges across flow ≥ 2 px (need {MIN_SAMPLES}): exposure not identifiable blindly");
+    let n = along.len();
+    if n < MIN_SAMPLES || across.len() < MIN_SAMPLES / 4 {
+        let reason = format!(
+            "{n} edges across flow ≥ 2 px and {} edges along it (need {MIN_SAMPLES} and {}): exposure not identifiable blindly",
+            across.len(),
+            MIN_SAMPLES / 4
+        );
         let mut d = super::not_identifiable("fast", reason, started);
         d.samples_used = n as u64;
         return (MotionBlur::absent(d), None);
     }
-    ratios.sort_by(|a, b| a.total_cmp(b));
-    let med = ratios[n / 2];
-    let mut dev: Vec<f32> = ratios.iter().map(|r| (r - med).abs()).collect();
+    across.sort_by(|a, b| a.total_cmp(b));
+    let w0_sq = across[across.len() / 2];
+    let mut lambdas: Vec<f32> =
+        along.iter().map(|&(wd, speed)| ((wd * wd - w0_sq).max(0.0).sqrt() / speed).clamp(0.0, 1.0)).collect();
+    lambdas.sort_by(|a, b| a.total_cmp(b));
+    let med = lambdas[n / 2];
+    let mut dev: Vec<f32> = lambdas.iter().map(|r| (r - med).abs()).collect();
     dev.sort_by(|a, b| a.total_cmp(b));
     // Standard error of a median: 1.253·σ/√n with σ ≈ 1.4826·MAD.
     let stderr = 1.253 * 1.4826 * dev[n / 2] as f64 / (n as f64).sqrt();

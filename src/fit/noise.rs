@@ -15,14 +15,13 @@
 //!   variance form (Poisson–Gaussian) by ordinary least squares; the form with the
 //!   smaller relative residual is kept;
 //! * the low-pass residual is fitted like a band (the paper drops it);
+//! * the regressor is the window-averaged luma B(Y), matching the pooled variance;
 //! * samples whose footprint touches a clipped pixel (any channel ≤ 0.5/255 or
 //!   ≥ 1 − 0.5/255 in I) are excluded; the luma range of the used samples is recorded.
 //!
-//! Blind: the same statistics from I alone at every grid point; per luma bin, a
-//! low quantile of the local variances picks flat regions (texture only adds
-//! variance), divided by that quantile's ratio to the mean for pure noise
-//! (measured on synthetic white noise with the same estimator). The low-pass is
-//! not identifiable from one frame (it is the image itself) and is left out.
+//! Blind (`fit_fast`): level-0 statistics of I alone at its flattest samples per luma
+//! bin, coarser levels by white-noise band ratios; the low-pass is not identifiable
+//! from one frame (it is the image itself) and is left out.
 //!
 //! Present when the level-0 std at mid-range luma exceeds 3 standard errors and
 //! 1e-4 (0.026/255: far below visibility).
@@ -30,7 +29,6 @@
 use crate::image::{gaussian_pyramid, laplacian_pyramid, IntegralImage, Plane, Rgb};
 use crate::model::{Diagnostics, Noise, NoiseForm, NoiseLevel, Status, NOISE_LEVELS};
 use rayon::prelude::*;
-use std::sync::OnceLock;
 use std::time::Instant;
 
 /// Sample stride at level 0. The paper's 32 leaves (512/32)² = 256 samples per
@@ -40,7 +38,7 @@ use std::time::Instant;
 pub const DEFAULT_STRIDE_PX: usize = 8;
 const CLIP_LO: f32 = 0.5 / 255.0;
 const CLIP_HI: f32 = 1.0 - 0.5 / 255.0;
-const BLIND_QUANTILE: f64 = 0.1;
+const BLIND_FLAT_FRACTION: f64 = 0.2;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
 
@@ -64,6 +62,18 @@ fn window(level: usize) -> [[f32; 9]; 9] {
     }
     w.iter_mut().flatten().for_each(|v| *v /= sum);
     w
+}
+
+#[inline]
+fn local_mean(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
+    let mut acc = 0.0;
+    for (j, row) in w.iter().enumerate() {
+        let yy = y as isize + j as isize - 4;
+        for (i, wt) in row.iter().enumerate() {
+            acc += wt * p.get_clamped(x as isize + i as isize - 4, yy);
+        }
+    }
+    acc
 }
 
 #[inline]
@@ -103,9 +113,10 @@ fn collect_samples(
             let stride = (stride0 >> l).max(1);
             let band0 = &bands[0][l];
             let scale = 1usize << l;
-            // Footprint of a level-l sample in level-0 pixels: the band's own support
-            // (~4 px per level of the 5-tap chain) plus the 9×9 window, at 2^l px each.
-            let radius = 8 * scale + 4;
+            // Footprint of a level-l sample in level-0 pixels: the band's support (the
+            // reduce chain and one expand, ~5 px per level-l pixel) plus the window's
+            // 2σ radius, which is 8 level-0 px at every level (σ halves as pixels double).
+            let radius = 5 * scale + 8;
             let mut out = LevelSamples { y: vec![], var: [vec![], vec![], vec![]] };
             for y in grid(band0.height, stride) {
                 for x in grid(band0.width, stride) {
@@ -113,7 +124,10 @@ fn collect_samples(
                     if clip.box_sum(x0, y0, radius) > 0.0 {
                         continue;
                     }
-                    out.y.push(luma[l].get(x, y));
+                    // Window-averaged luma: the window pools noise whose variance is
+                    // affine in Y, so B(var) = a + b·B(Y) exactly — regressing on the
+                    // point luma instead biases dark samples near bright ones.
+                    out.y.push(local_mean(&luma[l], x, y, &win));
                     for c in 0..3 {
                         out.var[c].push(local_mean_sq(&bands[c][l], x, y, &win));
                     }
@@ -202,7 +216,7 @@ fn fit_levels(
     let mut affine = vec![NoiseLevel::ZERO; points.len()];
     let mut linear = vec![NoiseLevel::ZERO; points.len()];
     let mut covs = vec![[[[0.0; 2]; 2]; 3]; points.len()];
-    let (mut rel_aff, mut rel_lin) = (0.0f64, 0.0f64);
+    let (mut rel_aff, mut rel_lin, mut llr) = (0.0f64, 0.0f64, 0.0f64);
     for (l, (y, var, wts)) in points.iter().enumerate() {
         for c in 0..3 {
             let norm: f64 = var[c].iter().map(|&v| (v as f64).powi(2)).sum::<f64>().max(1e-300);
@@ -211,6 +225,7 @@ fn fit_levels(
             affine[l].slope[c] = b as f32;
             covs[l][c] = cov;
             rel_aff += ssr / norm;
+            let ssr_aff = ssr;
             let (la, lb, lssr) = fit_linear_std(y, &var[c], wts.as_deref())?;
             // Keep std non-negative at the reference point: (a + b·y)² is symmetric
             // in sign, so flip to the branch with a positive std.
@@ -219,12 +234,19 @@ fn fit_levels(
             linear[l].intercept[c] = la as f32;
             linear[l].slope[c] = lb as f32;
             rel_lin += lssr / norm;
+            // Gaussian log-likelihood ratio of the two 2-parameter fits: n·ln(SSR ratio).
+            // It weighs each level by its sample count, not by how noisy its local
+            // variances are, and is the standard criterion for equal-size models.
+            if ssr_aff > 0.0 && lssr > 0.0 {
+                llr += y.len() as f64 * (lssr / ssr_aff).ln();
+            }
         }
     }
-    if rel_lin < rel_aff {
-        Some((NoiseForm::LinearStd, linear, covs, rel_lin))
+    let m = (3 * points.len()) as f64;
+    if llr < 0.0 {
+        Some((NoiseForm::LinearStd, linear, covs, rel_lin / m))
     } else {
-        Some((NoiseForm::AffineVariance, affine, covs, rel_aff))
+        Some((NoiseForm::AffineVariance, affine, covs, rel_aff / m))
     }
 }
 
@@ -308,7 +330,7 @@ fn finish(
     let status = if present { Status::Present } else { Status::Absent };
     let reason = if present {
         format!(
-            "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (relative residual {rel_res:.4}); \
+            "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood ratio); \
              residuals are mean squared local-variance errors at level 0",
             100.0 * rel
         )
@@ -366,69 +388,79 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
     let bands = pyramids(&residual);
     let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
     let samples = collect_samples(&bands, &luma, &clip_mask(image), opts.noise_stride_px);
-    let points: Vec<_> = samples.iter().map(|s| (s.y.clone(), s.var.clone(), None)).collect();
-    let fitted = if samples.iter().all(|s| !s.y.is_empty()) { fit_levels(&points) } else { None };
+    // The low-pass residual is fitted when it has unclipped samples (its footprint
+    // is ~90 px wide, so frames with large clipped areas may leave none).
+    let usable = if samples[NOISE_LEVELS].y.is_empty() { NOISE_LEVELS } else { NOISE_LEVELS + 1 };
+    let points: Vec<_> = samples.iter().take(usable).map(|s| (s.y.clone(), s.var.clone(), None)).collect();
+    let fitted = if points.iter().all(|p| !p.0.is_empty()) { fit_levels(&points) } else { None };
     let range = luma_range(&samples[0]);
     (finish("accurate", started, fitted, &samples, range, true), plot_data(&points))
 }
 
-/// Ratio of the BLIND_QUANTILE of local variances to their mean, per level, for
-/// pure white noise (so a quantile of flat-region variances estimates the mean).
-fn blind_quantile_ratio() -> &'static [f64; NOISE_LEVELS] {
-    static R: OnceLock<[f64; NOISE_LEVELS]> = OnceLock::new();
-    R.get_or_init(|| {
-        let n = 384usize;
-        let white = Rgb {
-            width: n,
-            height: n,
-            channels: std::array::from_fn(|c| {
-                (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c as u32, 0xb1d)).collect()
-            }),
-        };
-        let bands = pyramids(&white);
-        let luma = gaussian_pyramid(&Plane::new(n, n, 0.5), NOISE_LEVELS);
-        let none = IntegralImage::new(&Plane::new(n, n, 0.0));
-        let samples = collect_samples(&bands, &luma, &none, 4);
-        let mut out = [1.0f64; NOISE_LEVELS];
-        for (l, o) in out.iter_mut().enumerate() {
-            let mut all: Vec<f32> = samples[l].var.iter().flatten().cloned().collect();
-            let mean = all.iter().map(|&v| v as f64).sum::<f64>() / all.len() as f64;
-            *o = percentile(&mut all, BLIND_QUANTILE) as f64 / mean;
-        }
-        out
-    })
-}
-
 /// Fast tier: the frame alone.
+///
+/// Only level 0 is measured: coarser bands of a textured frame are dominated by the
+/// scene, and one frame cannot tell coarse noise from texture. Flat samples are the
+/// 20% with the least level-2 luma band energy in their luma bin; that band is
+/// (nearly) uncorrelated with level-0 noise, so selecting on it does not bias the
+/// level-0 variance the way picking the lowest variances would. Levels 1–3 follow
+/// from level 0 by the white-noise band ratios c_l/c_0 (`synth::unit_band_std`): an
+/// assumption (ISP-correlated noise breaks it) stated in the README.
 pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
     let started = Instant::now();
-    let ratio = blind_quantile_ratio();
     let bands = pyramids(image);
+    let luma_bands = laplacian_pyramid(&image.luma(), 3);
     // Bin by a smoothed luma (one level coarser), since I's own luma carries the noise.
-    let gp = gaussian_pyramid(&image.luma(), NOISE_LEVELS + 1);
-    let luma: Vec<Plane> =
-        (0..=NOISE_LEVELS).map(|l| crate::image::expand(&gp[l + 1], gp[l].width, gp[l].height)).collect();
-    let samples = collect_samples(&bands, &luma, &clip_mask(image), (opts.noise_stride_px / 2).max(1));
-    let mut points = Vec::with_capacity(NOISE_LEVELS);
-    for (l, s) in samples.iter().take(NOISE_LEVELS).enumerate() {
-        let (mut ys, mut vs, mut ws) = (vec![], [vec![], vec![], vec![]], vec![]);
-        for b in 0..BLIND_BINS {
-            let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
-            let idx: Vec<usize> = (0..s.y.len()).filter(|&i| s.y[i] >= lo && s.y[i] < hi).collect();
-            if idx.len() < BLIND_MIN_PER_BIN {
+    let gp = gaussian_pyramid(&image.luma(), 1);
+    let luma0 = crate::image::expand(&gp[1], gp[0].width, gp[0].height);
+    let luma: Vec<Plane> = vec![luma0; NOISE_LEVELS + 1];
+    let stride0 = (opts.noise_stride_px / 2).max(1);
+    let clip = clip_mask(image);
+    let win0 = window(0);
+    let win2 = window(2);
+    let band2 = &luma_bands.bands[2];
+    // (luma, structure, var r, g, b) at level-0 grid points with unclipped footprints.
+    let mut pts: Vec<(f32, f32, [f32; 3])> = vec![];
+    for y in grid(image.height, stride0) {
+        for x in grid(image.width, stride0) {
+            if clip.box_sum(x, y, 5 * 4 + 8) > 0.0 {
                 continue;
             }
-            let mut ybin: Vec<f32> = idx.iter().map(|&i| s.y[i]).collect();
-            ys.push(percentile(&mut ybin, 0.5));
-            ws.push(idx.len() as f32);
-            for c in 0..3 {
-                let mut v: Vec<f32> = idx.iter().map(|&i| s.var[c][i]).collect();
-                vs[c].push((percentile(&mut v, BLIND_QUANTILE) as f64 / ratio[l]) as f32);
-            }
+            let structure = local_mean_sq(band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
+            let v = std::array::from_fn(|c| local_mean_sq(&bands[c][0], x, y, &win0));
+            pts.push((local_mean(&luma[0], x, y, &win0), structure, v));
         }
-        points.push((ys, vs, Some(ws)));
     }
-    let fitted = if points.iter().all(|p| !p.0.is_empty()) { fit_levels(&points) } else { None };
+    let (mut ys, mut vs, mut ws) = (vec![], [vec![], vec![], vec![]], vec![]);
+    for b in 0..BLIND_BINS {
+        let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
+        let mut bin: Vec<&(f32, f32, [f32; 3])> = pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
+        if bin.len() < BLIND_MIN_PER_BIN {
+            continue;
+        }
+        bin.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let flat = &bin[..(bin.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize];
+        let n = flat.len() as f32;
+        ys.push(flat.iter().map(|p| p.0).sum::<f32>() / n);
+        ws.push(n);
+        for c in 0..3 {
+            vs[c].push(flat.iter().map(|p| p.2[c]).sum::<f32>() / n);
+        }
+    }
+    let samples_used = ws.iter().sum::<f32>() as usize;
+    let points = vec![(ys, vs, Some(ws))];
+    let fitted = if points[0].0.is_empty() { None } else { fit_levels(&points) };
+    let fitted = fitted.map(|(form, lv, covs, rel)| {
+        let unit = crate::synth::unit_band_std();
+        let levels = (0..NOISE_LEVELS)
+            .map(|l| {
+                let r = unit[l] / unit[0];
+                let k = if form == NoiseForm::LinearStd { r } else { r * r };
+                NoiseLevel { slope: lv[0].slope.map(|v| v * k), intercept: lv[0].intercept.map(|v| v * k) }
+            })
+            .collect();
+        (form, levels, covs, rel)
+    });
     let range = match points.first() {
         Some((y, _, _)) if !y.is_empty() => {
             let lo = y.iter().cloned().fold(1.0f32, f32::min);
@@ -437,5 +469,8 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
         }
         _ => [0.0, 1.0],
     };
-    (finish("fast", started, fitted, &samples, range, false), plot_data(&points))
+    let level0 = LevelSamples { y: points[0].0.clone(), var: points[0].1.clone() };
+    let mut noise = finish("fast", started, fitted, &[level0], range, false);
+    noise.diagnostics.samples_used = samples_used as u64;
+    (noise, plot_data(&points))
 }

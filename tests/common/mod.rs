@@ -1,0 +1,87 @@
+//! Shared helpers for the integration tests: vendored photographs, synthetic depth
+//! and flow with known structure, the true noise generator.
+#![allow(dead_code)]
+
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::io;
+use std::path::PathBuf;
+
+pub fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
+}
+
+pub fn photo(name: &str) -> Rgb {
+    io::load_rgb(&data(name)).expect("vendored test photo").0
+}
+
+/// Crop (x0, y0, w, h).
+pub fn crop(img: &Rgb, x0: usize, y0: usize, w: usize, h: usize) -> Rgb {
+    let mut out = Rgb::new(w, h, [0.0; 3]);
+    for c in 0..3 {
+        for y in 0..h {
+            for x in 0..w {
+                out.channels[c][y * w + x] = img.channels[c][(y0 + y) * img.width + x0 + x];
+            }
+        }
+    }
+    out
+}
+
+/// 8-bit quantisation, as a PNG round trip does.
+pub fn quantize8(img: &Rgb) -> Rgb {
+    img.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0)
+}
+
+/// A smooth metric depth map from `near_m` to `far_m`: a tilted plane with a bump,
+/// so every depth in the range is populated.
+pub fn depth_ramp(w: usize, h: usize, near_m: f32, far_m: f32) -> Plane {
+    let mut d = Plane::new(w, h, 0.0);
+    for y in 0..h {
+        for x in 0..w {
+            let u = (x as f32 + 0.5) / w as f32;
+            let v = (y as f32 + 0.5) / h as f32;
+            let t = (0.7 * v + 0.3 * u + 0.08 * (6.0 * u).sin() * (4.0 * v).cos()).clamp(0.0, 1.0);
+            d.data[y * w + x] = near_m + (far_m - near_m) * t;
+        }
+    }
+    d
+}
+
+/// A smooth flow field in px/frame with magnitude around `scale` and varying
+/// direction (a rotation plus a translation, like head motion).
+pub fn flow_field(w: usize, h: usize, scale: f32) -> Flow {
+    let mut f = Flow::uniform(w, h, 0.0, 0.0);
+    for y in 0..h {
+        for x in 0..w {
+            let u = x as f32 / w as f32 - 0.5;
+            let v = y as f32 / h as f32 - 0.5;
+            let i = y * w + x;
+            f.dx[i] = scale * (0.8 - 0.9 * v);
+            f.dy[i] = scale * (0.3 + 0.9 * u);
+        }
+    }
+    f
+}
+
+/// Poisson–Gaussian sensor noise: std_c(Y) = sqrt(a_c + b_c·Y), white, seeded.
+pub fn add_sensor_noise(clean: &Rgb, a: [f32; 3], b: [f32; 3], seed: u64) -> Rgb {
+    let y = clean.luma();
+    let mut out = clean.clone();
+    for c in 0..3 {
+        for i in 0..clean.len() {
+            let s = (a[c] + b[c] * y.data[i]).max(0.0).sqrt();
+            let n = blind_augment::synth::gaussian((i % clean.width) as u32, (i / clean.width) as u32, c as u32 + 10, seed);
+            out.channels[c][i] += s * n;
+        }
+    }
+    out
+}
+
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
