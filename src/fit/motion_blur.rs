@@ -14,11 +14,7 @@
 //! Fewer than 64 → not identifiable. Present when λ > 3·stderr and λ ≥ 0.005
 //! (a 0.1 px streak at 20 px/frame: invisible).
 //!
-//! Blind: the frame's own edge spread along the flow. A step blurred by a box of
-//! length L has directional-gradient peak h/L; re-blurring with a box of length
-//! L0 = |F| ≥ L gives peak h/L0, so L = L0·g_reblur/g and λ = L/|F| = g_reblur/g,
-//! at local maxima of the directional gradient, median over edges. Needs streaks
-//! of ≥ 2 px to be resolved by a central difference.
+//! Blind (`fit_fast`): gradient-energy isotropy — see its documentation.
 
 use crate::image::{Flow, Plane, Rgb};
 use crate::model::{Diagnostics, MotionBlur, Status};
@@ -69,6 +65,7 @@ impl Profiles {
         (cum(0.5 * lambda) - cum(-0.5 * lambda)) / lambda
     }
 
+    /// Number of samples (one target each; the fast tier keeps 4 profiles per sample).
     fn len(&self) -> usize {
         self.target.len()
     }
@@ -220,97 +217,110 @@ pub fn fit_accurate(image: &Rgb, sharp: &Rgb, flow: &Flow) -> (MotionBlur, Optio
     (mb, Some(MbPlotData { lambdas, losses, estimate: Some(lambda) }))
 }
 
-/// Mean of `p` along `flow` over t ∈ [−½, ½] at continuous position (x, y).
-fn box_along(p: &Plane, x: f32, y: f32, fx: f32, fy: f32, m: usize) -> f32 {
-    let mut acc = 0.0;
+/// Append the cumulative profile of `p` from (x, y) along `dir` (t ∈ [−½, ½]).
+fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32)) {
+    let len = (dir.0 * dir.0 + dir.1 * dir.1).sqrt();
+    let m = ((len / 0.5).ceil() as usize).max(4);
+    let start = prof.f.len();
+    let mut cum = 0.0f32;
     for j in 0..=m {
         let t = j as f32 / m as f32 - 0.5;
-        let wt = if j == 0 || j == m { 0.5 } else { 1.0 };
-        acc += wt * p.sample_bilinear(x + t * fx, y + t * fy);
+        let v = p.sample_bilinear(x + t * dir.0, y + t * dir.1);
+        if j > 0 {
+            cum += 0.5 * (prof.f[start + j - 1] + v) / m as f32;
+        }
+        prof.f.push(v);
+        prof.c.push(cum);
     }
-    acc / m as f32
+    prof.offsets.push(prof.f.len());
 }
 
-/// Effective width W = h / peak gradient of the edge through (x, y) along unit
-/// direction u, measured as L0·g_reblur/g with a box of length L0 along u
-/// (valid while L0 ≥ the edge's width). None unless (x, y) is a strong edge along u
-/// and a local maximum of the directional gradient.
-fn edge_width(y: &Plane, x: f32, yy: f32, ux: f32, uy: f32, l0: f32) -> Option<f32> {
-    let g = |d: f32| {
-        0.5 * (y.sample_bilinear(x + (d + 1.0) * ux, yy + (d + 1.0) * uy)
-            - y.sample_bilinear(x + (d - 1.0) * ux, yy + (d - 1.0) * uy))
-    };
-    let g0 = g(0.0).abs();
-    if g0 < 0.02 || g0 < g(-1.0).abs() || g0 < g(1.0).abs() {
-        return None;
-    }
-    let m = ((l0 / 0.5).ceil() as usize).max(2);
-    let (fx, fy) = (ux * l0, uy * l0);
-    let gr = 0.5 * (box_along(y, x + ux, yy + uy, fx, fy, m) - box_along(y, x - ux, yy - uy, fx, fy, m));
-    Some(l0 * (gr.abs() / g0).clamp(0.0, 1.0))
-}
-
-/// Fast tier: frame and flow only (edge spread along the flow).
+/// Fast tier: frame and flow only, from gradient-energy isotropy.
 ///
-/// A box streak of length L = λ|F| convolved with the scene's own edge profile
-/// (optics, demosaicing, the photo's softness) has an effective width W with
-/// W² ≈ L² + W0². W0 is measured on edges whose normal is perpendicular to the
-/// flow (motion does not widen them), W on edges whose normal is along the flow;
-/// λ_i = √max(W_i² − median(W0²), 0) / |F_i|, median over edges.
+/// Assume the sharp scene is statistically isotropic around the sampled pixels
+/// (textures have no preferred direction relative to the flow). A box streak of
+/// length L* = λ*|F| along u = F/|F| leaves the frame I. Blur I once more, by a box
+/// of length L along the perpendicular v, and compare the directional gradient
+/// energies C(L) = E[(∂_u B_v(L) I)²] and D(L) = E[(∂_v B_v(L) I)²]. By isotropy
+/// they are equal exactly when both axes carry the same box, i.e. at L = L*; C < D
+/// for L < L*. λ is the root of C − D on [0, 1] (bisection), with L = λ|F| per
+/// pixel. Isotropic blur (DoF, optics) cancels out. Anisotropic scenes (all edges
+/// parallel) bias it; sample pixels are picked by gradient *magnitude* only, so the
+/// selection does not prefer any direction. Standard error: spread of the root over
+/// 8 interleaved subsets / √8.
 pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let y = image.luma();
     let (w, h) = (y.width, y.height);
-    let stride = if w * h > 400_000 { 2 } else { 1 };
-    let (mut along, mut across) = (vec![], vec![]);
-    for py in (2..h.saturating_sub(2)).step_by(stride) {
-        for px in (2..w.saturating_sub(2)).step_by(stride) {
+    let mut cand = vec![];
+    for py in (2..h.saturating_sub(2)).step_by(2) {
+        for px in (2..w.saturating_sub(2)).step_by(2) {
             let i = py * w + px;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
-            let speed = (fx * fx + fy * fy).sqrt();
-            if speed < 2.0 {
+            // Flow below 3 px/frame: the ±1 px derivative cannot resolve the box.
+            if fx * fx + fy * fy < 9.0 {
                 continue;
             }
-            let (ux, uy) = (fx / speed, fy / speed);
             let gx = 0.5 * (y.get(px + 1, py) - y.get(px - 1, py));
             let gy = 0.5 * (y.get(px, py + 1) - y.get(px, py - 1));
-            let gm = (gx * gx + gy * gy).sqrt();
-            if gm < 0.02 {
-                continue;
-            }
-            let cos = (gx * ux + gy * uy).abs() / gm;
-            let (xf, yf) = (px as f32, py as f32);
-            if cos > 0.9 {
-                if let Some(wd) = edge_width(&y, xf, yf, ux, uy, speed) {
-                    along.push((wd, speed));
-                }
-            } else if cos < 0.3 {
-                if let Some(wd) = edge_width(&y, xf, yf, -uy, ux, speed) {
-                    across.push(wd * wd);
-                }
+            if gx * gx + gy * gy >= 1e-4 {
+                cand.push((px, py));
             }
         }
     }
-    let n = along.len();
-    if n < MIN_SAMPLES || across.len() < MIN_SAMPLES / 4 {
-        let reason = format!(
-            "{n} edges across flow ≥ 2 px and {} edges along it (need {MIN_SAMPLES} and {}): exposure not identifiable blindly",
-            across.len(),
-            MIN_SAMPLES / 4
-        );
+    let keep = cand.len().div_ceil(8192).max(1);
+    // Per sample: profiles along v (length |F|) at p+u, p−u, p+v, p−v.
+    let mut prof = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
+    for &(px, py) in cand.iter().step_by(keep) {
+        let i = py * w + px;
+        let (fx, fy) = (flow.dx[i], flow.dy[i]);
+        let speed = (fx * fx + fy * fy).sqrt();
+        let (ux, uy) = (fx / speed, fy / speed);
+        let (vx, vy) = (-uy, ux);
+        let (x, yy) = (px as f32, py as f32);
+        for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
+            push_profile(&mut prof, &y, x + ox, yy + oy, (vx * speed, vy * speed));
+        }
+        prof.target.push(0.0);
+    }
+    let n = prof.len();
+    if n < MIN_SAMPLES {
+        let reason = format!("only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}): exposure not identifiable blindly");
         let mut d = super::not_identifiable("fast", reason, started);
         d.samples_used = n as u64;
         return (MotionBlur::absent(d), None);
     }
-    across.sort_by(|a, b| a.total_cmp(b));
-    let w0_sq = across[across.len() / 2];
-    let mut lambdas: Vec<f32> =
-        along.iter().map(|&(wd, speed)| ((wd * wd - w0_sq).max(0.0).sqrt() / speed).clamp(0.0, 1.0)).collect();
-    lambdas.sort_by(|a, b| a.total_cmp(b));
-    let med = lambdas[n / 2];
-    let mut dev: Vec<f32> = lambdas.iter().map(|r| (r - med).abs()).collect();
-    dev.sort_by(|a, b| a.total_cmp(b));
-    // Standard error of a median: 1.253·σ/√n with σ ≈ 1.4826·MAD.
-    let stderr = 1.253 * 1.4826 * dev[n / 2] as f64 / (n as f64).sqrt();
-    (decide("fast", med, stderr, None, n, started), None)
+    // C − D over the samples in `subset` (k-th of `of` interleaved subsets).
+    let imbalance = |lambda: f32, subset: usize, of: usize| -> f64 {
+        let (mut c, mut d) = (0.0f64, 0.0f64);
+        for s in (subset..n).step_by(of) {
+            let b = |k: usize| prof.blurred(4 * s + k, lambda);
+            c += (0.5 * (b(0) - b(1)) as f64).powi(2);
+            d += (0.5 * (b(2) - b(3)) as f64).powi(2);
+        }
+        c - d
+    };
+    let root = |subset: usize, of: usize| -> f32 {
+        if imbalance(0.0, subset, of) >= 0.0 {
+            return 0.0;
+        }
+        if imbalance(1.0, subset, of) < 0.0 {
+            return 1.0;
+        }
+        let (mut lo, mut hi) = (0.0f32, 1.0f32);
+        for _ in 0..20 {
+            let mid = 0.5 * (lo + hi);
+            if imbalance(mid, subset, of) < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    let lambda = root(0, 1);
+    let parts: Vec<f64> = (0..8).map(|k| root(k, 8) as f64).collect();
+    let mean = parts.iter().sum::<f64>() / 8.0;
+    let stderr = (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / 7.0).sqrt() / 8f64.sqrt();
+    (decide("fast", lambda, stderr, None, n, started), None)
 }

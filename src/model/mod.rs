@@ -167,6 +167,15 @@ pub struct Diagnostics {
 }
 
 impl Diagnostics {
+    pub fn status_str(&self) -> &'static str {
+        match self.status {
+            Status::Present => "present",
+            Status::Absent => "absent",
+            Status::NotIdentifiable => "not identifiable",
+            Status::NotFitted => "not fitted",
+        }
+    }
+
     pub fn not_fitted(reason: &str) -> Self {
         Self {
             status: Status::NotFitted,

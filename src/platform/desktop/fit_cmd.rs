@@ -1,0 +1,155 @@
+//! `blind-augment fit`: one frame, or a folder of frames aggregated robustly.
+
+use super::FitArgs;
+use anyhow::{Context, Result};
+use blind_augment::fit::{aggregate_models, fit, FitInputs, FitOptions, FitOutput};
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::io;
+use std::path::{Path, PathBuf};
+
+const IMAGE_EXTS: [&str; 5] = ["png", "jpg", "jpeg", "pfm", "npy"];
+
+struct Loaded {
+    image: Rgb,
+    denoised: Option<Rgb>,
+    motion_deblurred: Option<Rgb>,
+    defocus_deblurred: Option<Rgb>,
+    depth: Option<Plane>,
+    flow: Option<Flow>,
+}
+
+fn load_opt_rgb(p: &Option<PathBuf>) -> Result<Option<Rgb>> {
+    Ok(match p {
+        Some(p) => Some(io::load_rgb(p)?.0),
+        None => None,
+    })
+}
+
+/// In folder mode, the file in `dir` with the same stem as `frame` (any extension).
+fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
+    let stem = frame.file_stem().context("frame without a file name")?;
+    let entries = std::fs::read_dir(dir).with_context(|| format!("reading {what} folder {}", dir.display()))?;
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.file_stem() == Some(stem) {
+            return Ok(p);
+        }
+    }
+    anyhow::bail!("{what} folder {} has no file named like {}", dir.display(), frame.display())
+}
+
+fn run_one(args: &FitArgs, inp: &Loaded, opts: &FitOptions) -> Result<FitOutput> {
+    let fi = FitInputs {
+        image: &inp.image,
+        denoised: inp.denoised.as_ref(),
+        motion_deblurred: inp.motion_deblurred.as_ref(),
+        defocus_deblurred: inp.defocus_deblurred.as_ref(),
+        depth: inp.depth.as_ref(),
+        depth_units: args.geometry.depth_units.into(),
+        flow: inp.flow.as_ref(),
+    };
+    Ok(fit(&fi, opts)?)
+}
+
+pub fn run(args: FitArgs) -> Result<()> {
+    let opts = FitOptions { tier: super::tier(args.tier), effects: super::effects(&args.only), ..Default::default() };
+    let g = &args.geometry;
+    let output = if let Some(dir) = &args.frames {
+        let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("reading frames folder {}", dir.display()))?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| {
+                p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| IMAGE_EXTS.contains(&e.to_ascii_lowercase().as_str()))
+            })
+            .collect();
+        frames.sort();
+        anyhow::ensure!(!frames.is_empty(), "frames folder {} holds no images", dir.display());
+        let bar = indicatif::ProgressBar::new(frames.len() as u64).with_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        let mut models = vec![];
+        let mut last = None;
+        for frame in &frames {
+            bar.set_message(frame.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default());
+            let load = |d: &Option<PathBuf>, what: &str| -> Result<Option<Rgb>> {
+                match d {
+                    Some(d) => Ok(Some(io::load_rgb(&sibling(d, frame, what)?)?.0)),
+                    None => Ok(None),
+                }
+            };
+            let inp = Loaded {
+                image: io::load_rgb(frame)?.0,
+                denoised: load(&args.denoised, "denoised")?,
+                motion_deblurred: load(&args.motion_deblurred, "motion-deblurred")?,
+                defocus_deblurred: load(&args.defocus_deblurred, "defocus-deblurred")?,
+                depth: match &g.depth {
+                    Some(d) => Some(io::load_depth(&sibling(d, frame, "depth")?, g.depth_png_scale)?),
+                    None => None,
+                },
+                flow: match &g.flow {
+                    Some(d) => Some(io::load_flow(&sibling(d, frame, "flow")?)?),
+                    None => None,
+                },
+            };
+            let out = run_one(&args, &inp, &opts).with_context(|| format!("fitting {}", frame.display()))?;
+            models.push(out.model.clone());
+            last = Some(out);
+            bar.inc(1);
+        }
+        bar.finish();
+        let model = aggregate_models(&models)?;
+        FitOutput { model, plots: last.map(|o| o.plots).unwrap_or_default() }
+    } else {
+        let image = args.image.as_ref().context("--image or --frames is required")?;
+        let inp = Loaded {
+            image: io::load_rgb(image)?.0,
+            denoised: load_opt_rgb(&args.denoised)?,
+            motion_deblurred: load_opt_rgb(&args.motion_deblurred)?,
+            defocus_deblurred: load_opt_rgb(&args.defocus_deblurred)?,
+            depth: g.depth.as_ref().map(|p| io::load_depth(p, g.depth_png_scale)).transpose()?,
+            flow: g.flow.as_ref().map(|p| io::load_flow(p)).transpose()?,
+        };
+        run_one(&args, &inp, &opts).with_context(|| format!("fitting {}", image.display()))?
+    };
+    let json = output.model.to_json()?;
+    std::fs::write(&args.out, json).with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!("wrote {}", args.out.display());
+    summarize(&output.model);
+    if let Some(dir) = &args.plots {
+        write_plots(dir, &output)?;
+    }
+    Ok(())
+}
+
+pub fn summarize(m: &blind_augment::model::CameraModel) {
+    let d = &m.noise.diagnostics;
+    eprintln!("  noise:          {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
+    let d = &m.motion_blur.diagnostics;
+    eprintln!("  motion blur:    {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
+    let d = &m.depth_of_field.diagnostics;
+    eprintln!("  depth of field: {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
+}
+
+pub fn write_plots(dir: &Path, out: &FitOutput) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    if let Some(d) = &out.plots.noise {
+        let p = dir.join("noise.png");
+        blind_augment::plots::noise_plot(&p, d, &out.model.noise)?;
+        eprintln!("wrote {}", p.display());
+    }
+    if let Some(d) = &out.plots.depth_of_field {
+        let p = dir.join("depth_of_field.png");
+        blind_augment::plots::dof_plot(&p, d, &out.model.depth_of_field)?;
+        eprintln!("wrote {}", p.display());
+    }
+    if let Some(d) = &out.plots.motion_blur {
+        let p = dir.join("motion_blur.png");
+        blind_augment::plots::mb_plot(&p, d)?;
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
