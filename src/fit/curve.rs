@@ -8,6 +8,7 @@
 //! * thin lens δ = k·|u − u_f| + c0 with u the inverse depth: for each candidate
 //!   focus u_f the model is linear in (k, c0); u_f is found by a grid over the
 //!   sample range and golden-section refinement.
+//!
 //! The form with the lower mean Huber loss wins; the thin lens wins ties within 1%
 //! because it stays bounded outside the fitted range. A curve whose variation over
 //! the range is below 3 standard errors (or 0.05 px) is replaced by a constant.
@@ -49,14 +50,27 @@ fn robust_scale(res: &[f64]) -> f64 {
 
 fn huber_loss(res: &[f64], scale: f64) -> f64 {
     let k = HUBER_K * scale;
-    res.iter().map(|&r| if r.abs() <= k { 0.5 * r * r } else { k * (r.abs() - 0.5 * k) }).sum::<f64>()
+    res.iter()
+        .map(|&r| {
+            if r.abs() <= k {
+                0.5 * r * r
+            } else {
+                k * (r.abs() - 0.5 * k)
+            }
+        })
+        .sum::<f64>()
         / res.len().max(1) as f64
 }
 
 /// IRLS for y ≈ X β with Huber weights, X given row by row through `row(i)`
 /// (P ≤ 3 columns; normal equations accumulated in place, solved by Cholesky).
 /// Returns (β, residuals) or None if singular.
-fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], iters: usize) -> Option<([f64; P], Vec<f64>)> {
+fn irls<const P: usize>(
+    n: usize,
+    row: impl Fn(usize) -> [f64; P],
+    y: &[f64],
+    iters: usize,
+) -> Option<([f64; P], Vec<f64>)> {
     let mut w = vec![1.0f64; n];
     let mut beta = [0.0f64; P];
     let mut res = vec![0.0f64; n];
@@ -95,7 +109,9 @@ fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], it
 fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
     // Centre and scale Z for conditioning, then map back to raw coefficients.
     let zm = z.iter().sum::<f64>() / z.len() as f64;
-    let zs = (z.iter().map(|v| (v - zm).powi(2)).sum::<f64>() / z.len() as f64).sqrt().max(1e-9);
+    let zs = (z.iter().map(|v| (v - zm).powi(2)).sum::<f64>() / z.len() as f64)
+        .sqrt()
+        .max(1e-9);
     let (b, res) = irls(
         z.len(),
         |i| {
@@ -109,7 +125,11 @@ fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
     let a = b[0] / (zs * zs);
     let bb = b[1] / zs - 2.0 * b[0] * zm / (zs * zs);
     let c = b[0] * zm * zm / (zs * zs) - b[1] * zm / zs + b[2];
-    let curve = DofCurve::Quadratic { a: a as f32, b: bb as f32, c: c as f32 };
+    let curve = DofCurve::Quadratic {
+        a: a as f32,
+        b: bb as f32,
+        c: c as f32,
+    };
     let ok = [a, bb, c].iter().all(|v| v.is_finite());
     ok.then_some((curve, res))
 }
@@ -122,7 +142,7 @@ fn fit_thin_lens_at(u: &[f64], s: &[f64], uf: f64, iters: usize) -> Option<(f64,
 fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, Vec<f64>)> {
     let lo = u.iter().cloned().fold(f64::INFINITY, f64::min);
     let hi = u.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     // The focus search runs on at most 2048 evenly spread samples with 6 IRLS steps;
@@ -138,7 +158,9 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
     // Grid (the focus may lie just outside the sampled range), then golden section.
     let span = hi - lo;
     let n = 32;
-    let grid: Vec<f64> = (0..=n).map(|i| lo - 0.1 * span + 1.2 * span * i as f64 / n as f64).collect();
+    let grid: Vec<f64> = (0..=n)
+        .map(|i| lo - 0.1 * span + 1.2 * span * i as f64 / n as f64)
+        .collect();
     let losses: Vec<f64> = grid.iter().map(|&g| loss_at(g)).collect();
     let best = (0..grid.len()).min_by(|&a, &b| losses[a].total_cmp(&losses[b]))?;
     let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n)]);
@@ -162,7 +184,7 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
     }
     let uf = 0.5 * (a + b);
     let (k, c0, res) = fit_thin_lens_at(u, s, uf, 15)?;
-    if !(k >= 0.0) {
+    if k.is_nan() || k < 0.0 {
         return None;
     }
     // Back from inverse depth to the depth value of the focal plane.
@@ -175,28 +197,50 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
         }
         DepthUnits::RelativeInverse => uf,
     };
-    let curve = DofCurve::ThinLens { k: k as f32, focus_depth: focus_depth as f32, c0: c0 as f32 };
-    [k, focus_depth, c0].iter().all(|v| v.is_finite()).then_some((curve, res))
+    let curve = DofCurve::ThinLens {
+        k: k as f32,
+        focus_depth: focus_depth as f32,
+        c0: c0 as f32,
+    };
+    [k, focus_depth, c0]
+        .iter()
+        .all(|v| v.is_finite())
+        .then_some((curve, res))
 }
 
 /// Fit δ(Z) to samples `(depth, sigma_px)` over `depth_range`. None if too few.
-pub fn fit_dof_curve(depth: &[f32], sigma_px: &[f32], units: DepthUnits, depth_range: [f32; 2]) -> Option<CurveFit> {
+pub fn fit_dof_curve(
+    depth: &[f32],
+    sigma_px: &[f32],
+    units: DepthUnits,
+    depth_range: [f32; 2],
+) -> Option<CurveFit> {
     if depth.len() < 8 {
         return None;
     }
     let z: Vec<f64> = depth.iter().map(|&v| v as f64).collect();
     let s: Vec<f64> = sigma_px.iter().map(|&v| v as f64).collect();
-    let u: Vec<f64> = depth.iter().map(|&v| units.inverse_depth(v) as f64).collect();
+    let u: Vec<f64> = depth
+        .iter()
+        .map(|&v| units.inverse_depth(v) as f64)
+        .collect();
     let quad = fit_quadratic(&z, &s);
     let thin = fit_thin_lens(&u, &s, units);
-    let score = |r: &Option<(DofCurve, Vec<f64>)>| r.as_ref().map(|(_, res)| huber_loss(res, robust_scale(res)));
+    let score = |r: &Option<(DofCurve, Vec<f64>)>| {
+        r.as_ref()
+            .map(|(_, res)| huber_loss(res, robust_scale(res)))
+    };
     let (lq, lt) = (score(&quad), score(&thin));
     let pick_thin = match (lq, lt) {
         (Some(q), Some(t)) => t <= q * 1.01,
         (None, Some(_)) => true,
         _ => false,
     };
-    let (curve, res) = if pick_thin { thin.clone()? } else { quad.clone()? };
+    let (curve, res) = if pick_thin {
+        thin.clone()?
+    } else {
+        quad.clone()?
+    };
     let scale = robust_scale(&res);
     let loss = huber_loss(&res, scale);
     let stderr_px = scale * (3.0 / z.len() as f64).sqrt();
@@ -207,10 +251,16 @@ pub fn fit_dof_curve(depth: &[f32], sigma_px: &[f32], units: DepthUnits, depth_r
             curve.sigma_px(units, zz)
         })
         .collect();
-    let (mn, mx) = evals.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    let (mn, mx) = evals
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let curve = if ((mx - mn) as f64) < (3.0 * stderr_px).max(0.05) {
         let mut sv = s.clone();
-        DofCurve::Constant { c: (median(&mut sv) as f32).clamp(0.0, crate::model::MAX_DOF_SIGMA_PX) }
+        DofCurve::Constant {
+            c: (median(&mut sv) as f32).clamp(0.0, crate::model::MAX_DOF_SIGMA_PX),
+        }
     } else {
         curve
     };

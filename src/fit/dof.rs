@@ -80,7 +80,11 @@ fn finish(
     }
     let range = depth_range(&z);
     let Some(fit) = fit_dof_curve(&z, &s, units, range) else {
-        let mut d = super::not_identifiable(method, "robust depth-model fit failed (degenerate design)", started);
+        let mut d = super::not_identifiable(
+            method,
+            "robust depth-model fit failed (degenerate design)",
+            started,
+        );
         d.samples_used = n as u64;
         return (DepthOfField::absent(units, d), None);
     };
@@ -117,7 +121,12 @@ fn finish(
         fit_time_s: started.elapsed().as_secs_f64(),
         stderr: Some(fit.stderr_px),
     };
-    let plot = DofPlotData { depth: z, sigma_px: s, quadratic: fit.quadratic, thin_lens: fit.thin_lens };
+    let plot = DofPlotData {
+        depth: z,
+        sigma_px: s,
+        quadratic: fit.quadratic,
+        thin_lens: fit.thin_lens,
+    };
     (dof, Some(plot))
 }
 
@@ -149,7 +158,10 @@ pub fn fit_accurate(
             if !valid_depth(z, units) {
                 continue;
             }
-            let g: f32 = (0..9).map(|k| grad.get(x + k % 3 - 1, y + k / 3 - 1)).sum::<f32>() / 9.0;
+            let g: f32 = (0..9)
+                .map(|k| grad.get(x + k % 3 - 1, y + k / 3 - 1))
+                .sum::<f32>()
+                / 9.0;
             if g >= TEXTURE_MIN_GRAD_SQ {
                 centres.push((x, y));
             }
@@ -158,7 +170,11 @@ pub fn fit_accurate(
     let n = centres.len();
     let spacing = opts.dof_node_spacing_px;
     let intervals = (opts.dof_max_sigma_px / spacing).ceil() as usize;
-    let mut stats = IntervalStats { aa: vec![0.0; n * intervals], ad: vec![0.0; n * intervals], dd: vec![0.0; n * intervals] };
+    let mut stats = IntervalStats {
+        aa: vec![0.0; n * intervals],
+        ad: vec![0.0; n * intervals],
+        dd: vec![0.0; n * intervals],
+    };
     if n >= MIN_SAMPLES {
         for_each_cascade_interval(&ys, spacing, opts.dof_max_sigma_px, |k, _, _, a, b| {
             for (s, &(x, y)) in centres.iter().enumerate() {
@@ -194,7 +210,11 @@ pub fn fit_accurate(
         let mut best = (f32::INFINITY, 0.0f32);
         for k in 0..intervals {
             let o = s * intervals + k;
-            let wgt = if stats.dd[o] > 1e-12 { (stats.ad[o] / stats.dd[o]).clamp(0.0, 1.0) } else { 0.0 };
+            let wgt = if stats.dd[o] > 1e-12 {
+                (stats.ad[o] / stats.dd[o]).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let r = stats.aa[o] - 2.0 * wgt * stats.ad[o] + wgt * wgt * stats.dd[o];
             if r < best.0 {
                 let (s0, s1) = (k as f32 * spacing, (k + 1) as f32 * spacing);
@@ -242,7 +262,11 @@ fn zhuo_sim_table() -> &'static Vec<(f32, f32)> {
                     .collect();
                 let p = Plane::from_vec(n, 1, data);
                 let re = blur_separable(&p, &k0);
-                let g = |q: &Plane| (1..n - 1).map(|x| 0.5 * (q.get(x + 1, 0) - q.get(x - 1, 0))).fold(0.0f32, f32::max);
+                let g = |q: &Plane| {
+                    (1..n - 1)
+                        .map(|x| 0.5 * (q.get(x + 1, 0) - q.get(x - 1, 0)))
+                        .fold(0.0f32, f32::max)
+                };
                 let r = g(&p) / g(&re);
                 raw_sum += ZS_SIGMA0 / (r * r - 1.0).max(1e-6).sqrt();
             }
@@ -258,7 +282,8 @@ const ZS_SIGMA0: f32 = 3.0;
 fn erf(x: f32) -> f32 {
     let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
     let y = 1.0
-        - (((((1.061_405_4 * t - 1.453_152_1) * t) + 1.421_413_8) * t - 0.284_496_74) * t + 0.254_829_6)
+        - (((((1.061_405_4 * t - 1.453_152_1) * t) + 1.421_413_8) * t - 0.284_496_74) * t
+            + 0.254_829_6)
             * t
             * (-x * x).exp();
     y.copysign(x)
@@ -291,7 +316,10 @@ pub fn fit_fast(
     let re = blur_separable(&y, &discrete_gaussian_kernel(ZS_SIGMA0 * ZS_SIGMA0));
     let (w, h) = (y.width, y.height);
     let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {
-        (0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy)), 0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1)))
+        (
+            0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy)),
+            0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1)),
+        )
     };
     let (mut zs, mut sig) = (vec![], vec![]);
     for py in 2..h.saturating_sub(2) {

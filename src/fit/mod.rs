@@ -43,7 +43,11 @@ pub struct Effects {
 }
 
 impl Effects {
-    pub const ALL: Effects = Effects { noise: true, motion_blur: true, depth_of_field: true };
+    pub const ALL: Effects = Effects {
+        noise: true,
+        motion_blur: true,
+        depth_of_field: true,
+    };
 }
 
 /// Everything an estimator may use. References are per effect (paper Tab. 1).
@@ -89,15 +93,33 @@ pub enum FitError {
     #[error("input `{input}` is empty (0×0)")]
     Empty { input: &'static str },
     #[error("input `{input}` is {got_w}×{got_h} but the image is {want_w}×{want_h}")]
-    SizeMismatch { input: &'static str, want_w: usize, want_h: usize, got_w: usize, got_h: usize },
+    SizeMismatch {
+        input: &'static str,
+        want_w: usize,
+        want_h: usize,
+        got_w: usize,
+        got_h: usize,
+    },
     #[error("input `{input}` has a non-finite value ({value}) at x={x}, y={y}, channel {channel}")]
-    NonFinite { input: &'static str, x: usize, y: usize, channel: usize, value: f32 },
+    NonFinite {
+        input: &'static str,
+        x: usize,
+        y: usize,
+        channel: usize,
+        value: f32,
+    },
     #[error("the accurate tier for {effect} needs `{input}`, which was not given")]
-    MissingReference { effect: &'static str, input: &'static str },
+    MissingReference {
+        effect: &'static str,
+        input: &'static str,
+    },
     #[error("no frames to aggregate")]
     NoFrames,
     #[error("invalid option `{option}`: {problem}")]
-    Option { option: &'static str, problem: String },
+    Option {
+        option: &'static str,
+        problem: String,
+    },
 }
 
 /// Data behind the plots (`--plots`).
@@ -116,11 +138,23 @@ pub struct FitOutput {
 
 fn check_rgb(input: &'static str, img: &Rgb, w: usize, h: usize) -> Result<(), FitError> {
     if img.width != w || img.height != h {
-        return Err(FitError::SizeMismatch { input, want_w: w, want_h: h, got_w: img.width, got_h: img.height });
+        return Err(FitError::SizeMismatch {
+            input,
+            want_w: w,
+            want_h: h,
+            got_w: img.width,
+            got_h: img.height,
+        });
     }
     if let Some((x, y, c)) = img.first_non_finite() {
         let value = img.channels[c][y * w + x];
-        return Err(FitError::NonFinite { input, x, y, channel: c, value });
+        return Err(FitError::NonFinite {
+            input,
+            x,
+            y,
+            channel: c,
+            value,
+        });
     }
     Ok(())
 }
@@ -144,17 +178,35 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     // skipped, not rejected. Only the size must match.
     if let Some(z) = inp.depth {
         if z.width != w || z.height != h {
-            return Err(FitError::SizeMismatch { input: "depth", want_w: w, want_h: h, got_w: z.width, got_h: z.height });
+            return Err(FitError::SizeMismatch {
+                input: "depth",
+                want_w: w,
+                want_h: h,
+                got_w: z.width,
+                got_h: z.height,
+            });
         }
     }
     if let Some(f) = inp.flow {
         if f.width != w || f.height != h {
-            return Err(FitError::SizeMismatch { input: "flow", want_w: w, want_h: h, got_w: f.width, got_h: f.height });
+            return Err(FitError::SizeMismatch {
+                input: "flow",
+                want_w: w,
+                want_h: h,
+                got_w: f.width,
+                got_h: f.height,
+            });
         }
         for (i, (&dx, &dy)) in f.dx.iter().zip(&f.dy).enumerate() {
             for (channel, value) in [(0, dx), (1, dy)] {
                 if !value.is_finite() {
-                    return Err(FitError::NonFinite { input: "flow", x: i % w, y: i / w, channel, value });
+                    return Err(FitError::NonFinite {
+                        input: "flow",
+                        x: i % w,
+                        y: i / w,
+                        channel,
+                        value,
+                    });
                 }
             }
         }
@@ -168,11 +220,18 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     if !(opts.dof_max_sigma_px > 0.0 && opts.dof_max_sigma_px <= crate::model::MAX_DOF_SIGMA_PX) {
         return Err(FitError::Option {
             option: "dof_max_sigma_px",
-            problem: format!("must be in (0, {}], got {}", crate::model::MAX_DOF_SIGMA_PX, opts.dof_max_sigma_px),
+            problem: format!(
+                "must be in (0, {}], got {}",
+                crate::model::MAX_DOF_SIGMA_PX,
+                opts.dof_max_sigma_px
+            ),
         });
     }
     if opts.noise_stride_px == 0 {
-        return Err(FitError::Option { option: "noise_stride_px", problem: "must be ≥ 1".into() });
+        return Err(FitError::Option {
+            option: "noise_stride_px",
+            problem: "must be ≥ 1".into(),
+        });
     }
     Ok(())
 }
@@ -218,7 +277,9 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
 
     if opts.effects.noise {
         let (noise, data) = match tier_for(opts, inp.denoised, "noise", "denoised")? {
-            Tier::Accurate => noise::fit_accurate(inp.image, inp.denoised.unwrap_or(inp.image), opts),
+            Tier::Accurate => {
+                noise::fit_accurate(inp.image, inp.denoised.unwrap_or(inp.image), opts)
+            }
             Tier::Fast => noise::fit_fast(inp.image, opts),
         };
         model.noise = noise;
@@ -229,16 +290,30 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
 
     if opts.effects.motion_blur {
         let started = Instant::now();
-        let tier = tier_for(opts, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
-        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
+        let tier = tier_for(
+            opts,
+            inp.motion_deblurred,
+            "motion blur",
+            "motion-deblurred",
+        )?;
+        let method = if tier == Tier::Accurate {
+            "accurate"
+        } else {
+            "fast"
+        };
         match inp.flow {
             None => {
-                model.motion_blur =
-                    MotionBlur::absent(not_identifiable(method, "no flow map given: exposure not identifiable", started))
+                model.motion_blur = MotionBlur::absent(not_identifiable(
+                    method,
+                    "no flow map given: exposure not identifiable",
+                    started,
+                ))
             }
             Some(flow) => {
                 let (mb, data) = match (tier, inp.motion_deblurred) {
-                    (Tier::Accurate, Some(sharp)) => motion_blur::fit_accurate(inp.image, sharp, flow),
+                    (Tier::Accurate, Some(sharp)) => {
+                        motion_blur::fit_accurate(inp.image, sharp, flow)
+                    }
                     _ => motion_blur::fit_fast(inp.image, flow),
                 };
                 model.motion_blur = mb;
@@ -251,8 +326,17 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
 
     if opts.effects.depth_of_field {
         let started = Instant::now();
-        let tier = tier_for(opts, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
-        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
+        let tier = tier_for(
+            opts,
+            inp.defocus_deblurred,
+            "depth of field",
+            "defocus-deblurred",
+        )?;
+        let method = if tier == Tier::Accurate {
+            "accurate"
+        } else {
+            "fast"
+        };
         match inp.depth {
             None => {
                 model.depth_of_field = DepthOfField::absent(
@@ -262,7 +346,9 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
             }
             Some(depth) => {
                 let (dof, data) = match (tier, inp.defocus_deblurred) {
-                    (Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
+                    (Tier::Accurate, Some(sharp)) => {
+                        dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts)
+                    }
                     _ => dof::fit_fast(inp.image, depth, inp.depth_units, opts),
                 };
                 model.depth_of_field = dof;
@@ -270,15 +356,20 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
             }
         }
     } else {
-        model.depth_of_field =
-            DepthOfField::absent(inp.depth_units, Diagnostics::not_fitted("not requested (--only)"));
+        model.depth_of_field = DepthOfField::absent(
+            inp.depth_units,
+            Diagnostics::not_fitted("not requested (--only)"),
+        );
     }
 
     // Estimators only produce finite, in-range values; this is the last guard
     // before anything is written or uploaded.
     if let Err(e) = model.validate() {
         log::error!("fitted model failed validation ({e}); effects reset to absent");
-        return Err(FitError::Option { option: "model", problem: e.to_string() });
+        return Err(FitError::Option {
+            option: "model",
+            problem: e.to_string(),
+        });
     }
     Ok(FitOutput { model, plots })
 }

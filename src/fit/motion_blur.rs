@@ -72,7 +72,11 @@ impl Profiles {
 
     fn loss(&self, lambda: f32) -> f64 {
         let n = self.len();
-        (0..n).map(|i| (self.target[i] - self.blurred(i, lambda)) as f64).map(|r| r * r).sum::<f64>() / n as f64
+        (0..n)
+            .map(|i| (self.target[i] - self.blurred(i, lambda)) as f64)
+            .map(|r| r * r)
+            .sum::<f64>()
+            / n as f64
     }
 }
 
@@ -98,7 +102,12 @@ fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow) -> Profiles {
         }
     }
     let keep = cand.len().div_ceil(MAX_SAMPLES).max(1);
-    let mut p = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
+    let mut p = Profiles {
+        f: vec![],
+        c: vec![],
+        offsets: vec![0],
+        target: vec![],
+    };
     for &(x, y) in cand.iter().step_by(keep) {
         let i = y * w + x;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
@@ -158,10 +167,18 @@ fn decide(
     started: Instant,
 ) -> MotionBlur {
     let present = (lambda as f64) > 3.0 * stderr && lambda >= 0.005;
-    let status = if present { Status::Present } else { Status::Absent };
+    let status = if present {
+        Status::Present
+    } else {
+        Status::Absent
+    };
     let reason = format!(
         "λ = {lambda:.4} ± {stderr:.4} from {n} pixels; {}; residuals are mean squared luma errors",
-        if present { "above 3 standard errors and 0.005" } else { "within 3 standard errors of 0 or below 0.005" }
+        if present {
+            "above 3 standard errors and 0.005"
+        } else {
+            "within 3 standard errors of 0 or below 0.005"
+        }
     );
     MotionBlur {
         present,
@@ -194,7 +211,9 @@ pub fn fit_accurate(image: &Rgb, sharp: &Rgb, flow: &Flow) -> (MotionBlur, Optio
     }
     let lambdas: Vec<f32> = (0..=20).map(|i| i as f32 / 20.0).collect();
     let losses: Vec<f64> = lambdas.iter().map(|&l| prof.loss(l)).collect();
-    let best = (0..lambdas.len()).min_by(|&a, &b| losses[a].total_cmp(&losses[b])).unwrap_or(0);
+    let best = (0..lambdas.len())
+        .min_by(|&a, &b| losses[a].total_cmp(&losses[b]))
+        .unwrap_or(0);
     let lo = lambdas[best.saturating_sub(1)];
     let hi = lambdas[(best + 1).min(lambdas.len() - 1)];
     let mut lambda = golden(lo, hi, |l| prof.loss(l));
@@ -212,9 +231,27 @@ pub fn fit_accurate(image: &Rgb, sharp: &Rgb, flow: &Flow) -> (MotionBlur, Optio
         .map(|i| ((prof.blurred(i, l1) - prof.blurred(i, l0)) / (l1 - l0)) as f64)
         .map(|j| j * j)
         .sum();
-    let stderr = if jj > 0.0 { (after * n as f64 / (n as f64 - 1.0) / jj).sqrt() } else { 1.0 };
-    let mb = decide("accurate", lambda, stderr, Some((losses[0], after)), n, started);
-    (mb, Some(MbPlotData { lambdas, losses, estimate: Some(lambda) }))
+    let stderr = if jj > 0.0 {
+        (after * n as f64 / (n as f64 - 1.0) / jj).sqrt()
+    } else {
+        1.0
+    };
+    let mb = decide(
+        "accurate",
+        lambda,
+        stderr,
+        Some((losses[0], after)),
+        n,
+        started,
+    );
+    (
+        mb,
+        Some(MbPlotData {
+            lambdas,
+            losses,
+            estimate: Some(lambda),
+        }),
+    )
 }
 
 /// Append the cumulative profile of `p` from (x, y) along `dir` (t ∈ [−½, ½]).
@@ -270,7 +307,12 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     }
     let keep = cand.len().div_ceil(8192).max(1);
     // Per sample: profiles along v (length |F|) at p+u, p−u, p+v, p−v.
-    let mut prof = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
+    let mut prof = Profiles {
+        f: vec![],
+        c: vec![],
+        offsets: vec![0],
+        target: vec![],
+    };
     for &(px, py) in cand.iter().step_by(keep) {
         let i = py * w + px;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);

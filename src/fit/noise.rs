@@ -42,6 +42,11 @@ const BLIND_FLAT_FRACTION: f64 = 0.2;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
 
+/// Per level: luma, per-channel local variance, optional per-sample weights.
+type LevelPoints = (Vec<f32>, [Vec<f32>; 3], Option<Vec<f32>>);
+/// Chosen form, per-level maps, per-level per-channel OLS covariance, mean relative residual.
+type LevelFit = (NoiseForm, Vec<NoiseLevel>, Vec<[[[f64; 2]; 2]; 3]>, f64);
+
 /// Samples behind the noise plot: per level (4 = low-pass), luma and per-channel std.
 #[derive(Clone, Debug, Default)]
 pub struct NoisePlotData {
@@ -117,10 +122,16 @@ fn collect_samples(
             // reduce chain and one expand, ~5 px per level-l pixel) plus the window's
             // 2σ radius, which is 8 level-0 px at every level (σ halves as pixels double).
             let radius = 5 * scale + 8;
-            let mut out = LevelSamples { y: vec![], var: [vec![], vec![], vec![]] };
+            let mut out = LevelSamples {
+                y: vec![],
+                var: [vec![], vec![], vec![]],
+            };
             for y in grid(band0.height, stride) {
                 for x in grid(band0.width, stride) {
-                    let (x0, y0) = ((x * scale).min(clip.width() - 1), (y * scale).min(clip.height() - 1));
+                    let (x0, y0) = (
+                        (x * scale).min(clip.width() - 1),
+                        (y * scale).min(clip.height() - 1),
+                    );
                     if clip.box_sum(x0, y0, radius) > 0.0 {
                         continue;
                     }
@@ -167,7 +178,10 @@ fn ols(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64, [[f6
         .sum();
     let s2 = ssr / (n as f64 - 2.0).max(1.0) / (sw / n as f64);
     let cov = if det.abs() > 1e-12 * sw * sw {
-        [[s2 * syy / det, -s2 * sy / det], [-s2 * sy / det, s2 * sw / det]]
+        [
+            [s2 * syy / det, -s2 * sy / det],
+            [-s2 * sy / det, s2 * sw / det],
+        ]
     } else {
         [[s2 / sw, 0.0], [0.0, 0.0]]
     };
@@ -204,22 +218,26 @@ fn fit_linear_std(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64
             break;
         }
     }
-    let ssr = (0..y.len()).map(|i| w(i) * (v[i] as f64 - (a + b * y[i] as f64).powi(2)).powi(2)).sum();
+    let ssr = (0..y.len())
+        .map(|i| w(i) * (v[i] as f64 - (a + b * y[i] as f64).powi(2)).powi(2))
+        .sum();
     (a.is_finite() && b.is_finite()).then_some((a, b, ssr))
 }
 
 /// Per-level fits in both forms; keeps the form with the smaller relative residual.
 /// `points`: per level (luma, per-channel variance, optional weights).
-fn fit_levels(
-    points: &[(Vec<f32>, [Vec<f32>; 3], Option<Vec<f32>>)],
-) -> Option<(NoiseForm, Vec<NoiseLevel>, Vec<[[[f64; 2]; 2]; 3]>, f64)> {
+fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
     let mut affine = vec![NoiseLevel::ZERO; points.len()];
     let mut linear = vec![NoiseLevel::ZERO; points.len()];
     let mut covs = vec![[[[0.0; 2]; 2]; 3]; points.len()];
     let (mut rel_aff, mut rel_lin, mut llr) = (0.0f64, 0.0f64, 0.0f64);
     for (l, (y, var, wts)) in points.iter().enumerate() {
         for c in 0..3 {
-            let norm: f64 = var[c].iter().map(|&v| (v as f64).powi(2)).sum::<f64>().max(1e-300);
+            let norm: f64 = var[c]
+                .iter()
+                .map(|&v| (v as f64).powi(2))
+                .sum::<f64>()
+                .max(1e-300);
             let (a, b, ssr, cov) = ols(y, &var[c], wts.as_deref())?;
             affine[l].intercept[c] = a as f32;
             affine[l].slope[c] = b as f32;
@@ -230,7 +248,11 @@ fn fit_levels(
             // Keep std non-negative at the reference point: (a + b·y)² is symmetric
             // in sign, so flip to the branch with a positive std.
             let ym = y.iter().sum::<f32>() / y.len().max(1) as f32;
-            let (la, lb) = if la + lb * ym as f64 >= 0.0 { (la, lb) } else { (-la, -lb) };
+            let (la, lb) = if la + lb * ym as f64 >= 0.0 {
+                (la, lb)
+            } else {
+                (-la, -lb)
+            };
             linear[l].intercept[c] = la as f32;
             linear[l].slope[c] = lb as f32;
             rel_lin += lssr / norm;
@@ -290,7 +312,7 @@ fn percentile(v: &mut [f32], q: f64) -> f32 {
 fn finish(
     method: &str,
     started: Instant,
-    fitted: Option<(NoiseForm, Vec<NoiseLevel>, Vec<[[[f64; 2]; 2]; 3]>, f64)>,
+    fitted: Option<LevelFit>,
     samples: &[LevelSamples],
     luma_range: [f32; 2],
     with_lowpass: bool,
@@ -302,7 +324,11 @@ fn finish(
         d.samples_used = n_used as u64;
         return Noise::absent(d);
     };
-    let lowpass = if with_lowpass && levels.len() > NOISE_LEVELS { Some(levels[NOISE_LEVELS]) } else { None };
+    let lowpass = if with_lowpass && levels.len() > NOISE_LEVELS {
+        Some(levels[NOISE_LEVELS])
+    } else {
+        None
+    };
     levels.truncate(NOISE_LEVELS);
     let noise = Noise {
         present: false,
@@ -319,15 +345,31 @@ fn finish(
     let mut std_mid = 0.0;
     for c in 0..3 {
         let cov = covs[0][c];
-        let var_se = (cov[0][0] + 2.0 * ym * cov[0][1] + ym * ym * cov[1][1]).max(0.0).sqrt();
+        let var_se = (cov[0][0] + 2.0 * ym * cov[0][1] + ym * ym * cov[1][1])
+            .max(0.0)
+            .sqrt();
         let s = noise.levels[0].std(form, c, ym as f32) as f64;
         std_mid += s / 3.0;
-        rel += if s > 0.0 { var_se / (2.0 * s * s) / 3.0 } else { f64::INFINITY };
+        rel += if s > 0.0 {
+            var_se / (2.0 * s * s) / 3.0
+        } else {
+            f64::INFINITY
+        };
     }
-    let before: f64 = samples[0].var.iter().flatten().map(|&v| (v as f64).powi(2)).sum::<f64>()
+    let before: f64 = samples[0]
+        .var
+        .iter()
+        .flatten()
+        .map(|&v| (v as f64).powi(2))
+        .sum::<f64>()
         / (3 * samples[0].y.len()).max(1) as f64;
-    let present = std_mid > 1e-4 && rel.is_finite() && std_mid * (1.0 - 3.0 * rel) > 0.0 && rel < 1.0 / 3.0;
-    let status = if present { Status::Present } else { Status::Absent };
+    let present =
+        std_mid > 1e-4 && rel.is_finite() && std_mid * (1.0 - 3.0 * rel) > 0.0 && rel < 1.0 / 3.0;
+    let status = if present {
+        Status::Present
+    } else {
+        Status::Absent
+    };
     let reason = if present {
         format!(
             "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood ratio); \
@@ -353,7 +395,7 @@ fn finish(
     }
 }
 
-fn plot_data(points: &[(Vec<f32>, [Vec<f32>; 3], Option<Vec<f32>>)]) -> NoisePlotData {
+fn plot_data(points: &[LevelPoints]) -> NoisePlotData {
     NoisePlotData {
         levels: points
             .iter()
@@ -372,17 +414,28 @@ fn luma_range(samples: &LevelSamples) -> [f32; 2] {
     }
     let lo = percentile(&mut y, 0.005);
     let hi = percentile(&mut y, 0.995);
-    [lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0).max(lo.clamp(0.0, 1.0))]
+    [
+        lo.clamp(0.0, 1.0),
+        hi.clamp(0.0, 1.0).max(lo.clamp(0.0, 1.0)),
+    ]
 }
 
 /// Accurate tier: I and I_noNoise.
-pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
+pub fn fit_accurate(
+    image: &Rgb,
+    denoised: &Rgb,
+    opts: &super::FitOptions,
+) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let residual = Rgb {
         width: image.width,
         height: image.height,
         channels: std::array::from_fn(|c| {
-            image.channels[c].iter().zip(&denoised.channels[c]).map(|(a, b)| a - b).collect()
+            image.channels[c]
+                .iter()
+                .zip(&denoised.channels[c])
+                .map(|(a, b)| a - b)
+                .collect()
         }),
     };
     let bands = pyramids(&residual);
@@ -390,11 +443,26 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
     let samples = collect_samples(&bands, &luma, &clip_mask(image), opts.noise_stride_px);
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).
-    let usable = if samples[NOISE_LEVELS].y.is_empty() { NOISE_LEVELS } else { NOISE_LEVELS + 1 };
-    let points: Vec<_> = samples.iter().take(usable).map(|s| (s.y.clone(), s.var.clone(), None)).collect();
-    let fitted = if points.iter().all(|p| !p.0.is_empty()) { fit_levels(&points) } else { None };
+    let usable = if samples[NOISE_LEVELS].y.is_empty() {
+        NOISE_LEVELS
+    } else {
+        NOISE_LEVELS + 1
+    };
+    let points: Vec<_> = samples
+        .iter()
+        .take(usable)
+        .map(|s| (s.y.clone(), s.var.clone(), None))
+        .collect();
+    let fitted = if points.iter().all(|p| !p.0.is_empty()) {
+        fit_levels(&points)
+    } else {
+        None
+    };
     let range = luma_range(&samples[0]);
-    (finish("accurate", started, fitted, &samples, range, true), plot_data(&points))
+    (
+        finish("accurate", started, fitted, &samples, range, true),
+        plot_data(&points),
+    )
 }
 
 /// Fast tier: the frame alone.
@@ -426,15 +494,24 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
             if clip.box_sum(x, y, 5 * 4 + 8) > 0.0 {
                 continue;
             }
-            let structure = local_mean_sq(band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
+            let structure = local_mean_sq(
+                band2,
+                (x / 4).min(band2.width - 1),
+                (y / 4).min(band2.height - 1),
+                &win2,
+            );
             let v = std::array::from_fn(|c| local_mean_sq(&bands[c][0], x, y, &win0));
             pts.push((local_mean(&luma[0], x, y, &win0), structure, v));
         }
     }
     let (mut ys, mut vs, mut ws) = (vec![], [vec![], vec![], vec![]], vec![]);
     for b in 0..BLIND_BINS {
-        let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
-        let mut bin: Vec<&(f32, f32, [f32; 3])> = pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
+        let (lo, hi) = (
+            b as f32 / BLIND_BINS as f32,
+            (b + 1) as f32 / BLIND_BINS as f32,
+        );
+        let mut bin: Vec<&(f32, f32, [f32; 3])> =
+            pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
         if bin.len() < BLIND_MIN_PER_BIN {
             continue;
         }
@@ -449,14 +526,25 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
     }
     let samples_used = ws.iter().sum::<f32>() as usize;
     let points = vec![(ys, vs, Some(ws))];
-    let fitted = if points[0].0.is_empty() { None } else { fit_levels(&points) };
+    let fitted = if points[0].0.is_empty() {
+        None
+    } else {
+        fit_levels(&points)
+    };
     let fitted = fitted.map(|(form, lv, covs, rel)| {
         let unit = crate::synth::unit_band_std();
         let levels = (0..NOISE_LEVELS)
             .map(|l| {
                 let r = unit[l] / unit[0];
-                let k = if form == NoiseForm::LinearStd { r } else { r * r };
-                NoiseLevel { slope: lv[0].slope.map(|v| v * k), intercept: lv[0].intercept.map(|v| v * k) }
+                let k = if form == NoiseForm::LinearStd {
+                    r
+                } else {
+                    r * r
+                };
+                NoiseLevel {
+                    slope: lv[0].slope.map(|v| v * k),
+                    intercept: lv[0].intercept.map(|v| v * k),
+                }
             })
             .collect();
         (form, levels, covs, rel)
@@ -469,7 +557,10 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
         }
         _ => [0.0, 1.0],
     };
-    let level0 = LevelSamples { y: points[0].0.clone(), var: points[0].1.clone() };
+    let level0 = LevelSamples {
+        y: points[0].0.clone(),
+        var: points[0].1.clone(),
+    };
     let mut noise = finish("fast", started, fitted, &[level0], range, false);
     noise.diagnostics.samples_used = samples_used as u64;
     (noise, plot_data(&points))

@@ -32,7 +32,9 @@ pub fn discrete_gaussian_kernel(variance_px2: f32) -> Vec<f32> {
             }
         }
     }
-    let mut k: Vec<f64> = (0..=2 * r).map(|i| vals[(i as isize - r as isize).unsigned_abs()]).collect();
+    let mut k: Vec<f64> = (0..=2 * r)
+        .map(|i| vals[(i as isize - r as isize).unsigned_abs()])
+        .collect();
     let s: f64 = k.iter().sum();
     for v in &mut k {
         *v /= s;
@@ -81,7 +83,11 @@ mod tests {
     fn moments(k: &[f32]) -> (f64, f64) {
         let r = (k.len() / 2) as f64;
         let sum: f64 = k.iter().map(|&v| v as f64).sum();
-        let var: f64 = k.iter().enumerate().map(|(i, &v)| v as f64 * (i as f64 - r).powi(2)).sum();
+        let var: f64 = k
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| v as f64 * (i as f64 - r).powi(2))
+            .sum();
         (sum, var)
     }
 
@@ -92,7 +98,10 @@ mod tests {
         for &t in &[0.0625f32, 0.25, 1.0, 4.0, 25.0, 100.0] {
             let (sum, var) = moments(&discrete_gaussian_kernel(t));
             assert!((sum - 1.0).abs() < 1e-5, "t={t} sum={sum}");
-            assert!((var - t as f64).abs() < 1e-4 * t as f64 + 1e-6, "t={t} var={var}");
+            assert!(
+                (var - t as f64).abs() < 1e-4 * t as f64 + 1e-6,
+                "t={t} var={var}"
+            );
         }
         assert_eq!(discrete_gaussian_kernel(0.0), vec![1.0]);
     }
