@@ -11,13 +11,15 @@
 //!   depends on the band's autocorrelation (worst at level 3, where B spans ~3
 //!   samples);
 //! * regression is on variance, not std: E[√v̂] < σ (Jensen), E[v̂] = σ². The
-//!   paper's linear-std form is fitted by Gauss–Newton on variance; the affine
-//!   variance form (Poisson–Gaussian) by ordinary least squares; the form with the
-//!   smaller relative residual is kept;
+//!   paper's linear-std form is fitted by Gauss–Newton on variance, the affine
+//!   variance form (Poisson–Gaussian) by least squares, both weighted by 1/σ⁴ (the
+//!   sampling variance of a variance estimate), so dark lumas are fitted as well as
+//!   bright ones; the form with the higher likelihood is kept;
 //! * the low-pass residual is fitted like a band (the paper drops it);
 //! * the regressor is the window-averaged luma B(Y), matching the pooled variance;
-//! * samples whose footprint touches a clipped pixel (any channel ≤ 0.5/255 or
-//!   ≥ 1 − 0.5/255 in I) are excluded; the luma range of the used samples is recorded.
+//! * samples whose footprint touches a clipped pixel (`clip_mask`: a repeated
+//!   extreme value in any channel of I) are excluded; the luma range of the used
+//!   samples is recorded.
 //!
 //! Blind (`fit_fast`): level-0 statistics of I alone at its flattest samples per luma
 //! bin, coarser levels by white-noise band ratios; the low-pass is not identifiable
@@ -36,14 +38,19 @@ use std::time::Instant;
 /// ~18% error, giving ~1% error on the fitted std. 8 px (4096 samples) brings that
 /// to ~0.3% for a negligible cost (see BENCHMARKS.md).
 pub const DEFAULT_STRIDE_PX: usize = 8;
-const CLIP_LO: f32 = 0.5 / 255.0;
-const CLIP_HI: f32 = 1.0 - 0.5 / 255.0;
 const BLIND_FLAT_FRACTION: f64 = 0.2;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
 
-/// Per level: luma, per-channel local variance, optional per-sample weights.
-type LevelPoints = (Vec<f32>, [Vec<f32>; 3], Option<Vec<f32>>);
+/// Regression data of one level: window moments of luma B(Y), B(Y²), per-channel
+/// local variance, optional per-sample weights.
+#[derive(Clone, Default)]
+struct LevelPoints {
+    y: Vec<f32>,
+    y2: Vec<f32>,
+    var: [Vec<f32>; 3],
+    weights: Option<Vec<f32>>,
+}
 /// Chosen form, per-level maps, per-level per-channel OLS covariance, mean relative residual.
 type LevelFit = (NoiseForm, Vec<NoiseLevel>, Vec<[[[f64; 2]; 2]; 3]>, f64);
 
@@ -102,6 +109,7 @@ fn grid(len: usize, stride: usize) -> impl Iterator<Item = usize> {
 /// Per-level samples: luma and local variance per channel, clipped footprints out.
 struct LevelSamples {
     y: Vec<f32>,
+    y2: Vec<f32>,
     var: [Vec<f32>; 3],
 }
 
@@ -124,6 +132,7 @@ fn collect_samples(
             let radius = 5 * scale + 8;
             let mut out = LevelSamples {
                 y: vec![],
+                y2: vec![],
                 var: [vec![], vec![], vec![]],
             };
             for y in grid(band0.height, stride) {
@@ -139,6 +148,7 @@ fn collect_samples(
                     // affine in Y, so B(var) = a + b·B(Y) exactly — regressing on the
                     // point luma instead biases dark samples near bright ones.
                     out.y.push(local_mean(&luma[l], x, y, &win));
+                    out.y2.push(local_mean_sq(&luma[l], x, y, &win));
                     for c in 0..3 {
                         out.var[c].push(local_mean_sq(&bands[c][l], x, y, &win));
                     }
@@ -188,17 +198,27 @@ fn ols(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64, [[f6
     Some((a, b, ssr, cov))
 }
 
-/// Gauss–Newton for v ≈ (a + b·y)², started from OLS of √v on y.
-fn fit_linear_std(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64)> {
+/// Gauss–Newton for v ≈ B((a + b·Y)²) = a² + 2ab·m1 + b²·m2 (m1 = B(Y),
+/// m2 = B(Y²): the window pools the squared std, so this is exact where
+/// (a + b·B(Y))² would be biased up by b²·Var_B(Y)). Started from OLS of √v on m1.
+fn fit_linear_std(
+    m1: &[f32],
+    m2: &[f32],
+    v: &[f32],
+    wts: Option<&[f32]>,
+) -> Option<(f64, f64, f64)> {
     let sq: Vec<f32> = v.iter().map(|&x| x.max(0.0).sqrt()).collect();
-    let (mut a, mut b, _, _) = ols(y, &sq, wts)?;
+    let (mut a, mut b, _, _) = ols(m1, &sq, wts)?;
     let w = |i: usize| wts.map_or(1.0, |w| w[i] as f64);
+    let pred = |a: f64, b: f64, i: usize| a * a + 2.0 * a * b * m1[i] as f64 + b * b * m2[i] as f64;
     for _ in 0..30 {
         let (mut jtj, mut jtr) = ([[0.0f64; 2]; 2], [0.0f64; 2]);
-        for i in 0..y.len() {
-            let s = a + b * y[i] as f64;
-            let r = v[i] as f64 - s * s;
-            let j = [2.0 * s, 2.0 * s * y[i] as f64];
+        for i in 0..v.len() {
+            let r = v[i] as f64 - pred(a, b, i);
+            let j = [
+                2.0 * a + 2.0 * b * m1[i] as f64,
+                2.0 * a * m1[i] as f64 + 2.0 * b * m2[i] as f64,
+            ];
             for p in 0..2 {
                 jtr[p] += w(i) * j[p] * r;
                 for q in 0..2 {
@@ -218,33 +238,75 @@ fn fit_linear_std(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64
             break;
         }
     }
-    let ssr = (0..y.len())
-        .map(|i| w(i) * (v[i] as f64 - (a + b * y[i] as f64).powi(2)).powi(2))
+    let ssr = (0..v.len())
+        .map(|i| w(i) * (v[i] as f64 - pred(a, b, i)).powi(2))
         .sum();
     (a.is_finite() && b.is_finite()).then_some((a, b, ssr))
 }
 
-/// Per-level fits in both forms; keeps the form with the smaller relative residual.
-/// `points`: per level (luma, per-channel variance, optional weights).
+/// Weights 1/pred² (times the optional base weights): the sampling variance of a
+/// local-variance estimate grows like σ⁴, so unweighted least squares would let the
+/// bright end dictate the dark end. Predictions are floored at 1e-3 of their
+/// maximum so a line through zero cannot produce infinite weights.
+fn precision_weights(pred: &[f64], base: Option<&[f32]>) -> Vec<f32> {
+    let floor = pred.iter().cloned().fold(0.0f64, f64::max) * 1e-3 + 1e-30;
+    pred.iter()
+        .enumerate()
+        .map(|(i, &p)| (base.map_or(1.0, |b| b[i] as f64) / p.max(floor).powi(2)) as f32)
+        .collect()
+}
+
+/// −2·log-likelihood (up to a constant) of variance samples `v` under predictions
+/// `pred` with sampling std ∝ pred: Σ ln pred² + n·ln(mean((v − pred)²/pred²)).
+fn neg2_log_likelihood(v: &[f32], pred: &[f64]) -> f64 {
+    let floor = pred.iter().cloned().fold(0.0f64, f64::max) * 1e-3 + 1e-30;
+    let n = v.len() as f64;
+    let (mut logs, mut rel) = (0.0f64, 0.0f64);
+    for (&vi, &p) in v.iter().zip(pred) {
+        let p = p.max(floor);
+        logs += 2.0 * p.ln();
+        rel += (vi as f64 - p).powi(2) / (p * p);
+    }
+    logs + n * (rel / n).max(1e-300).ln()
+}
+
+/// Per-level fits in both forms by iteratively reweighted least squares (3 rounds
+/// of 1/pred² weights); the form with the higher heteroscedastic Gaussian
+/// likelihood (summed over levels and channels) is kept.
 fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
     let mut affine = vec![NoiseLevel::ZERO; points.len()];
     let mut linear = vec![NoiseLevel::ZERO; points.len()];
     let mut covs = vec![[[[0.0; 2]; 2]; 3]; points.len()];
-    let (mut rel_aff, mut rel_lin, mut llr) = (0.0f64, 0.0f64, 0.0f64);
-    for (l, (y, var, wts)) in points.iter().enumerate() {
+    let (mut nll_aff, mut nll_lin, mut rel_aff, mut rel_lin) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for (l, pts) in points.iter().enumerate() {
+        let (y, y2, wts) = (&pts.y, &pts.y2, &pts.weights);
         for c in 0..3 {
-            let norm: f64 = var[c]
-                .iter()
-                .map(|&v| (v as f64).powi(2))
-                .sum::<f64>()
-                .max(1e-300);
-            let (a, b, ssr, cov) = ols(y, &var[c], wts.as_deref())?;
+            let v = &pts.var[c];
+            // Affine variance: v ≈ a + b·y.
+            let (mut a, mut b, _, mut cov) = ols(y, v, wts.as_deref())?;
+            for _ in 0..3 {
+                let pred: Vec<f64> = y.iter().map(|&yi| a + b * yi as f64).collect();
+                let w = precision_weights(&pred, wts.as_deref());
+                (a, b, _, cov) = ols(y, v, Some(&w))?;
+            }
+            let pred_aff: Vec<f64> = y.iter().map(|&yi| a + b * yi as f64).collect();
             affine[l].intercept[c] = a as f32;
             affine[l].slope[c] = b as f32;
             covs[l][c] = cov;
-            rel_aff += ssr / norm;
-            let ssr_aff = ssr;
-            let (la, lb, lssr) = fit_linear_std(y, &var[c], wts.as_deref())?;
+            nll_aff += neg2_log_likelihood(v, &pred_aff);
+            // Linear std: v ≈ (a + b·y)².
+            let lin_pred = |a: f64, b: f64| -> Vec<f64> {
+                (0..y.len())
+                    .map(|i| a * a + 2.0 * a * b * y[i] as f64 + b * b * y2[i] as f64)
+                    .collect()
+            };
+            let (mut la, mut lb, _) = fit_linear_std(y, y2, v, wts.as_deref())?;
+            for _ in 0..3 {
+                let w = precision_weights(&lin_pred(la, lb), wts.as_deref());
+                (la, lb, _) = fit_linear_std(y, y2, v, Some(&w))?;
+            }
+            let pred_lin = lin_pred(la, lb);
+            nll_lin += neg2_log_likelihood(v, &pred_lin);
             // Keep std non-negative at the reference point: (a + b·y)² is symmetric
             // in sign, so flip to the branch with a positive std.
             let ym = y.iter().sum::<f32>() / y.len().max(1) as f32;
@@ -255,29 +317,53 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
             };
             linear[l].intercept[c] = la as f32;
             linear[l].slope[c] = lb as f32;
-            rel_lin += lssr / norm;
-            // Gaussian log-likelihood ratio of the two 2-parameter fits: n·ln(SSR ratio).
-            // It weighs each level by its sample count, not by how noisy its local
-            // variances are, and is the standard criterion for equal-size models.
-            if ssr_aff > 0.0 && lssr > 0.0 {
-                llr += y.len() as f64 * (lssr / ssr_aff).ln();
-            }
+            let rel = |pred: &[f64]| {
+                v.iter()
+                    .zip(pred)
+                    .map(|(&vi, &p)| (vi as f64 - p).powi(2))
+                    .sum::<f64>()
+                    / v.iter()
+                        .map(|&vi| (vi as f64).powi(2))
+                        .sum::<f64>()
+                        .max(1e-300)
+            };
+            rel_aff += rel(&pred_aff);
+            rel_lin += rel(&pred_lin);
         }
     }
     let m = (3 * points.len()) as f64;
-    if llr < 0.0 {
+    if nll_lin < nll_aff {
         Some((NoiseForm::LinearStd, linear, covs, rel_lin / m))
     } else {
         Some((NoiseForm::AffineVariance, affine, covs, rel_aff / m))
     }
 }
 
+/// Clipped pixels: a channel is clipped at its maximum (minimum) when that exact
+/// value repeats in at least 0.05% of the pixels (and 2) and is bright, ≥ 0.6
+/// (dark, ≤ 0.1). This finds 8-bit 255s, 16-bit 65535s and float frames clipped at
+/// any white level, while unclipped float frames (over- and undershoot included)
+/// have no repeated extreme and lose nothing.
 fn clip_mask(img: &Rgb) -> IntegralImage {
-    let data = (0..img.len())
+    let n = img.len();
+    let min_count = (n / 2000).max(2);
+    let limits: Vec<(Option<f32>, Option<f32>)> = img
+        .channels
+        .iter()
+        .map(|ch| {
+            let lo = ch.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = ch.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            let count = |v: f32| ch.iter().filter(|&&x| x == v).count();
+            let lo = (lo <= 0.1 && count(lo) >= min_count).then_some(lo);
+            let hi = (hi >= 0.6 && count(hi) >= min_count).then_some(hi);
+            (lo, hi)
+        })
+        .collect();
+    let data = (0..n)
         .map(|i| {
             let clipped = (0..3).any(|c| {
                 let v = img.channels[c][i];
-                v <= CLIP_LO || v >= CLIP_HI
+                limits[c].0 == Some(v) || limits[c].1 == Some(v)
             });
             clipped as u8 as f32
         })
@@ -372,7 +458,7 @@ fn finish(
     };
     let reason = if present {
         format!(
-            "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood ratio); \
+            "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood); \
              residuals are mean squared local-variance errors at level 0",
             100.0 * rel
         )
@@ -399,9 +485,14 @@ fn plot_data(points: &[LevelPoints]) -> NoisePlotData {
     NoisePlotData {
         levels: points
             .iter()
-            .map(|(y, v, _)| {
-                let s = |c: usize| v[c].iter().map(|x| x.max(0.0).sqrt()).collect::<Vec<_>>();
-                (y.clone(), [s(0), s(1), s(2)])
+            .map(|p| {
+                let s = |c: usize| {
+                    p.var[c]
+                        .iter()
+                        .map(|x| x.max(0.0).sqrt())
+                        .collect::<Vec<_>>()
+                };
+                (p.y.clone(), [s(0), s(1), s(2)])
             })
             .collect(),
     }
@@ -412,8 +503,9 @@ fn luma_range(samples: &LevelSamples) -> [f32; 2] {
     if y.is_empty() {
         return [0.0, 1.0];
     }
-    let lo = percentile(&mut y, 0.005);
-    let hi = percentile(&mut y, 0.995);
+    // 1st–99th percentile: the luma range the samples actually constrain.
+    let lo = percentile(&mut y, 0.01);
+    let hi = percentile(&mut y, 0.99);
     [
         lo.clamp(0.0, 1.0),
         hi.clamp(0.0, 1.0).max(lo.clamp(0.0, 1.0)),
@@ -448,12 +540,17 @@ pub fn fit_accurate(
     } else {
         NOISE_LEVELS + 1
     };
-    let points: Vec<_> = samples
+    let points: Vec<LevelPoints> = samples
         .iter()
         .take(usable)
-        .map(|s| (s.y.clone(), s.var.clone(), None))
+        .map(|s| LevelPoints {
+            y: s.y.clone(),
+            y2: s.y2.clone(),
+            var: s.var.clone(),
+            weights: None,
+        })
         .collect();
-    let fitted = if points.iter().all(|p| !p.0.is_empty()) {
+    let fitted = if points.iter().all(|p| !p.y.is_empty()) {
         fit_levels(&points)
     } else {
         None
@@ -465,11 +562,43 @@ pub fn fit_accurate(
     )
 }
 
+/// Median / mean of level-0 local variances (9×9, σ = 4 window) of white noise:
+/// texture leaking into the "flat" set only ever adds variance, and a median
+/// ignores a minority of such samples where a mean does not. Measured once on a
+/// 256×256×3 field (relative standard error ≈ 0.3%).
+fn white_noise_median_to_mean() -> f32 {
+    static R: std::sync::OnceLock<f32> = std::sync::OnceLock::new();
+    *R.get_or_init(|| {
+        let n = 256usize;
+        let mut v = vec![];
+        let mut sum = 0.0f64;
+        let win = window(0);
+        for c in 0..3u32 {
+            let data = (0..n * n)
+                .map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c, 0xb1d))
+                .collect();
+            let band = laplacian_pyramid(&Plane::from_vec(n, n, data), 1)
+                .bands
+                .swap_remove(0);
+            for y in grid(n, 4) {
+                for x in grid(n, 4) {
+                    let m = local_mean_sq(&band, x, y, &win);
+                    sum += m as f64;
+                    v.push(m);
+                }
+            }
+        }
+        let mean = (sum / v.len() as f64) as f32;
+        percentile(&mut v, 0.5) / mean
+    })
+}
+
 /// Fast tier: the frame alone.
 ///
 /// Only level 0 is measured: coarser bands of a textured frame are dominated by the
 /// scene, and one frame cannot tell coarse noise from texture. Flat samples are the
-/// 20% with the least level-2 luma band energy in their luma bin; that band is
+/// 20% with the least level-2 luma band energy in their luma bin (their median
+/// variance, calibrated by `white_noise_median_to_mean`); that band is
 /// (nearly) uncorrelated with level-0 noise, so selecting on it does not bias the
 /// level-0 variance the way picking the lowest variances would. Levels 1–3 follow
 /// from level 0 by the white-noise band ratios c_l/c_0 (`synth::unit_band_std`): an
@@ -487,8 +616,8 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
     let win0 = window(0);
     let win2 = window(2);
     let band2 = &luma_bands.bands[2];
-    // (luma, structure, var r, g, b) at level-0 grid points with unclipped footprints.
-    let mut pts: Vec<(f32, f32, [f32; 3])> = vec![];
+    // (B(Y), B(Y²), structure, var r, g, b) at level-0 grid points, unclipped footprints.
+    let mut pts: Vec<(f32, f32, f32, [f32; 3])> = vec![];
     for y in grid(image.height, stride0) {
         for x in grid(image.width, stride0) {
             if clip.box_sum(x, y, 5 * 4 + 8) > 0.0 {
@@ -501,32 +630,78 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
                 &win2,
             );
             let v = std::array::from_fn(|c| local_mean_sq(&bands[c][0], x, y, &win0));
-            pts.push((local_mean(&luma[0], x, y, &win0), structure, v));
+            pts.push((
+                local_mean(&luma[0], x, y, &win0),
+                local_mean_sq(&luma[0], x, y, &win0),
+                structure,
+                v,
+            ));
         }
     }
-    let (mut ys, mut vs, mut ws) = (vec![], [vec![], vec![], vec![]], vec![]);
+    let median_to_mean = white_noise_median_to_mean();
+    let (mut ys, mut y2s, mut vs, mut ws) = (vec![], vec![], [vec![], vec![], vec![]], vec![]);
     for b in 0..BLIND_BINS {
         let (lo, hi) = (
             b as f32 / BLIND_BINS as f32,
             (b + 1) as f32 / BLIND_BINS as f32,
         );
-        let mut bin: Vec<&(f32, f32, [f32; 3])> =
+        let mut bin: Vec<&(f32, f32, f32, [f32; 3])> =
             pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
         if bin.len() < BLIND_MIN_PER_BIN {
             continue;
         }
-        bin.sort_by(|a, b| a.1.total_cmp(&b.1));
+        bin.sort_by(|a, b| a.2.total_cmp(&b.2));
         let flat = &bin[..(bin.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize];
         let n = flat.len() as f32;
         ys.push(flat.iter().map(|p| p.0).sum::<f32>() / n);
+        y2s.push(flat.iter().map(|p| p.1).sum::<f32>() / n);
         ws.push(n);
         for c in 0..3 {
-            vs[c].push(flat.iter().map(|p| p.2[c]).sum::<f32>() / n);
+            let mut v: Vec<f32> = flat.iter().map(|p| p.3[c]).collect();
+            vs[c].push(percentile(&mut v, 0.5) / median_to_mean);
         }
     }
+    // One-sided trimming: texture leaking into a bin only raises it, so bins more
+    // than 30% above the affine-variance line (any channel) are dropped and the
+    // line refitted, up to 3 rounds, keeping at least 3 bins.
+    for _ in 0..3 {
+        if ys.len() <= 3 {
+            break;
+        }
+        let lines: Vec<_> = (0..3).filter_map(|c| ols(&ys, &vs[c], Some(&ws))).collect();
+        if lines.len() < 3 {
+            break;
+        }
+        let keep: Vec<bool> = (0..ys.len())
+            .map(|i| {
+                (0..3).all(|c| {
+                    vs[c][i] as f64 <= 1.3 * (lines[c].0 + lines[c].1 * ys[i] as f64).max(1e-12)
+                })
+            })
+            .collect();
+        if keep.iter().all(|&k| k) || keep.iter().filter(|&&k| k).count() < 3 {
+            break;
+        }
+        let filt = |v: &Vec<f32>| {
+            v.iter()
+                .zip(&keep)
+                .filter(|(_, &k)| k)
+                .map(|(x, _)| *x)
+                .collect::<Vec<f32>>()
+        };
+        ys = filt(&ys);
+        y2s = filt(&y2s);
+        ws = filt(&ws);
+        vs = [filt(&vs[0]), filt(&vs[1]), filt(&vs[2])];
+    }
     let samples_used = ws.iter().sum::<f32>() as usize;
-    let points = vec![(ys, vs, Some(ws))];
-    let fitted = if points[0].0.is_empty() {
+    let points = vec![LevelPoints {
+        y: ys,
+        y2: y2s,
+        var: vs,
+        weights: Some(ws),
+    }];
+    let fitted = if points[0].y.is_empty() {
         None
     } else {
         fit_levels(&points)
@@ -549,17 +724,18 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
             .collect();
         (form, levels, covs, rel)
     });
-    let range = match points.first() {
-        Some((y, _, _)) if !y.is_empty() => {
-            let lo = y.iter().cloned().fold(1.0f32, f32::min);
-            let hi = y.iter().cloned().fold(0.0f32, f32::max);
-            [lo, hi.max(lo)]
-        }
-        _ => [0.0, 1.0],
+    let y = &points[0].y;
+    let range = if y.is_empty() {
+        [0.0, 1.0]
+    } else {
+        let lo = y.iter().cloned().fold(1.0f32, f32::min);
+        let hi = y.iter().cloned().fold(0.0f32, f32::max);
+        [lo, hi.max(lo)]
     };
     let level0 = LevelSamples {
-        y: points[0].0.clone(),
-        var: points[0].1.clone(),
+        y: y.clone(),
+        y2: points[0].y2.clone(),
+        var: points[0].var.clone(),
     };
     let mut noise = finish("fast", started, fitted, &[level0], range, false);
     noise.diagnostics.samples_used = samples_used as u64;
