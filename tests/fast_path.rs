@@ -3,6 +3,9 @@
 //! stated here and in the README; they are far looser than the accurate tier's
 //! because a single frame cannot separate the scene from the camera exactly.
 
+// Per-channel loops index several parallel arrays; see src/lib.rs.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
