@@ -1,1 +1,148 @@
-fn main() {}
+//! Fit benchmarks: each estimator at 512×512 and at 1280×960 (Quest 3 passthrough
+//! camera frame), single-threaded and on all threads. Inputs are the vendored
+//! astronaut photograph (mirror-tiled to 1280×960) with known synthetic distortions.
+//! Run: `cargo bench --bench fit` (or `cargo xtask bench`); figures in BENCHMARKS.md.
+
+use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::model::*;
+use blind_augment::synth;
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use std::path::PathBuf;
+use std::time::Duration;
+
+struct Case {
+    name: String,
+    clean: Rgb,
+    noisy: Rgb,
+    blurred_mb: Rgb,
+    blurred_dof: Rgb,
+    all: Rgb,
+    depth: Plane,
+    flow: Flow,
+}
+
+fn mirror_tile(src: &Rgb, w: usize, h: usize) -> Rgb {
+    let mut out = Rgb::new(w, h, [0.0; 3]);
+    let m = |i: usize, n: usize| {
+        let p = i % (2 * n);
+        if p < n {
+            p
+        } else {
+            2 * n - 1 - p
+        }
+    };
+    for c in 0..3 {
+        for y in 0..h {
+            for x in 0..w {
+                out.channels[c][y * w + x] = src.channels[c][m(y, src.height) * src.width + m(x, src.width)];
+            }
+        }
+    }
+    out
+}
+
+fn case(w: usize, h: usize) -> Case {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/astronaut.png");
+    let photo = blind_augment::io::load_rgb(&path).expect("vendored photo").0;
+    let clean = mirror_tile(&photo, w, h);
+    let mut depth = Plane::new(w, h, 0.0);
+    for y in 0..h {
+        for x in 0..w {
+            depth.data[y * w + x] = 0.5 + 3.5 * (0.7 * y as f32 / h as f32 + 0.3 * x as f32 / w as f32);
+        }
+    }
+    let mut flow = Flow::uniform(w, h, 0.0, 0.0);
+    for y in 0..h {
+        for x in 0..w {
+            flow.dx[y * w + x] = 8.0 * (0.8 - 0.9 * (y as f32 / h as f32 - 0.5));
+            flow.dy[y * w + x] = 8.0 * (0.3 + 0.9 * (x as f32 / w as f32 - 0.5));
+        }
+    }
+    let mut truth = CameraModel::empty(w as u32, h as u32);
+    truth.depth_of_field = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
+        depth_range: [0.5, 4.0],
+        diagnostics: Diagnostics::not_fitted("truth"),
+    };
+    let unit = synth::unit_band_std();
+    truth.noise = Noise {
+        present: true,
+        form: NoiseForm::AffineVariance,
+        levels: (0..NOISE_LEVELS)
+            .map(|l| NoiseLevel { slope: [8e-4 * unit[l] * unit[l]; 3], intercept: [2e-5 * unit[l] * unit[l]; 3] })
+            .collect(),
+        lowpass: None,
+        luminance_range: [0.0, 1.0],
+        diagnostics: Diagnostics::not_fitted("truth"),
+    };
+    truth.motion_blur =
+        MotionBlur { present: true, exposure: Some(0.5), diagnostics: Diagnostics::not_fitted("truth") };
+    let q = |i: &Rgb| i.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);
+    Case {
+        name: format!("{w}x{h}"),
+        noisy: q(&synth::add_noise(&clean, &truth.noise, 1)),
+        blurred_mb: q(&synth::add_motion_blur(&clean, &flow, 0.5)),
+        blurred_dof: q(&synth::add_dof(&clean, &depth, &truth.depth_of_field)),
+        all: q(&synth::apply_camera_model(&clean, &truth, Some(&depth), Some(&flow), 1)),
+        clean,
+        depth,
+        flow,
+    }
+}
+
+fn inputs<'a>(c: &'a Case, image: &'a Rgb) -> FitInputs<'a> {
+    FitInputs {
+        image,
+        denoised: None,
+        motion_deblurred: None,
+        defocus_deblurred: None,
+        depth: Some(&c.depth),
+        depth_units: DepthUnits::MetricM,
+        flow: Some(&c.flow),
+    }
+}
+
+fn only(noise: bool, mb: bool, dof: bool, tier: Tier) -> FitOptions {
+    FitOptions {
+        tier: Some(tier),
+        effects: Effects { noise, motion_blur: mb, depth_of_field: dof },
+        ..Default::default()
+    }
+}
+
+fn bench(cr: &mut Criterion) {
+    let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");
+    let all = rayon::ThreadPoolBuilder::new().build().expect("default pool");
+    let threads = all.current_num_threads();
+    for (w, h) in [(512usize, 512usize), (1280, 960)] {
+        let c = case(w, h);
+        let mut g = cr.benchmark_group(format!("fit_{}", c.name));
+        g.sample_size(20).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+        for (pool_name, pool) in [("1thread", &single), ("all_threads", &all)] {
+            let label = if pool_name == "1thread" { pool_name.to_string() } else { format!("{threads}threads") };
+            g.bench_function(BenchmarkId::new("noise_accurate", &label), |b| {
+                let inp = FitInputs { denoised: Some(&c.clean), ..inputs(&c, &c.noisy) };
+                b.iter(|| pool.install(|| fit(&inp, &only(true, false, false, Tier::Accurate))))
+            });
+            g.bench_function(BenchmarkId::new("motion_blur_accurate", &label), |b| {
+                let inp = FitInputs { motion_deblurred: Some(&c.clean), ..inputs(&c, &c.blurred_mb) };
+                b.iter(|| pool.install(|| fit(&inp, &only(false, true, false, Tier::Accurate))))
+            });
+            g.bench_function(BenchmarkId::new("dof_accurate", &label), |b| {
+                let inp = FitInputs { defocus_deblurred: Some(&c.clean), ..inputs(&c, &c.blurred_dof) };
+                b.iter(|| pool.install(|| fit(&inp, &only(false, false, true, Tier::Accurate))))
+            });
+            g.bench_function(BenchmarkId::new("fast_all_effects", &label), |b| {
+                let inp = inputs(&c, &c.all);
+                b.iter(|| pool.install(|| fit(&inp, &only(true, true, true, Tier::Fast))))
+            });
+        }
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

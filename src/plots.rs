@@ -17,10 +17,7 @@ pub struct PlotError {
 }
 
 fn err(path: &Path, e: impl std::fmt::Display) -> PlotError {
-    PlotError {
-        path: path.display().to_string(),
-        problem: e.to_string(),
-    }
+    PlotError { path: path.display().to_string(), problem: e.to_string() }
 }
 
 fn register_font() {
@@ -33,11 +30,7 @@ fn register_font() {
     });
 }
 
-const CHANNEL_COLOURS: [RGBColor; 3] = [
-    RGBColor(220, 50, 47),
-    RGBColor(60, 160, 60),
-    RGBColor(38, 110, 210),
-];
+const CHANNEL_COLOURS: [RGBColor; 3] = [RGBColor(220, 50, 47), RGBColor(60, 160, 60), RGBColor(38, 110, 210)];
 
 /// Every k-th index so at most `max` points are drawn.
 fn thin(n: usize, max: usize) -> impl Iterator<Item = usize> {
@@ -69,10 +62,7 @@ pub fn noise_plot(path: &Path, data: &NoisePlotData, noise: &Noise) -> Result<()
             }
         }
         let mut chart = ChartBuilder::on(&panels[l])
-            .caption(
-                format!("noise {title} ({:?})", noise.form),
-                ("sans-serif", 18),
-            )
+            .caption(format!("noise {title} ({:?})", noise.form), ("sans-serif", 18))
             .margin(8)
             .x_label_area_size(32)
             .y_label_area_size(60)
@@ -88,10 +78,7 @@ pub fn noise_plot(path: &Path, data: &NoisePlotData, noise: &Noise) -> Result<()
         for c in 0..3 {
             let col = CHANNEL_COLOURS[c];
             chart
-                .draw_series(
-                    thin(ys.len(), 1500)
-                        .map(|i| Circle::new((ys[i], stds[c][i]), 1, col.mix(0.35).filled())),
-                )
+                .draw_series(thin(ys.len(), 1500).map(|i| Circle::new((ys[i], stds[c][i]), 1, col.mix(0.35).filled())))
                 .map_err(|e| err(path, e))?;
             if let Some(lv) = level {
                 let [lo, hi] = noise.luminance_range;
@@ -116,40 +103,25 @@ pub fn dof_plot(path: &Path, data: &DofPlotData, dof: &DepthOfField) -> Result<(
     let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(path, e))?;
     let [lo, hi] = dof.depth_range;
-    let (lo, hi) = if hi > lo {
-        (lo, hi)
-    } else {
-        (lo - 0.5, lo + 0.5)
-    };
+    let (lo, hi) = if hi > lo { (lo, hi) } else { (lo - 0.5, lo + 0.5) };
     let smax = data.sigma_px.iter().cloned().fold(0.5f32, f32::max) * 1.1;
     let unit = match dof.units {
         DepthUnits::MetricM => "depth Z (m)",
         DepthUnits::RelativeInverse => "relative inverse depth",
     };
     let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("depth of field δ(Z) [{}]", dof.diagnostics.status_str()),
-            ("sans-serif", 22),
-        )
+        .caption(format!("depth of field δ(Z) [{}]", dof.diagnostics.status_str()), ("sans-serif", 22))
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(lo..hi, 0f32..smax)
         .map_err(|e| err(path, e))?;
+    chart.configure_mesh().x_desc(unit).y_desc("blur std δ (px)").draw().map_err(|e| err(path, e))?;
     chart
-        .configure_mesh()
-        .x_desc(unit)
-        .y_desc("blur std δ (px)")
-        .draw()
-        .map_err(|e| err(path, e))?;
-    chart
-        .draw_series(thin(data.depth.len(), 4000).map(|i| {
-            Circle::new(
-                (data.depth[i], data.sigma_px[i]),
-                1,
-                BLACK.mix(0.25).filled(),
-            )
-        }))
+        .draw_series(
+            thin(data.depth.len(), 4000)
+                .map(|i| Circle::new((data.depth[i], data.sigma_px[i]), 1, BLACK.mix(0.25).filled())),
+        )
         .map_err(|e| err(path, e))?
         .label("per-pixel estimates")
         .legend(|(x, y)| Circle::new((x, y), 3, BLACK.filled()));
@@ -159,35 +131,23 @@ pub fn dof_plot(path: &Path, data: &DofPlotData, dof: &DepthOfField) -> Result<(
             (z, c.sigma_px(dof.units, z))
         })
     };
-    let candidates = [
-        ("quadratic", data.quadratic, RGBColor(220, 120, 0)),
-        ("thin lens", data.thin_lens, RGBColor(38, 110, 210)),
-    ];
+    let candidates =
+        [("quadratic", data.quadratic, RGBColor(220, 120, 0)), ("thin lens", data.thin_lens, RGBColor(38, 110, 210))];
     for (name, curve, col) in candidates {
         if let Some(c) = curve {
             chart
                 .draw_series(LineSeries::new(curve_series(c), col.stroke_width(2)))
                 .map_err(|e| err(path, e))?
                 .label(name)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
-                });
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
         }
     }
     if let Some(c) = dof.curve {
         chart
-            .draw_series(LineSeries::new(
-                curve_series(c),
-                RGBColor(200, 30, 30).stroke_width(4),
-            ))
+            .draw_series(LineSeries::new(curve_series(c), RGBColor(200, 30, 30).stroke_width(4)))
             .map_err(|e| err(path, e))?
             .label("kept")
-            .legend(|(x, y)| {
-                PathElement::new(
-                    vec![(x, y), (x + 20, y)],
-                    RGBColor(200, 30, 30).stroke_width(4),
-                )
-            });
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(200, 30, 30).stroke_width(4)));
     }
     chart
         .configure_series_labels()
@@ -211,43 +171,23 @@ pub fn mb_plot(path: &Path, data: &MbPlotData) -> Result<(), PlotError> {
         .y_label_area_size(80)
         .build_cartesian_2d(0f32..1f32, 0f64..lmax)
         .map_err(|e| err(path, e))?;
-    chart
-        .configure_mesh()
-        .x_desc("exposure λ")
-        .y_desc("mean squared error")
-        .draw()
-        .map_err(|e| err(path, e))?;
+    chart.configure_mesh().x_desc("exposure λ").y_desc("mean squared error").draw().map_err(|e| err(path, e))?;
     chart
         .draw_series(LineSeries::new(
-            data.lambdas
-                .iter()
-                .cloned()
-                .zip(data.losses.iter().cloned()),
+            data.lambdas.iter().cloned().zip(data.losses.iter().cloned()),
             BLUE.stroke_width(2),
         ))
         .map_err(|e| err(path, e))?;
     chart
-        .draw_series(
-            data.lambdas
-                .iter()
-                .zip(&data.losses)
-                .map(|(&l, &v)| Circle::new((l, v), 3, BLUE.filled())),
-        )
+        .draw_series(data.lambdas.iter().zip(&data.losses).map(|(&l, &v)| Circle::new((l, v), 3, BLUE.filled())))
         .map_err(|e| err(path, e))?;
     if let Some(est) = data.estimate {
         chart
-            .draw_series(LineSeries::new(
-                vec![(est, 0.0), (est, lmax)],
-                RED.stroke_width(2),
-            ))
+            .draw_series(LineSeries::new(vec![(est, 0.0), (est, lmax)], RED.stroke_width(2)))
             .map_err(|e| err(path, e))?
             .label(format!("λ = {est:.4}"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(path, e))?;
+        chart.configure_series_labels().border_style(BLACK).draw().map_err(|e| err(path, e))?;
     }
     root.present().map_err(|e| err(path, e))
 }

@@ -43,17 +43,9 @@ fn exposure_at_zero_and_one() {
     let flow = flow_field(512, 512, 6.0);
     for (lambda, present) in [(0.0f32, false), (1.0, true)] {
         let blurred = quantize8(&add_motion_blur(&img, &flow, lambda));
-        let inp = FitInputs {
-            motion_deblurred: Some(&img),
-            flow: Some(&flow),
-            ..bare(&blurred)
-        };
+        let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..bare(&blurred) };
         let opts = FitOptions {
-            effects: Effects {
-                noise: false,
-                motion_blur: true,
-                depth_of_field: false,
-            },
+            effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
             ..Default::default()
         };
         let mb = fit(&inp, &opts).expect("valid").model.motion_blur;
@@ -61,28 +53,15 @@ fn exposure_at_zero_and_one() {
         // 0.005: the boundary cases must land on the boundary, not near it.
         assert!((got - lambda).abs() <= 0.005, "λ {lambda}: {got}");
         assert_eq!(mb.present, present);
-        assert_eq!(
-            mb.diagnostics.status,
-            if present {
-                Status::Present
-            } else {
-                Status::Absent
-            }
-        );
+        assert_eq!(mb.diagnostics.status, if present { Status::Present } else { Status::Absent });
     }
 }
 
 #[test]
 fn zero_noise_is_absent_not_invented() {
     let img = photo("chelsea.png");
-    let inp = FitInputs {
-        denoised: Some(&img),
-        ..bare(&img)
-    };
-    let noise = fit(&inp, &FitOptions::default())
-        .expect("valid")
-        .model
-        .noise;
+    let inp = FitInputs { denoised: Some(&img), ..bare(&img) };
+    let noise = fit(&inp, &FitOptions::default()).expect("valid").model.noise;
     assert!(!noise.present, "{:?}", noise.diagnostics);
     for l in &noise.levels {
         for c in 0..3 {
@@ -98,19 +77,12 @@ fn zero_noise_is_absent_not_invented() {
 fn strong_noise_std_0_2() {
     let clean = photo("astronaut.png");
     let noisy = add_sensor_noise(&clean, [0.04; 3], [0.0; 3], 4);
-    let mut inp = FitInputs {
-        denoised: Some(&clean),
-        ..bare(&noisy)
-    };
+    let mut inp = FitInputs { denoised: Some(&clean), ..bare(&noisy) };
     inp.denoised = Some(&clean);
     let out = fit(
         &inp,
         &FitOptions {
-            effects: Effects {
-                noise: true,
-                motion_blur: false,
-                depth_of_field: false,
-            },
+            effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
             ..Default::default()
         },
     )
@@ -119,12 +91,7 @@ fn strong_noise_std_0_2() {
     assert!(noise.present);
     let f = noise_field(&Plane::new(256, 256, 0.5), &noise, 1);
     for c in 0..3 {
-        let s = (f.channels[c]
-            .iter()
-            .map(|v| (*v as f64).powi(2))
-            .sum::<f64>()
-            / f.channels[c].len() as f64)
-            .sqrt();
+        let s = (f.channels[c].iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / f.channels[c].len() as f64).sqrt();
         assert!((s / 0.2 - 1.0).abs() < 0.03, "channel {c}: std {s}");
     }
 }
@@ -148,18 +115,11 @@ fn saturated_and_black_regions_are_excluded() {
     let (a, b) = ([1e-4f32; 3], [0.0f32; 3]);
     // Clip like a sensor (and an 8-bit file) would.
     let noisy = quantize8(&add_sensor_noise(&clean, a, b, 2));
-    let inp = FitInputs {
-        denoised: Some(&clean),
-        ..bare(&noisy)
-    };
+    let inp = FitInputs { denoised: Some(&clean), ..bare(&noisy) };
     let noise = fit(
         &inp,
         &FitOptions {
-            effects: Effects {
-                noise: true,
-                motion_blur: false,
-                depth_of_field: false,
-            },
+            effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
             ..Default::default()
         },
     )
@@ -167,18 +127,9 @@ fn saturated_and_black_regions_are_excluded() {
     .model
     .noise;
     assert!(noise.present);
-    assert!(
-        noise.luminance_range[1] < 0.99 && noise.luminance_range[0] > 0.0,
-        "{:?}",
-        noise.luminance_range
-    );
+    assert!(noise.luminance_range[1] < 0.99 && noise.luminance_range[0] > 0.0, "{:?}", noise.luminance_range);
     let f = noise_field(&Plane::new(256, 256, 0.5), &noise, 1);
-    let s = (f.channels[1]
-        .iter()
-        .map(|v| (*v as f64).powi(2))
-        .sum::<f64>()
-        / f.channels[1].len() as f64)
-        .sqrt();
+    let s = (f.channels[1].iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / f.channels[1].len() as f64).sqrt();
     // 8-bit quantisation adds (1/255)²/12 of variance: truth √(1e-4 + 1.28e-6).
     let truth = (1e-4f64 + 1.0 / (255.0f64 * 255.0 * 12.0)).sqrt();
     assert!((s / truth - 1.0).abs() < 0.03, "std {s} vs {truth}");
@@ -192,31 +143,16 @@ fn flat_textureless_frame() {
     let noisy = add_sensor_noise(&clean, [4e-4; 3], [0.0; 3], 1);
     let depth = depth_ramp(200, 150, 1.0, 3.0);
     let flow = Flow::uniform(200, 150, 5.0, 1.0);
-    let out = fit(
-        &all_refs(&noisy, &clean, &depth, &flow),
-        &FitOptions::default(),
-    )
-    .expect("valid")
-    .model;
+    let out = fit(&all_refs(&noisy, &clean, &depth, &flow), &FitOptions::default()).expect("valid").model;
     assert_eq!(out.motion_blur.diagnostics.status, Status::NotIdentifiable);
     assert_eq!(out.motion_blur.exposure, None);
-    assert_eq!(
-        out.depth_of_field.diagnostics.status,
-        Status::NotIdentifiable
-    );
+    assert_eq!(out.depth_of_field.diagnostics.status, Status::NotIdentifiable);
     assert!(out.depth_of_field.curve.is_none());
     assert!(out.noise.present);
     // Fast tier on the same frame: also no invented blur.
     let fast = fit(
-        &FitInputs {
-            depth: Some(&depth),
-            flow: Some(&flow),
-            ..bare(&noisy)
-        },
-        &FitOptions {
-            tier: Some(Tier::Fast),
-            ..Default::default()
-        },
+        &FitInputs { depth: Some(&depth), flow: Some(&flow), ..bare(&noisy) },
+        &FitOptions { tier: Some(Tier::Fast), ..Default::default() },
     )
     .expect("valid")
     .model;
@@ -231,18 +167,12 @@ fn tiny_and_odd_sizes() {
         let depth = depth_ramp(w, h, 1.0, 2.0);
         let flow = Flow::uniform(w, h, 2.0, 0.0);
         for tier in [Tier::Fast, Tier::Accurate] {
-            let out = fit(
-                &all_refs(&img, &clean, &depth, &flow),
-                &FitOptions {
-                    tier: Some(tier),
-                    ..Default::default()
-                },
-            )
-            .unwrap_or_else(|e| panic!("{w}×{h} {tier:?}: {e}"));
+            let out =
+                fit(&all_refs(&img, &clean, &depth, &flow), &FitOptions { tier: Some(tier), ..Default::default() })
+                    .unwrap_or_else(|e| panic!("{w}×{h} {tier:?}: {e}"));
             out.model.validate().expect("valid model");
             // The model must also apply to a frame of the same size.
-            let synthesized =
-                synth::apply_camera_model(&clean, &out.model, Some(&depth), Some(&flow), 0);
+            let synthesized = synth::apply_camera_model(&clean, &out.model, Some(&depth), Some(&flow), 0);
             assert!(synthesized.first_non_finite().is_none());
         }
     }
@@ -253,121 +183,41 @@ fn non_finite_pixels_are_named() {
     let clean = Rgb::new(16, 16, [0.5; 3]);
     let mut bad = clean.clone();
     bad.channels[2][5 * 16 + 3] = f32::NAN;
-    let err = fit(
-        &FitInputs {
-            denoised: Some(&bad),
-            ..bare(&clean)
-        },
-        &FitOptions::default(),
-    )
-    .unwrap_err();
-    assert!(
-        matches!(
-            err,
-            FitError::NonFinite {
-                input: "denoised",
-                x: 3,
-                y: 5,
-                channel: 2,
-                ..
-            }
-        ),
-        "{err}"
-    );
+    let err = fit(&FitInputs { denoised: Some(&bad), ..bare(&clean) }, &FitOptions::default()).unwrap_err();
+    assert!(matches!(err, FitError::NonFinite { input: "denoised", x: 3, y: 5, channel: 2, .. }), "{err}");
     assert!(err.to_string().contains("denoised") && err.to_string().contains("x=3, y=5"));
     bad.channels[2][5 * 16 + 3] = f32::INFINITY;
     let err = fit(&bare(&bad), &FitOptions::default()).unwrap_err();
     assert!(matches!(err, FitError::NonFinite { input: "image", .. }));
     let mut flow = Flow::uniform(16, 16, 1.0, 0.0);
     flow.dy[7] = f32::NAN;
-    let err = fit(
-        &FitInputs {
-            flow: Some(&flow),
-            ..bare(&clean)
-        },
-        &FitOptions::default(),
-    )
-    .unwrap_err();
-    assert!(
-        matches!(err, FitError::NonFinite { input: "flow", .. }),
-        "{err}"
-    );
+    let err = fit(&FitInputs { flow: Some(&flow), ..bare(&clean) }, &FitOptions::default()).unwrap_err();
+    assert!(matches!(err, FitError::NonFinite { input: "flow", .. }), "{err}");
 }
 
 #[test]
 fn mismatched_sizes_and_missing_references_are_named() {
     let a = Rgb::new(16, 16, [0.5; 3]);
     let b = Rgb::new(16, 15, [0.5; 3]);
-    let err = fit(
-        &FitInputs {
-            motion_deblurred: Some(&b),
-            ..bare(&a)
-        },
-        &FitOptions::default(),
-    )
-    .unwrap_err();
-    assert_eq!(
-        err,
-        FitError::SizeMismatch {
-            input: "motion-deblurred",
-            want_w: 16,
-            want_h: 16,
-            got_w: 16,
-            got_h: 15
-        }
-    );
+    let err = fit(&FitInputs { motion_deblurred: Some(&b), ..bare(&a) }, &FitOptions::default()).unwrap_err();
+    assert_eq!(err, FitError::SizeMismatch { input: "motion-deblurred", want_w: 16, want_h: 16, got_w: 16, got_h: 15 });
     let depth = Plane::new(15, 16, 1.0);
-    let err = fit(
-        &FitInputs {
-            depth: Some(&depth),
-            ..bare(&a)
-        },
-        &FitOptions::default(),
-    )
-    .unwrap_err();
+    let err = fit(&FitInputs { depth: Some(&depth), ..bare(&a) }, &FitOptions::default()).unwrap_err();
     assert!(matches!(err, FitError::SizeMismatch { input: "depth", .. }));
-    let err = fit(
-        &bare(&a),
-        &FitOptions {
-            tier: Some(Tier::Accurate),
-            ..Default::default()
-        },
-    )
-    .unwrap_err();
-    assert!(
-        matches!(
-            err,
-            FitError::MissingReference {
-                input: "denoised",
-                ..
-            }
-        ),
-        "{err}"
-    );
+    let err = fit(&bare(&a), &FitOptions { tier: Some(Tier::Accurate), ..Default::default() }).unwrap_err();
+    assert!(matches!(err, FitError::MissingReference { input: "denoised", .. }), "{err}");
     let empty = Rgb::new(0, 0, [0.0; 3]);
-    assert!(matches!(
-        fit(&bare(&empty), &FitOptions::default()),
-        Err(FitError::Empty { .. })
-    ));
+    assert!(matches!(fit(&bare(&empty), &FitOptions::default()), Err(FitError::Empty { .. })));
 }
 
 #[test]
 fn depth_with_only_invalid_values_is_not_identifiable() {
     let img = photo("chelsea.png");
     let depth = Plane::new(img.width, img.height, f32::NAN);
-    let out = fit(
-        &FitInputs {
-            defocus_deblurred: Some(&img),
-            depth: Some(&depth),
-            ..bare(&img)
-        },
-        &FitOptions::default(),
-    )
-    .expect("invalid depth pixels are skipped, not fatal");
-    assert_eq!(
-        out.model.depth_of_field.diagnostics.status,
-        Status::NotIdentifiable
-    );
+    let out =
+        fit(&FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..bare(&img) }, &FitOptions::default())
+            .expect("invalid depth pixels are skipped, not fatal");
+    assert_eq!(out.model.depth_of_field.diagnostics.status, Status::NotIdentifiable);
 }
 
 fn arb_frame() -> impl Strategy<Value = (usize, usize, Vec<f32>, u64, f32, f32, f32)> {

@@ -17,11 +17,7 @@ use common::*;
 fn opts(noise: bool, mb: bool, dof: bool) -> FitOptions {
     FitOptions {
         tier: Some(Tier::Fast),
-        effects: Effects {
-            noise,
-            motion_blur: mb,
-            depth_of_field: dof,
-        },
+        effects: Effects { noise, motion_blur: mb, depth_of_field: dof },
         ..Default::default()
     }
 }
@@ -34,10 +30,7 @@ fn opts(noise: bool, mb: bool, dof: bool) -> FitOptions {
 fn fast_noise_within_stated_tolerance() {
     let clean = photo("astronaut.png");
     let (a, b) = ([2e-5f32, 1.2e-5, 4e-5], [8e-4f32, 5e-4, 1.2e-3]);
-    let seed: u64 = std::env::var("SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(9);
+    let seed: u64 = std::env::var("SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(9);
     let noisy = add_sensor_noise(&clean, a, b, seed);
     let inp = FitInputs {
         image: &noisy,
@@ -48,10 +41,7 @@ fn fast_noise_within_stated_tolerance() {
         depth_units: DepthUnits::MetricM,
         flow: None,
     };
-    let noise = fit(&inp, &opts(true, false, false))
-        .expect("valid")
-        .model
-        .noise;
+    let noise = fit(&inp, &opts(true, false, false)).expect("valid").model.noise;
     assert!(noise.present);
     assert_eq!(noise.diagnostics.method, "fast");
     let [lo, hi] = noise.luminance_range;
@@ -60,20 +50,13 @@ fn fast_noise_within_stated_tolerance() {
         let y = lo + (hi - lo) * (k as f32 + 0.5) / 9.0;
         let f = noise_field(&Plane::new(256, 256, y), &noise, 3);
         for c in 0..3 {
-            let s = (f.channels[c]
-                .iter()
-                .map(|v| (*v as f64).powi(2))
-                .sum::<f64>()
-                / f.channels[c].len() as f64)
-                .sqrt();
+            let s =
+                (f.channels[c].iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / f.channels[c].len() as f64).sqrt();
             errs.push((s / ((a[c] + b[c] * y) as f64).sqrt() - 1.0).abs());
         }
     }
     let med = median(errs);
-    println!(
-        "fast noise: {:?} {:?} median |rel err| {med:.4}",
-        noise.form, noise.levels[0]
-    );
+    println!("fast noise: {:?} {:?} median |rel err| {med:.4}", noise.form, noise.levels[0]);
     assert!(med <= 0.10, "median relative error {med}");
 }
 
@@ -96,10 +79,7 @@ fn fast_exposure_within_stated_tolerance() {
             depth_units: DepthUnits::MetricM,
             flow: Some(&flow),
         };
-        let mb = fit(&inp, &opts(false, true, false))
-            .expect("valid")
-            .model
-            .motion_blur;
+        let mb = fit(&inp, &opts(false, true, false)).expect("valid").model.motion_blur;
         let got = mb.exposure.expect("identifiable with 8 px flow");
         println!("fast λ {lambda} → {got:.3} ± {:?}", mb.diagnostics.stderr);
         assert!((got - lambda).abs() <= 0.15, "λ {lambda}: got {got}");
@@ -114,18 +94,9 @@ fn fast_exposure_within_stated_tolerance() {
 fn fast_dof_within_stated_tolerance() {
     let img = photo("astronaut.png");
     let depth = depth_ramp(img.width, img.height, 0.5, 4.0);
-    for curve in [
-        DofCurve::ThinLens {
-            k: 3.0,
-            focus_depth: 1.2,
-            c0: 0.3,
-        },
-        DofCurve::Quadratic {
-            a: 0.3,
-            b: -1.0,
-            c: 1.5,
-        },
-    ] {
+    for curve in
+        [DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }, DofCurve::Quadratic { a: 0.3, b: -1.0, c: 1.5 }]
+    {
         let truth = DepthOfField {
             present: true,
             units: DepthUnits::MetricM,
@@ -143,10 +114,7 @@ fn fast_dof_within_stated_tolerance() {
             depth_units: DepthUnits::MetricM,
             flow: None,
         };
-        let got = fit(&inp, &opts(false, false, true))
-            .expect("valid")
-            .model
-            .depth_of_field;
+        let got = fit(&inp, &opts(false, false, true)).expect("valid").model.depth_of_field;
         let [lo, hi] = got.depth_range;
         let rmse = ((0..=100)
             .map(|i| {

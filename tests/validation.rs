@@ -28,27 +28,13 @@ fn inputs<'a>(image: &'a Rgb) -> FitInputs<'a> {
 }
 
 fn only(noise: bool, mb: bool, dof: bool) -> FitOptions {
-    FitOptions {
-        effects: Effects {
-            noise,
-            motion_blur: mb,
-            depth_of_field: dof,
-        },
-        ..Default::default()
-    }
+    FitOptions { effects: Effects { noise, motion_blur: mb, depth_of_field: dof }, ..Default::default() }
 }
 
 fn fit_lambda(sharp: &Rgb, flow: &Flow, lambda: f32) -> MotionBlur {
     let blurred = quantize8(&add_motion_blur(sharp, flow, lambda));
-    let inp = FitInputs {
-        motion_deblurred: Some(sharp),
-        flow: Some(flow),
-        ..inputs(&blurred)
-    };
-    fit(&inp, &only(false, true, false))
-        .expect("valid inputs")
-        .model
-        .motion_blur
+    let inp = FitInputs { motion_deblurred: Some(sharp), flow: Some(flow), ..inputs(&blurred) };
+    fit(&inp, &only(false, true, false)).expect("valid inputs").model.motion_blur
 }
 
 /// λ over the range, with 8 px/frame flow and with 1.5 px/frame flow (streaks of
@@ -76,10 +62,7 @@ fn exposure_accurate_median_error_within_0_01() {
             errors.push((got - lambda).abs() as f64);
             // No single case may be far off either: 0.04 covers the 8-bit
             // quantisation of sub-pixel streaks (their whole signal is a few 1/255 steps).
-            assert!(
-                (got - lambda).abs() <= 0.04,
-                "λ {lambda} at {scale} px/frame: got {got}"
-            );
+            assert!((got - lambda).abs() <= 0.04, "λ {lambda} at {scale} px/frame: got {got}");
             assert_eq!(mb.present, lambda > 0.0, "presence for λ = {lambda}");
         }
     }
@@ -111,18 +94,35 @@ fn truth_dof(units: DepthUnits, curve: DofCurve, range: [f32; 2]) -> DepthOfFiel
     }
 }
 
-fn fit_dof(sharp: &Rgb, depth: &Plane, units: DepthUnits, truth: &DepthOfField) -> DepthOfField {
+fn fit_dof_with(
+    sharp: &Rgb,
+    depth: &Plane,
+    units: DepthUnits,
+    truth: &DepthOfField,
+    opts: &FitOptions,
+) -> DepthOfField {
     let blurred = quantize8(&add_dof(sharp, depth, truth));
-    let inp = FitInputs {
-        defocus_deblurred: Some(sharp),
-        depth: Some(depth),
-        depth_units: units,
-        ..inputs(&blurred)
-    };
-    fit(&inp, &only(false, false, true))
-        .expect("valid inputs")
-        .model
-        .depth_of_field
+    let inp = FitInputs { defocus_deblurred: Some(sharp), depth: Some(depth), depth_units: units, ..inputs(&blurred) };
+    fit(&inp, opts).expect("valid inputs").model.depth_of_field
+}
+
+fn fit_dof(sharp: &Rgb, depth: &Plane, units: DepthUnits, truth: &DepthOfField) -> DepthOfField {
+    fit_dof_with(sharp, depth, units, truth, &only(false, false, true))
+}
+
+/// The full-resolution stack (no pyramid handoff) inverts the reference exactly up
+/// to quantisation: on the strongest case (to 9.4 px) it must be 5× inside the
+/// tolerance, which is what the faster default spends.
+#[test]
+fn dof_full_resolution_stack_is_exact() {
+    let img = photo("astronaut.png");
+    let depth = depth_ramp(img.width, img.height, 0.5, 4.0);
+    let truth = truth_dof(DepthUnits::MetricM, DofCurve::ThinLens { k: 8.0, focus_depth: 0.7, c0: 0.0 }, [0.5, 4.0]);
+    let opts = FitOptions { dof_pyramid_from_px: None, ..only(false, false, true) };
+    let got = fit_dof_with(&img, &depth, DepthUnits::MetricM, &truth, &opts);
+    let rmse = dof_rmse(&got, &truth);
+    println!("full-resolution stack: RMSE {rmse:.4} px");
+    assert!(rmse <= 0.01, "δ RMSE {rmse} px");
 }
 
 /// Both forms as truth on a 512² photo with metric depth 0.5–4 m.
@@ -131,21 +131,9 @@ fn dof_accurate_rmse_within_0_05_px_metric() {
     let img = photo("astronaut.png");
     let depth = depth_ramp(img.width, img.height, 0.5, 4.0);
     for curve in [
-        DofCurve::ThinLens {
-            k: 3.0,
-            focus_depth: 1.2,
-            c0: 0.3,
-        },
-        DofCurve::Quadratic {
-            a: 0.3,
-            b: -1.0,
-            c: 1.5,
-        },
-        DofCurve::ThinLens {
-            k: 8.0,
-            focus_depth: 0.7,
-            c0: 0.0,
-        }, // up to 9.4 px at 4 m
+        DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 },
+        DofCurve::Quadratic { a: 0.3, b: -1.0, c: 1.5 },
+        DofCurve::ThinLens { k: 8.0, focus_depth: 0.7, c0: 0.0 }, // up to 9.4 px at 4 m
     ] {
         let truth = truth_dof(DepthUnits::MetricM, curve, [0.5, 4.0]);
         let got = fit_dof(&img, &depth, DepthUnits::MetricM, &truth);
@@ -160,31 +148,16 @@ fn dof_accurate_rmse_within_0_05_px_metric() {
 /// pixels present) as relative inverse depth.
 #[test]
 fn dof_accurate_rmse_within_0_05_px_real_disparity() {
-    let (img, _) =
-        blind_augment::io::load_rgb(&asset("motorcycle_left_333x497.png")).expect("asset");
+    let (img, _) = blind_augment::io::load_rgb(&asset("motorcycle_left_333x497.png")).expect("asset");
     let disparity =
-        blind_augment::io::load_depth(&asset("motorcycle_disp_333x497_x64.png"), 1.0 / 64.0)
-            .expect("asset");
-    let truth = truth_dof(
-        DepthUnits::RelativeInverse,
-        DofCurve::ThinLens {
-            k: 0.12,
-            focus_depth: 30.0,
-            c0: 0.2,
-        },
-        [7.0, 61.0],
-    );
+        blind_augment::io::load_depth(&asset("motorcycle_disp_333x497_x64.png"), 1.0 / 64.0).expect("asset");
+    let truth =
+        truth_dof(DepthUnits::RelativeInverse, DofCurve::ThinLens { k: 0.12, focus_depth: 30.0, c0: 0.2 }, [7.0, 61.0]);
     let got = fit_dof(&img, &disparity, DepthUnits::RelativeInverse, &truth);
     let rmse = dof_rmse(&got, &truth);
-    println!(
-        "real disparity: got {:?} over {:?}, RMSE {rmse:.4} px",
-        got.curve, got.depth_range
-    );
+    println!("real disparity: got {:?} over {:?}, RMSE {rmse:.4} px", got.curve, got.depth_range);
     assert!(rmse <= 0.05, "δ RMSE {rmse} px > 0.05");
-    assert!(
-        matches!(got.curve, Some(DofCurve::ThinLens { .. })),
-        "thin lens truth kept as thin lens"
-    );
+    assert!(matches!(got.curve, Some(DofCurve::ThinLens { .. })), "thin lens truth kept as thin lens");
 }
 
 /// Std of the noise `synth` adds to a flat grey of luma y, per channel, over 256²
@@ -222,22 +195,13 @@ fn noise_accurate_median_relative_error_within_1_5_percent() {
     for name in ["astronaut.png", "chelsea.png"] {
         let clean = photo(name);
         let noisy = add_sensor_noise(&clean, A, B, 5);
-        let inp = FitInputs {
-            denoised: Some(&clean),
-            ..inputs(&noisy)
-        };
-        let noise = fit(&inp, &only(true, false, false))
-            .expect("valid")
-            .model
-            .noise;
+        let inp = FitInputs { denoised: Some(&clean), ..inputs(&noisy) };
+        let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
         assert!(noise.present);
         let errs = noise_errors(&noise, |c, y| ((A[c] + B[c] * y) as f64).sqrt());
         let med = median(errs.iter().map(|e| e.abs()).collect());
         let max = errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
-        println!(
-            "{name}: {:?} over {:?}, median |rel err| {med:.4}, max {max:.4}",
-            noise.form, noise.luminance_range
-        );
+        println!("{name}: {:?} over {:?}, median |rel err| {med:.4}, max {max:.4}", noise.form, noise.luminance_range);
         // Over a wide luma range the Poisson–Gaussian truth must be recognised; over a
         // narrow one (chelsea: mostly mid-tones) both forms fit equally well.
         if noise.luminance_range[1] - noise.luminance_range[0] > 0.6 {
@@ -257,25 +221,15 @@ fn noise_accurate_picks_linear_std_when_std_is_linear() {
     for c in 0..3 {
         for i in 0..clean.len() {
             let s = s0[c] + s1[c] * y.data[i];
-            noisy.channels[c][i] +=
-                s * synth::gaussian((i % 512) as u32, (i / 512) as u32, c as u32 + 20, 8);
+            noisy.channels[c][i] += s * synth::gaussian((i % 512) as u32, (i / 512) as u32, c as u32 + 20, 8);
         }
     }
-    let inp = FitInputs {
-        denoised: Some(&clean),
-        ..inputs(&noisy)
-    };
-    let noise = fit(&inp, &only(true, false, false))
-        .expect("valid")
-        .model
-        .noise;
+    let inp = FitInputs { denoised: Some(&clean), ..inputs(&noisy) };
+    let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
     assert_eq!(noise.form, NoiseForm::LinearStd);
     let errs = noise_errors(&noise, |c, y| (s0[c] + s1[c] * y) as f64);
     let med = median(errs.iter().map(|e| e.abs()).collect());
-    println!(
-        "linear-std truth: median |rel err| {med:.4} over {:?}",
-        noise.luminance_range
-    );
+    println!("linear-std truth: median |rel err| {med:.4} over {:?}", noise.luminance_range);
     assert!(med <= 0.015, "median relative error {med}");
 }
 
@@ -286,36 +240,22 @@ fn noise_accurate_picks_linear_std_when_std_is_linear() {
 fn noise_lowpass_residual_is_measured() {
     let clean = photo("astronaut.png");
     let noisy = add_sensor_noise(&clean, A, B, 6);
-    let inp = FitInputs {
-        denoised: Some(&clean),
-        ..inputs(&noisy)
-    };
-    let noise = fit(&inp, &only(true, false, false))
-        .expect("valid")
-        .model
-        .noise;
+    let inp = FitInputs { denoised: Some(&clean), ..inputs(&noisy) };
+    let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
     let unit = synth::unit_band_std();
     let share = unit[NOISE_LEVELS].powi(2) / unit.iter().map(|u| u * u).sum::<f32>();
-    println!(
-        "low-pass share of white-noise variance: {:.5}; fitted: {:?}",
-        share, noise.lowpass
-    );
+    println!("low-pass share of white-noise variance: {:.5}; fitted: {:?}", share, noise.lowpass);
     let mut without = noise.clone();
     without.lowpass = None;
     for y in [0.2f32, 0.5, 0.8] {
         let (a, b) = (synth_flat_std(&noise, y), synth_flat_std(&without, y));
         for c in 0..3 {
             let d = (a[c] / b[c] - 1.0).abs();
-            assert!(
-                d < 0.005,
-                "dropping the low-pass changes std by {d} at Y={y}"
-            );
+            assert!(d < 0.005, "dropping the low-pass changes std by {d} at Y={y}");
         }
     }
 }
 
 fn asset(name: &str) -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("assets")
-        .join(name)
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets").join(name)
 }

@@ -16,16 +16,10 @@ fn median(mut v: Vec<f32>) -> f32 {
 }
 
 fn summary(ds: &[&Diagnostics], present: usize, total: usize) -> Diagnostics {
-    let mut d = ds
-        .first()
-        .map(|d| (*d).clone())
-        .unwrap_or_else(|| Diagnostics::not_fitted("no frames"));
+    let mut d = ds.first().map(|d| (*d).clone()).unwrap_or_else(|| Diagnostics::not_fitted("no frames"));
     d.samples_used = ds.iter().map(|d| d.samples_used).sum();
     d.fit_time_s = ds.iter().map(|d| d.fit_time_s).sum();
-    d.reason = format!(
-        "median over {present} of {total} frames where present; {}",
-        d.reason
-    );
+    d.reason = format!("median over {present} of {total} frames where present; {}", d.reason);
     d
 }
 
@@ -41,13 +35,9 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         out.noise = base.noise.clone();
         for l in 0..out.noise.levels.len() {
             for c in 0..3 {
-                out.noise.levels[l].slope[c] =
-                    median(same.iter().map(|m| m.noise.levels[l].slope[c]).collect());
-                out.noise.levels[l].intercept[c] = median(
-                    same.iter()
-                        .map(|m| m.noise.levels[l].intercept[c])
-                        .collect(),
-                );
+                out.noise.levels[l].slope[c] = median(same.iter().map(|m| m.noise.levels[l].slope[c]).collect());
+                out.noise.levels[l].intercept[c] =
+                    median(same.iter().map(|m| m.noise.levels[l].intercept[c]).collect());
             }
         }
         out.noise.lowpass = None;
@@ -59,10 +49,7 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         out.noise.diagnostics = summary(&ds, same.len(), total);
     }
 
-    let mb: Vec<&CameraModel> = models
-        .iter()
-        .filter(|m| m.motion_blur.exposure.is_some())
-        .collect();
+    let mb: Vec<&CameraModel> = models.iter().filter(|m| m.motion_blur.exposure.is_some()).collect();
     if !mb.is_empty() {
         let lambdas: Vec<f32> = mb.iter().filter_map(|m| m.motion_blur.exposure).collect();
         let present = mb.iter().filter(|m| m.motion_blur.present).count();
@@ -71,11 +58,7 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         // Present if most identifiable frames say so.
         out.motion_blur.present = 2 * present > mb.len();
         out.motion_blur.diagnostics = summary(&ds, present, total);
-        out.motion_blur.diagnostics.status = if out.motion_blur.present {
-            Status::Present
-        } else {
-            Status::Absent
-        };
+        out.motion_blur.diagnostics.status = if out.motion_blur.present { Status::Present } else { Status::Absent };
     }
 
     let mut dof: Vec<&CameraModel> = models.iter().filter(|m| m.depth_of_field.present).collect();
@@ -90,9 +73,6 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         out.depth_of_field = pick.depth_of_field.clone();
         out.depth_of_field.diagnostics = summary(&ds, dof.len(), total);
     }
-    out.validate().map_err(|e| FitError::Option {
-        option: "aggregate",
-        problem: e.to_string(),
-    })?;
+    out.validate().map_err(|e| FitError::Option { option: "aggregate", problem: e.to_string() })?;
     Ok(out)
 }

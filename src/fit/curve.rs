@@ -30,16 +30,18 @@ pub struct CurveFit {
     pub thin_lens: Option<DofCurve>,
 }
 
+/// Median by linear-time selection (the IRLS loops call this hundreds of times).
 fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
-    v.sort_by(|a, b| a.total_cmp(b));
     let n = v.len();
+    let (_, &mut upper, _) = v.select_nth_unstable_by(n / 2, |a, b| a.total_cmp(b));
     if n % 2 == 1 {
-        v[n / 2]
+        upper
     } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
+        let lower = v[..n / 2].iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (lower + upper)
     }
 }
 
@@ -50,15 +52,7 @@ fn robust_scale(res: &[f64]) -> f64 {
 
 fn huber_loss(res: &[f64], scale: f64) -> f64 {
     let k = HUBER_K * scale;
-    res.iter()
-        .map(|&r| {
-            if r.abs() <= k {
-                0.5 * r * r
-            } else {
-                k * (r.abs() - 0.5 * k)
-            }
-        })
-        .sum::<f64>()
+    res.iter().map(|&r| if r.abs() <= k { 0.5 * r * r } else { k * (r.abs() - 0.5 * k) }).sum::<f64>()
         / res.len().max(1) as f64
 }
 
@@ -109,9 +103,7 @@ fn irls<const P: usize>(
 fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
     // Centre and scale Z for conditioning, then map back to raw coefficients.
     let zm = z.iter().sum::<f64>() / z.len() as f64;
-    let zs = (z.iter().map(|v| (v - zm).powi(2)).sum::<f64>() / z.len() as f64)
-        .sqrt()
-        .max(1e-9);
+    let zs = (z.iter().map(|v| (v - zm).powi(2)).sum::<f64>() / z.len() as f64).sqrt().max(1e-9);
     let (b, res) = irls(
         z.len(),
         |i| {
@@ -125,11 +117,7 @@ fn fit_quadratic(z: &[f64], s: &[f64]) -> Option<(DofCurve, Vec<f64>)> {
     let a = b[0] / (zs * zs);
     let bb = b[1] / zs - 2.0 * b[0] * zm / (zs * zs);
     let c = b[0] * zm * zm / (zs * zs) - b[1] * zm / zs + b[2];
-    let curve = DofCurve::Quadratic {
-        a: a as f32,
-        b: bb as f32,
-        c: c as f32,
-    };
+    let curve = DofCurve::Quadratic { a: a as f32, b: bb as f32, c: c as f32 };
     let ok = [a, bb, c].iter().all(|v| v.is_finite());
     ok.then_some((curve, res))
 }
@@ -158,16 +146,15 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
     // Grid (the focus may lie just outside the sampled range), then golden section.
     let span = hi - lo;
     let n = 32;
-    let grid: Vec<f64> = (0..=n)
-        .map(|i| lo - 0.1 * span + 1.2 * span * i as f64 / n as f64)
-        .collect();
+    let grid: Vec<f64> = (0..=n).map(|i| lo - 0.1 * span + 1.2 * span * i as f64 / n as f64).collect();
     let losses: Vec<f64> = grid.iter().map(|&g| loss_at(g)).collect();
     let best = (0..grid.len()).min_by(|&a, &b| losses[a].total_cmp(&losses[b]))?;
     let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n)]);
     let g = 0.618_033_988_75;
     let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
     let (mut fc, mut fd) = (loss_at(c), loss_at(d));
-    for _ in 0..40 {
+    // 25 steps shrink the two-grid-cell bracket by 0.618^25 ≈ 6e-6.
+    for _ in 0..25 {
         if fc < fd {
             b = d;
             d = c;
@@ -197,50 +184,28 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
         }
         DepthUnits::RelativeInverse => uf,
     };
-    let curve = DofCurve::ThinLens {
-        k: k as f32,
-        focus_depth: focus_depth as f32,
-        c0: c0 as f32,
-    };
-    [k, focus_depth, c0]
-        .iter()
-        .all(|v| v.is_finite())
-        .then_some((curve, res))
+    let curve = DofCurve::ThinLens { k: k as f32, focus_depth: focus_depth as f32, c0: c0 as f32 };
+    [k, focus_depth, c0].iter().all(|v| v.is_finite()).then_some((curve, res))
 }
 
 /// Fit δ(Z) to samples `(depth, sigma_px)` over `depth_range`. None if too few.
-pub fn fit_dof_curve(
-    depth: &[f32],
-    sigma_px: &[f32],
-    units: DepthUnits,
-    depth_range: [f32; 2],
-) -> Option<CurveFit> {
+pub fn fit_dof_curve(depth: &[f32], sigma_px: &[f32], units: DepthUnits, depth_range: [f32; 2]) -> Option<CurveFit> {
     if depth.len() < 8 {
         return None;
     }
     let z: Vec<f64> = depth.iter().map(|&v| v as f64).collect();
     let s: Vec<f64> = sigma_px.iter().map(|&v| v as f64).collect();
-    let u: Vec<f64> = depth
-        .iter()
-        .map(|&v| units.inverse_depth(v) as f64)
-        .collect();
+    let u: Vec<f64> = depth.iter().map(|&v| units.inverse_depth(v) as f64).collect();
     let quad = fit_quadratic(&z, &s);
     let thin = fit_thin_lens(&u, &s, units);
-    let score = |r: &Option<(DofCurve, Vec<f64>)>| {
-        r.as_ref()
-            .map(|(_, res)| huber_loss(res, robust_scale(res)))
-    };
+    let score = |r: &Option<(DofCurve, Vec<f64>)>| r.as_ref().map(|(_, res)| huber_loss(res, robust_scale(res)));
     let (lq, lt) = (score(&quad), score(&thin));
     let pick_thin = match (lq, lt) {
         (Some(q), Some(t)) => t <= q * 1.01,
         (None, Some(_)) => true,
         _ => false,
     };
-    let (curve, res) = if pick_thin {
-        thin.clone()?
-    } else {
-        quad.clone()?
-    };
+    let (curve, res) = if pick_thin { thin.clone()? } else { quad.clone()? };
     let scale = robust_scale(&res);
     let loss = huber_loss(&res, scale);
     let stderr_px = scale * (3.0 / z.len() as f64).sqrt();
@@ -251,25 +216,12 @@ pub fn fit_dof_curve(
             curve.sigma_px(units, zz)
         })
         .collect();
-    let (mn, mx) = evals
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (mn, mx) = evals.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     let curve = if ((mx - mn) as f64) < (3.0 * stderr_px).max(0.05) {
         let mut sv = s.clone();
-        DofCurve::Constant {
-            c: (median(&mut sv) as f32).clamp(0.0, crate::model::MAX_DOF_SIGMA_PX),
-        }
+        DofCurve::Constant { c: (median(&mut sv) as f32).clamp(0.0, crate::model::MAX_DOF_SIGMA_PX) }
     } else {
         curve
     };
-    Some(CurveFit {
-        curve,
-        loss,
-        scale,
-        stderr_px,
-        quadratic: quad.map(|(c, _)| c),
-        thin_lens: thin.map(|(c, _)| c),
-    })
+    Some(CurveFit { curve, loss, scale, stderr_px, quadratic: quad.map(|(c, _)| c), thin_lens: thin.map(|(c, _)| c) })
 }

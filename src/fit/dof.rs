@@ -4,7 +4,8 @@
 //! [0, 10] px; (2) textureless pixels rejected; (3) robust fit of δ(Z) (`curve`).
 //! Stage 1 runs on luma (DoF blur is linear and achromatic, so it commutes with
 //! luma) over the same cascaded discrete-Gaussian stack `synth::add_defocus` uses,
-//! with nodes every `node_spacing` px. Between nodes S_k, S_{k+1} the blend weight
+//! with nodes every `node_spacing` px, continued at half and quarter resolution
+//! once it is band-limited (`stack_levels`). Between nodes S_k, S_{k+1} the blend weight
 //! that best explains a 3×3 patch of I is closed-form,
 //! w = ⟨I − S_k, S_{k+1} − S_k⟩ / |S_{k+1} − S_k|², clamped to [0, 1], and
 //! σ² = σ_k² + w(σ_{k+1}² − σ_k²): a continuous σ, not a 0.1 px grid, and one pass
@@ -29,7 +30,6 @@
 use super::curve::fit_dof_curve;
 use crate::image::{blur_separable, discrete_gaussian_kernel, gradient_sq, Plane, Rgb};
 use crate::model::{DepthOfField, DepthUnits, Diagnostics, Status};
-use crate::synth::for_each_cascade_interval;
 use std::sync::OnceLock;
 use std::time::Instant;
 
@@ -37,8 +37,15 @@ use std::time::Instant;
 /// synth reference's 0.25 px; the variance-matched blend makes the mismatch a
 /// higher-order effect (measured in tests/validation.rs and BENCHMARKS.md).
 pub const DEFAULT_NODE_SPACING_PX: f32 = 0.5;
+/// Default handoff of the DoF stack to half resolution (see `stack_levels`).
+/// Measured at 512² (BENCHMARKS.md): at 5 px the strong-blur RMSE is 0.009 px
+/// (full resolution: 0.005) for two thirds of the time; at 3 px it is 0.046 px,
+/// too close to the 0.05 px tolerance for 6 ms.
+pub const DEFAULT_PYRAMID_FROM_PX: Option<f32> = Some(5.0);
 const TEXTURE_MIN_GRAD_SQ: f32 = 1e-4;
-const SAMPLE_STRIDE: usize = 3;
+/// Sample centres on multiples of 4, so each one is also a pixel of the half- and
+/// quarter-resolution levels (pixel j there ↔ pixel 2j / 4j here).
+const SAMPLE_STRIDE: usize = 4;
 const MIN_SAMPLES: usize = 32;
 
 #[derive(Clone, Debug, Default)]
@@ -71,20 +78,14 @@ fn finish(
 ) -> (DepthOfField, Option<DofPlotData>) {
     let n = z.len();
     if n < MIN_SAMPLES {
-        let reason = format!(
-            "only {n} textured pixels with valid depth (need {MIN_SAMPLES}): δ(Z) not identifiable"
-        );
+        let reason = format!("only {n} textured pixels with valid depth (need {MIN_SAMPLES}): δ(Z) not identifiable");
         let mut d = super::not_identifiable(method, reason, started);
         d.samples_used = n as u64;
         return (DepthOfField::absent(units, d), None);
     }
     let range = depth_range(&z);
     let Some(fit) = fit_dof_curve(&z, &s, units, range) else {
-        let mut d = super::not_identifiable(
-            method,
-            "robust depth-model fit failed (degenerate design)",
-            started,
-        );
+        let mut d = super::not_identifiable(method, "robust depth-model fit failed (degenerate design)", started);
         d.samples_used = n as u64;
         return (DepthOfField::absent(units, d), None);
     };
@@ -95,9 +96,8 @@ fn finish(
         depth_range: range,
         diagnostics: Diagnostics::not_fitted(""),
     };
-    let max_sigma = (0..=64)
-        .map(|i| dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0))
-        .fold(0.0f32, f32::max);
+    let max_sigma =
+        (0..=64).map(|i| dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0)).fold(0.0f32, f32::max);
     let present = max_sigma >= 0.1 && (max_sigma as f64) > 3.0 * fit.stderr_px;
     let residuals = residual_at(&dof);
     let form = match fit.curve {
@@ -121,12 +121,7 @@ fn finish(
         fit_time_s: started.elapsed().as_secs_f64(),
         stderr: Some(fit.stderr_px),
     };
-    let plot = DofPlotData {
-        depth: z,
-        sigma_px: s,
-        quadratic: fit.quadratic,
-        thin_lens: fit.thin_lens,
-    };
+    let plot = DofPlotData { depth: z, sigma_px: s, quadratic: fit.quadratic, thin_lens: fit.thin_lens };
     (dof, Some(plot))
 }
 
@@ -136,6 +131,47 @@ struct IntervalStats {
     aa: Vec<f32>,
     ad: Vec<f32>,
     dd: Vec<f32>,
+}
+
+/// One resolution of the multi-resolution stack: pixels of `1 << shift` full-res
+/// pixels, nodes σ_k = `lo + k·spacing` (full-res px) up to `hi`.
+struct StackLevel {
+    shift: usize,
+    lo: f32,
+    hi: f32,
+}
+
+/// The stack's resolutions for a handoff σ_h (`FitOptions::dof_pyramid_from_px`):
+/// full resolution to σ_h + 0.5, half resolution from σ_h to 2σ_h + 0.5, quarter
+/// resolution from 2σ_h on; `None` keeps everything at full resolution (exactly the
+/// reference's stack). Past σ_h the stack is band-limited (at σ_h = 3 its response at
+/// the half-res Nyquist frequency is e^(−2π²·9/16) ≈ 1.5e-5), but a discrete Gaussian
+/// of variance t/4 on the coarse grid is not the full-res one of variance t: their
+/// responses differ in the 4th order, which biases coarse-level σ slightly (measured
+/// in BENCHMARKS.md: the speed/accuracy trade of this option). Levels overlap by
+/// 0.5 px so a sample near a boundary is judged where its minimum is interior.
+fn stack_levels(handoff_px: Option<f32>) -> Vec<StackLevel> {
+    match handoff_px {
+        None => vec![StackLevel { shift: 0, lo: 0.0, hi: f32::INFINITY }],
+        Some(h) => vec![
+            StackLevel { shift: 0, lo: 0.0, hi: h + 0.5 },
+            StackLevel { shift: 1, lo: h, hi: 2.0 * h + 0.5 },
+            StackLevel { shift: 2, lo: 2.0 * h, hi: f32::INFINITY },
+        ],
+    }
+}
+
+/// Every other pixel in x and y (pixel j ↔ pixel 2j): no prefilter; callers only
+/// decimate band-limited planes (or the frame, whose relevant pixels are blurred).
+fn decimate(p: &Plane) -> Plane {
+    let (w, h) = (p.width.div_ceil(2), p.height.div_ceil(2));
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            out.push(p.get(2 * x, 2 * y));
+        }
+    }
+    Plane::from_vec(w, h, out)
 }
 
 /// Accurate tier: I, I_noDoF and Z.
@@ -152,16 +188,13 @@ pub fn fit_accurate(
     let (w, h) = (yi.width, yi.height);
     // Sample centres on a stride grid; each owns a 3×3 patch.
     let mut centres = vec![];
-    for y in (1..h.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
-        for x in (1..w.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
+    for y in (SAMPLE_STRIDE..h.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
+        for x in (SAMPLE_STRIDE..w.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
             let z = depth.get(x, y);
             if !valid_depth(z, units) {
                 continue;
             }
-            let g: f32 = (0..9)
-                .map(|k| grad.get(x + k % 3 - 1, y + k / 3 - 1))
-                .sum::<f32>()
-                / 9.0;
+            let g: f32 = (0..9).map(|k| grad.get(x + k % 3 - 1, y + k / 3 - 1)).sum::<f32>() / 9.0;
             if g >= TEXTURE_MIN_GRAD_SQ {
                 centres.push((x, y));
             }
@@ -169,62 +202,113 @@ pub fn fit_accurate(
     }
     let n = centres.len();
     let spacing = opts.dof_node_spacing_px;
-    let intervals = (opts.dof_max_sigma_px / spacing).ceil() as usize;
-    let mut stats = IntervalStats {
-        aa: vec![0.0; n * intervals],
-        ad: vec![0.0; n * intervals],
-        dd: vec![0.0; n * intervals],
-    };
+    let max_sigma = opts.dof_max_sigma_px;
+    // Per level: (first node σ, number of intervals, statistics).
+    let mut levels: Vec<(f32, usize, IntervalStats)> = vec![];
     if n >= MIN_SAMPLES {
-        for_each_cascade_interval(&ys, spacing, opts.dof_max_sigma_px, |k, _, _, a, b| {
-            for (s, &(x, y)) in centres.iter().enumerate() {
-                let (mut aa, mut ad, mut dd) = (0.0f32, 0.0f32, 0.0f32);
-                for j in y - 1..=y + 1 {
-                    for i in x - 1..=x + 1 {
-                        let idx = j * w + i;
-                        let av = yi.data[idx] - a.data[idx];
-                        let dv = b.data[idx] - a.data[idx];
-                        aa += av * av;
-                        ad += av * dv;
-                        dd += dv * dv;
-                    }
-                }
-                let o = s * intervals + k;
-                stats.aa[o] = aa;
-                stats.ad[o] = ad;
-                stats.dd[o] = dd;
+        let mut frame = yi.clone();
+        let mut start_plane = ys.clone();
+        let stack = stack_levels(opts.dof_pyramid_from_px);
+        for level in stack.iter() {
+            if level.lo >= max_sigma {
+                break;
             }
-        });
+            let lo = (level.lo / spacing).floor() * spacing;
+            let hi = level.hi.min(max_sigma);
+            let intervals = ((hi - lo) / spacing).ceil().max(1.0) as usize;
+            let scale = (1usize << level.shift) as f32;
+            let mut st = IntervalStats {
+                aa: vec![0.0; n * intervals],
+                ad: vec![0.0; n * intervals],
+                dd: vec![0.0; n * intervals],
+            };
+            let (fw, fh) = (frame.width, frame.height);
+            let mut handoff: Option<Plane> = None;
+            let next_lo = stack.get(level.shift + 1).map(|l| (l.lo / spacing).floor() * spacing);
+            let mut prev = start_plane.clone();
+            for k in 0..intervals {
+                let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
+                if Some(s0) == next_lo {
+                    handoff = Some(prev.clone());
+                }
+                // Increment in this level's pixel units: variances scale by 1/scale².
+                let next = blur_separable(&prev, &discrete_gaussian_kernel((s1 * s1 - s0 * s0) / (scale * scale)));
+                for (s, &(x, y)) in centres.iter().enumerate() {
+                    let (cx, cy) =
+                        ((x >> level.shift).clamp(1, fw.max(3) - 2), (y >> level.shift).clamp(1, fh.max(3) - 2));
+                    let (mut aa, mut ad, mut dd) = (0.0f32, 0.0f32, 0.0f32);
+                    for j in cy.saturating_sub(1)..(cy + 2).min(fh) {
+                        for i in cx.saturating_sub(1)..(cx + 2).min(fw) {
+                            let idx = j * fw + i;
+                            let av = frame.data[idx] - prev.data[idx];
+                            let dv = next.data[idx] - prev.data[idx];
+                            aa += av * av;
+                            ad += av * dv;
+                            dd += dv * dv;
+                        }
+                    }
+                    let o = s * intervals + k;
+                    st.aa[o] = aa;
+                    st.ad[o] = ad;
+                    st.dd[o] = dd;
+                }
+                prev = next;
+            }
+            if Some(lo + intervals as f32 * spacing) == next_lo {
+                handoff = Some(prev.clone());
+            }
+            levels.push((lo, intervals, st));
+            match handoff {
+                Some(p) if fw > 3 && fh > 3 => {
+                    start_plane = decimate(&p);
+                    frame = decimate(&frame);
+                }
+                _ => break,
+            }
+        }
     }
-    // Residual of sample s at σ, from its interval's statistics.
-    let residual = |s: usize, sigma: f32| -> f32 {
-        let k = ((sigma / spacing).floor() as usize).min(intervals - 1);
-        let (s0, s1) = (k as f32 * spacing, (k + 1) as f32 * spacing);
-        let wgt = ((sigma * sigma - s0 * s0) / (s1 * s1 - s0 * s0)).clamp(0.0, 1.0);
+    // Residual and best blend of sample s in interval k of a level.
+    let eval = |lv: &(f32, usize, IntervalStats), s: usize, k: usize, wgt: Option<f32>| -> (f32, f32) {
+        let (lo, intervals, st) = lv;
         let o = s * intervals + k;
-        (stats.aa[o] - 2.0 * wgt * stats.ad[o] + wgt * wgt * stats.dd[o]).max(0.0)
+        let wgt = wgt.unwrap_or(if st.dd[o] > 1e-12 { (st.ad[o] / st.dd[o]).clamp(0.0, 1.0) } else { 0.0 });
+        let r = (st.aa[o] - 2.0 * wgt * st.ad[o] + wgt * wgt * st.dd[o]).max(0.0);
+        let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
+        (r, (s0 * s0 + wgt * (s1 * s1 - s0 * s0)).sqrt())
     };
+    // Coarse-to-fine choice: a level's answer stands if its minimum is interior
+    // (below the next level's start + 0.25 px), else the next level decides.
     let mut zs = Vec::with_capacity(n);
     let mut sig = Vec::with_capacity(n);
     for (s, &(x, y)) in centres.iter().enumerate() {
-        let mut best = (f32::INFINITY, 0.0f32);
-        for k in 0..intervals {
-            let o = s * intervals + k;
-            let wgt = if stats.dd[o] > 1e-12 {
-                (stats.ad[o] / stats.dd[o]).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let r = stats.aa[o] - 2.0 * wgt * stats.ad[o] + wgt * wgt * stats.dd[o];
-            if r < best.0 {
-                let (s0, s1) = (k as f32 * spacing, (k + 1) as f32 * spacing);
-                best = (r, (s0 * s0 + wgt * (s1 * s1 - s0 * s0)).sqrt());
+        let mut chosen = 0.0f32;
+        for (li, lv) in levels.iter().enumerate() {
+            let best = (0..lv.1).map(|k| eval(lv, s, k, None)).min_by(|a, b| a.0.total_cmp(&b.0));
+            if let Some((_, sigma)) = best {
+                chosen = sigma;
+                let limit = levels.get(li + 1).map_or(f32::INFINITY, |next| next.0 + 0.25);
+                if sigma < limit {
+                    break;
+                }
             }
         }
         zs.push(depth.get(x, y));
-        sig.push(best.1);
+        sig.push(chosen);
     }
+    // Residual at σ: from the level whose range holds σ (coarser levels see every
+    // 2nd/4th pixel of the same residual field, so the means are comparable).
+    let residual = |s: usize, sigma: f32| -> f32 {
+        let li = levels.iter().rposition(|lv| sigma >= lv.0 + 0.25 || lv.0 == 0.0).unwrap_or(0);
+        let lv = &levels[li];
+        let k = (((sigma - lv.0) / spacing).floor().max(0.0) as usize).min(lv.1 - 1);
+        let (s0, s1) = (lv.0 + k as f32 * spacing, lv.0 + (k + 1) as f32 * spacing);
+        let wgt = ((sigma * sigma - s0 * s0) / (s1 * s1 - s0 * s0)).clamp(0.0, 1.0);
+        eval(lv, s, k, Some(wgt)).0
+    };
     let residual_at = |dof: &DepthOfField| -> Option<(f64, f64)> {
+        if levels.is_empty() {
+            return None;
+        }
         let (mut before, mut after) = (0.0f64, 0.0f64);
         for s in 0..n {
             before += residual(s, 0.0) as f64;
@@ -262,11 +346,8 @@ fn zhuo_sim_table() -> &'static Vec<(f32, f32)> {
                     .collect();
                 let p = Plane::from_vec(n, 1, data);
                 let re = blur_separable(&p, &k0);
-                let g = |q: &Plane| {
-                    (1..n - 1)
-                        .map(|x| 0.5 * (q.get(x + 1, 0) - q.get(x - 1, 0)))
-                        .fold(0.0f32, f32::max)
-                };
+                let g =
+                    |q: &Plane| (1..n - 1).map(|x| 0.5 * (q.get(x + 1, 0) - q.get(x - 1, 0))).fold(0.0f32, f32::max);
                 let r = g(&p) / g(&re);
                 raw_sum += ZS_SIGMA0 / (r * r - 1.0).max(1e-6).sqrt();
             }
@@ -282,8 +363,7 @@ const ZS_SIGMA0: f32 = 3.0;
 fn erf(x: f32) -> f32 {
     let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
     let y = 1.0
-        - (((((1.061_405_4 * t - 1.453_152_1) * t) + 1.421_413_8) * t - 0.284_496_74) * t
-            + 0.254_829_6)
+        - (((((1.061_405_4 * t - 1.453_152_1) * t) + 1.421_413_8) * t - 0.284_496_74) * t + 0.254_829_6)
             * t
             * (-x * x).exp();
     y.copysign(x)
@@ -316,10 +396,7 @@ pub fn fit_fast(
     let re = blur_separable(&y, &discrete_gaussian_kernel(ZS_SIGMA0 * ZS_SIGMA0));
     let (w, h) = (y.width, y.height);
     let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {
-        (
-            0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy)),
-            0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1)),
-        )
+        (0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy)), 0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1)))
     };
     let (mut zs, mut sig) = (vec![], vec![]);
     for py in 2..h.saturating_sub(2) {

@@ -43,11 +43,7 @@ pub struct Effects {
 }
 
 impl Effects {
-    pub const ALL: Effects = Effects {
-        noise: true,
-        motion_blur: true,
-        depth_of_field: true,
-    };
+    pub const ALL: Effects = Effects { noise: true, motion_blur: true, depth_of_field: true };
 }
 
 /// Everything an estimator may use. References are per effect (paper Tab. 1).
@@ -73,6 +69,11 @@ pub struct FitOptions {
     pub dof_node_spacing_px: f32,
     /// Upper end of the per-pixel σ search, px (paper: 10).
     pub dof_max_sigma_px: f32,
+    /// Continue the DoF stack at half resolution from this σ (and quarter from twice
+    /// it); `None`: full resolution throughout (slower, exact). See BENCHMARKS.md.
+    pub dof_pyramid_from_px: Option<f32>,
+    /// Most pixels the accurate exposure fit integrates (evenly thinned).
+    pub mb_max_samples: usize,
 }
 
 impl Default for FitOptions {
@@ -83,6 +84,8 @@ impl Default for FitOptions {
             noise_stride_px: noise::DEFAULT_STRIDE_PX,
             dof_node_spacing_px: dof::DEFAULT_NODE_SPACING_PX,
             dof_max_sigma_px: crate::model::MAX_DOF_SIGMA_PX,
+            dof_pyramid_from_px: dof::DEFAULT_PYRAMID_FROM_PX,
+            mb_max_samples: motion_blur::DEFAULT_MAX_SAMPLES,
         }
     }
 }
@@ -93,33 +96,15 @@ pub enum FitError {
     #[error("input `{input}` is empty (0×0)")]
     Empty { input: &'static str },
     #[error("input `{input}` is {got_w}×{got_h} but the image is {want_w}×{want_h}")]
-    SizeMismatch {
-        input: &'static str,
-        want_w: usize,
-        want_h: usize,
-        got_w: usize,
-        got_h: usize,
-    },
+    SizeMismatch { input: &'static str, want_w: usize, want_h: usize, got_w: usize, got_h: usize },
     #[error("input `{input}` has a non-finite value ({value}) at x={x}, y={y}, channel {channel}")]
-    NonFinite {
-        input: &'static str,
-        x: usize,
-        y: usize,
-        channel: usize,
-        value: f32,
-    },
+    NonFinite { input: &'static str, x: usize, y: usize, channel: usize, value: f32 },
     #[error("the accurate tier for {effect} needs `{input}`, which was not given")]
-    MissingReference {
-        effect: &'static str,
-        input: &'static str,
-    },
+    MissingReference { effect: &'static str, input: &'static str },
     #[error("no frames to aggregate")]
     NoFrames,
     #[error("invalid option `{option}`: {problem}")]
-    Option {
-        option: &'static str,
-        problem: String,
-    },
+    Option { option: &'static str, problem: String },
 }
 
 /// Data behind the plots (`--plots`).
@@ -138,23 +123,11 @@ pub struct FitOutput {
 
 fn check_rgb(input: &'static str, img: &Rgb, w: usize, h: usize) -> Result<(), FitError> {
     if img.width != w || img.height != h {
-        return Err(FitError::SizeMismatch {
-            input,
-            want_w: w,
-            want_h: h,
-            got_w: img.width,
-            got_h: img.height,
-        });
+        return Err(FitError::SizeMismatch { input, want_w: w, want_h: h, got_w: img.width, got_h: img.height });
     }
     if let Some((x, y, c)) = img.first_non_finite() {
         let value = img.channels[c][y * w + x];
-        return Err(FitError::NonFinite {
-            input,
-            x,
-            y,
-            channel: c,
-            value,
-        });
+        return Err(FitError::NonFinite { input, x, y, channel: c, value });
     }
     Ok(())
 }
@@ -200,13 +173,7 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
         for (i, (&dx, &dy)) in f.dx.iter().zip(&f.dy).enumerate() {
             for (channel, value) in [(0, dx), (1, dy)] {
                 if !value.is_finite() {
-                    return Err(FitError::NonFinite {
-                        input: "flow",
-                        x: i % w,
-                        y: i / w,
-                        channel,
-                        value,
-                    });
+                    return Err(FitError::NonFinite { input: "flow", x: i % w, y: i / w, channel, value });
                 }
             }
         }
@@ -220,18 +187,25 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     if !(opts.dof_max_sigma_px > 0.0 && opts.dof_max_sigma_px <= crate::model::MAX_DOF_SIGMA_PX) {
         return Err(FitError::Option {
             option: "dof_max_sigma_px",
-            problem: format!(
-                "must be in (0, {}], got {}",
-                crate::model::MAX_DOF_SIGMA_PX,
-                opts.dof_max_sigma_px
-            ),
+            problem: format!("must be in (0, {}], got {}", crate::model::MAX_DOF_SIGMA_PX, opts.dof_max_sigma_px),
+        });
+    }
+    if let Some(h) = opts.dof_pyramid_from_px {
+        if !(h.is_finite() && h >= 2.0) {
+            return Err(FitError::Option {
+                option: "dof_pyramid_from_px",
+                problem: format!("must be ≥ 2 px, got {h}"),
+            });
+        }
+    }
+    if opts.mb_max_samples < 64 {
+        return Err(FitError::Option {
+            option: "mb_max_samples",
+            problem: format!("must be ≥ 64, got {}", opts.mb_max_samples),
         });
     }
     if opts.noise_stride_px == 0 {
-        return Err(FitError::Option {
-            option: "noise_stride_px",
-            problem: "must be ≥ 1".into(),
-        });
+        return Err(FitError::Option { option: "noise_stride_px", problem: "must be ≥ 1".into() });
     }
     Ok(())
 }
@@ -264,22 +238,48 @@ fn not_identifiable(method: &str, reason: impl Into<String>, started: Instant) -
     }
 }
 
+/// Last guard before anything is written or uploaded: an effect whose fit is not a
+/// valid model (e.g. a line through a handful of samples that predicts a std above 1
+/// somewhere in range) is reported not identifiable, with the validation message,
+/// instead of being passed on or failing the whole fit.
+fn sanitize(model: &mut CameraModel) {
+    let (w, h) = (model.reference.width, model.reference.height);
+    let reset = |effect: &str, e: crate::model::ModelError, old: &Diagnostics| {
+        let mut d = old.clone();
+        d.status = crate::model::Status::NotIdentifiable;
+        d.reason = format!("fit rejected ({e}); the data do not support a {effect} model");
+        d
+    };
+    let mut probe = CameraModel::empty(w.max(1), h.max(1));
+    probe.noise = model.noise.clone();
+    if let Err(e) = probe.validate() {
+        model.noise = Noise::absent(reset("noise", e, &model.noise.diagnostics));
+    }
+    let mut probe = CameraModel::empty(w.max(1), h.max(1));
+    probe.motion_blur = model.motion_blur.clone();
+    if let Err(e) = probe.validate() {
+        model.motion_blur = MotionBlur::absent(reset("motion-blur", e, &model.motion_blur.diagnostics));
+    }
+    let mut probe = CameraModel::empty(w.max(1), h.max(1));
+    probe.depth_of_field = model.depth_of_field.clone();
+    if let Err(e) = probe.validate() {
+        let units = model.depth_of_field.units;
+        model.depth_of_field =
+            DepthOfField::absent(units, reset("depth-of-field", e, &model.depth_of_field.diagnostics));
+    }
+}
+
 /// Fit the camera model of one frame.
 pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     check_inputs(inp, opts)?;
     let (w, h) = (inp.image.width, inp.image.height);
-    let mut model = CameraModel {
-        schema: SCHEMA.to_string(),
-        ..CameraModel::empty(w as u32, h as u32)
-    };
+    let mut model = CameraModel { schema: SCHEMA.to_string(), ..CameraModel::empty(w as u32, h as u32) };
     model.depth_of_field.units = inp.depth_units;
     let mut plots = PlotData::default();
 
     if opts.effects.noise {
         let (noise, data) = match tier_for(opts, inp.denoised, "noise", "denoised")? {
-            Tier::Accurate => {
-                noise::fit_accurate(inp.image, inp.denoised.unwrap_or(inp.image), opts)
-            }
+            Tier::Accurate => noise::fit_accurate(inp.image, inp.denoised.unwrap_or(inp.image), opts),
             Tier::Fast => noise::fit_fast(inp.image, opts),
         };
         model.noise = noise;
@@ -290,17 +290,8 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
 
     if opts.effects.motion_blur {
         let started = Instant::now();
-        let tier = tier_for(
-            opts,
-            inp.motion_deblurred,
-            "motion blur",
-            "motion-deblurred",
-        )?;
-        let method = if tier == Tier::Accurate {
-            "accurate"
-        } else {
-            "fast"
-        };
+        let tier = tier_for(opts, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
+        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
         match inp.flow {
             None => {
                 model.motion_blur = MotionBlur::absent(not_identifiable(
@@ -312,7 +303,7 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
             Some(flow) => {
                 let (mb, data) = match (tier, inp.motion_deblurred) {
                     (Tier::Accurate, Some(sharp)) => {
-                        motion_blur::fit_accurate(inp.image, sharp, flow)
+                        motion_blur::fit_accurate(inp.image, sharp, flow, opts.mb_max_samples)
                     }
                     _ => motion_blur::fit_fast(inp.image, flow),
                 };
@@ -326,17 +317,8 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
 
     if opts.effects.depth_of_field {
         let started = Instant::now();
-        let tier = tier_for(
-            opts,
-            inp.defocus_deblurred,
-            "depth of field",
-            "defocus-deblurred",
-        )?;
-        let method = if tier == Tier::Accurate {
-            "accurate"
-        } else {
-            "fast"
-        };
+        let tier = tier_for(opts, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
+        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
         match inp.depth {
             None => {
                 model.depth_of_field = DepthOfField::absent(
@@ -346,9 +328,7 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
             }
             Some(depth) => {
                 let (dof, data) = match (tier, inp.defocus_deblurred) {
-                    (Tier::Accurate, Some(sharp)) => {
-                        dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts)
-                    }
+                    (Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
                     _ => dof::fit_fast(inp.image, depth, inp.depth_units, opts),
                 };
                 model.depth_of_field = dof;
@@ -356,20 +336,9 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
             }
         }
     } else {
-        model.depth_of_field = DepthOfField::absent(
-            inp.depth_units,
-            Diagnostics::not_fitted("not requested (--only)"),
-        );
+        model.depth_of_field = DepthOfField::absent(inp.depth_units, Diagnostics::not_fitted("not requested (--only)"));
     }
 
-    // Estimators only produce finite, in-range values; this is the last guard
-    // before anything is written or uploaded.
-    if let Err(e) = model.validate() {
-        log::error!("fitted model failed validation ({e}); effects reset to absent");
-        return Err(FitError::Option {
-            option: "model",
-            problem: e.to_string(),
-        });
-    }
+    sanitize(&mut model);
     Ok(FitOutput { model, plots })
 }

@@ -33,12 +33,14 @@ use crate::model::{Diagnostics, Noise, NoiseForm, NoiseLevel, Status, NOISE_LEVE
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Sample stride at level 0. The paper's 32 leaves (512/32)² = 256 samples per
-/// level at 512²; with ~60 effective samples per 9×9 window each variance sample has
-/// ~18% error, giving ~1% error on the fitted std. 8 px (4096 samples) brings that
-/// to ~0.3% for a negligible cost (see BENCHMARKS.md).
-pub const DEFAULT_STRIDE_PX: usize = 8;
+/// Sample stride at level 0, halved per level. Measured at 512² (BENCHMARKS.md):
+/// the paper's 32 gives a 0.44% median but 1.7% worst-luma error of synth's std;
+/// 16 keeps the worst case at 0.55% for 2.5 ms more; 8 and 4 buy nothing further.
+pub const DEFAULT_STRIDE_PX: usize = 16;
 const BLIND_FLAT_FRACTION: f64 = 0.2;
+/// The blind tier's level-0 grid: only 20% of its samples are kept (the flattest),
+/// so it samples 4× denser than the accurate tier.
+const BLIND_STRIDE_PX: usize = 4;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
 
@@ -130,17 +132,10 @@ fn collect_samples(
             // reduce chain and one expand, ~5 px per level-l pixel) plus the window's
             // 2σ radius, which is 8 level-0 px at every level (σ halves as pixels double).
             let radius = 5 * scale + 8;
-            let mut out = LevelSamples {
-                y: vec![],
-                y2: vec![],
-                var: [vec![], vec![], vec![]],
-            };
+            let mut out = LevelSamples { y: vec![], y2: vec![], var: [vec![], vec![], vec![]] };
             for y in grid(band0.height, stride) {
                 for x in grid(band0.width, stride) {
-                    let (x0, y0) = (
-                        (x * scale).min(clip.width() - 1),
-                        (y * scale).min(clip.height() - 1),
-                    );
+                    let (x0, y0) = ((x * scale).min(clip.width() - 1), (y * scale).min(clip.height() - 1));
                     if clip.box_sum(x0, y0, radius) > 0.0 {
                         continue;
                     }
@@ -176,22 +171,17 @@ fn ols(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64, [[f6
         syv += w * yi * vi;
     }
     let det = sw * syy - sy * sy;
-    let (a, b) = if det.abs() > 1e-12 * sw * sw {
+    // Fewer than 4 points, or all at one luma: a constant is all the data can say.
+    let (a, b) = if n >= 4 && det.abs() > 1e-12 * sw * sw {
         let b = (sw * syv - sy * sv) / det;
         ((sv - b * sy) / sw, b)
     } else {
-        // All samples at one luma: a constant is all the data can say.
         (sv / sw, 0.0)
     };
-    let ssr: f64 = (0..n)
-        .map(|i| wts.map_or(1.0, |w| w[i] as f64) * (v[i] as f64 - a - b * y[i] as f64).powi(2))
-        .sum();
+    let ssr: f64 = (0..n).map(|i| wts.map_or(1.0, |w| w[i] as f64) * (v[i] as f64 - a - b * y[i] as f64).powi(2)).sum();
     let s2 = ssr / (n as f64 - 2.0).max(1.0) / (sw / n as f64);
-    let cov = if det.abs() > 1e-12 * sw * sw {
-        [
-            [s2 * syy / det, -s2 * sy / det],
-            [-s2 * sy / det, s2 * sw / det],
-        ]
+    let cov = if n >= 4 && det.abs() > 1e-12 * sw * sw {
+        [[s2 * syy / det, -s2 * sy / det], [-s2 * sy / det, s2 * sw / det]]
     } else {
         [[s2 / sw, 0.0], [0.0, 0.0]]
     };
@@ -201,12 +191,7 @@ fn ols(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64, [[f6
 /// Gauss–Newton for v ≈ B((a + b·Y)²) = a² + 2ab·m1 + b²·m2 (m1 = B(Y),
 /// m2 = B(Y²): the window pools the squared std, so this is exact where
 /// (a + b·B(Y))² would be biased up by b²·Var_B(Y)). Started from OLS of √v on m1.
-fn fit_linear_std(
-    m1: &[f32],
-    m2: &[f32],
-    v: &[f32],
-    wts: Option<&[f32]>,
-) -> Option<(f64, f64, f64)> {
+fn fit_linear_std(m1: &[f32], m2: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64)> {
     let sq: Vec<f32> = v.iter().map(|&x| x.max(0.0).sqrt()).collect();
     let (mut a, mut b, _, _) = ols(m1, &sq, wts)?;
     let w = |i: usize| wts.map_or(1.0, |w| w[i] as f64);
@@ -215,10 +200,7 @@ fn fit_linear_std(
         let (mut jtj, mut jtr) = ([[0.0f64; 2]; 2], [0.0f64; 2]);
         for i in 0..v.len() {
             let r = v[i] as f64 - pred(a, b, i);
-            let j = [
-                2.0 * a + 2.0 * b * m1[i] as f64,
-                2.0 * a * m1[i] as f64 + 2.0 * b * m2[i] as f64,
-            ];
+            let j = [2.0 * a + 2.0 * b * m1[i] as f64, 2.0 * a * m1[i] as f64 + 2.0 * b * m2[i] as f64];
             for p in 0..2 {
                 jtr[p] += w(i) * j[p] * r;
                 for q in 0..2 {
@@ -238,9 +220,7 @@ fn fit_linear_std(
             break;
         }
     }
-    let ssr = (0..v.len())
-        .map(|i| w(i) * (v[i] as f64 - pred(a, b, i)).powi(2))
-        .sum();
+    let ssr = (0..v.len()).map(|i| w(i) * (v[i] as f64 - pred(a, b, i)).powi(2)).sum();
     (a.is_finite() && b.is_finite()).then_some((a, b, ssr))
 }
 
@@ -250,10 +230,7 @@ fn fit_linear_std(
 /// maximum so a line through zero cannot produce infinite weights.
 fn precision_weights(pred: &[f64], base: Option<&[f32]>) -> Vec<f32> {
     let floor = pred.iter().cloned().fold(0.0f64, f64::max) * 1e-3 + 1e-30;
-    pred.iter()
-        .enumerate()
-        .map(|(i, &p)| (base.map_or(1.0, |b| b[i] as f64) / p.max(floor).powi(2)) as f32)
-        .collect()
+    pred.iter().enumerate().map(|(i, &p)| (base.map_or(1.0, |b| b[i] as f64) / p.max(floor).powi(2)) as f32).collect()
 }
 
 /// −2·log-likelihood (up to a constant) of variance samples `v` under predictions
@@ -296,9 +273,7 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
             nll_aff += neg2_log_likelihood(v, &pred_aff);
             // Linear std: v ≈ (a + b·y)².
             let lin_pred = |a: f64, b: f64| -> Vec<f64> {
-                (0..y.len())
-                    .map(|i| a * a + 2.0 * a * b * y[i] as f64 + b * b * y2[i] as f64)
-                    .collect()
+                (0..y.len()).map(|i| a * a + 2.0 * a * b * y[i] as f64 + b * b * y2[i] as f64).collect()
             };
             let (mut la, mut lb, _) = fit_linear_std(y, y2, v, wts.as_deref())?;
             for _ in 0..3 {
@@ -310,22 +285,12 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
             // Keep std non-negative at the reference point: (a + b·y)² is symmetric
             // in sign, so flip to the branch with a positive std.
             let ym = y.iter().sum::<f32>() / y.len().max(1) as f32;
-            let (la, lb) = if la + lb * ym as f64 >= 0.0 {
-                (la, lb)
-            } else {
-                (-la, -lb)
-            };
+            let (la, lb) = if la + lb * ym as f64 >= 0.0 { (la, lb) } else { (-la, -lb) };
             linear[l].intercept[c] = la as f32;
             linear[l].slope[c] = lb as f32;
             let rel = |pred: &[f64]| {
-                v.iter()
-                    .zip(pred)
-                    .map(|(&vi, &p)| (vi as f64 - p).powi(2))
-                    .sum::<f64>()
-                    / v.iter()
-                        .map(|&vi| (vi as f64).powi(2))
-                        .sum::<f64>()
-                        .max(1e-300)
+                v.iter().zip(pred).map(|(&vi, &p)| (vi as f64 - p).powi(2)).sum::<f64>()
+                    / v.iter().map(|&vi| (vi as f64).powi(2)).sum::<f64>().max(1e-300)
             };
             rel_aff += rel(&pred_aff);
             rel_lin += rel(&pred_lin);
@@ -410,11 +375,7 @@ fn finish(
         d.samples_used = n_used as u64;
         return Noise::absent(d);
     };
-    let lowpass = if with_lowpass && levels.len() > NOISE_LEVELS {
-        Some(levels[NOISE_LEVELS])
-    } else {
-        None
-    };
+    let lowpass = if with_lowpass && levels.len() > NOISE_LEVELS { Some(levels[NOISE_LEVELS]) } else { None };
     levels.truncate(NOISE_LEVELS);
     let noise = Noise {
         present: false,
@@ -431,31 +392,15 @@ fn finish(
     let mut std_mid = 0.0;
     for c in 0..3 {
         let cov = covs[0][c];
-        let var_se = (cov[0][0] + 2.0 * ym * cov[0][1] + ym * ym * cov[1][1])
-            .max(0.0)
-            .sqrt();
+        let var_se = (cov[0][0] + 2.0 * ym * cov[0][1] + ym * ym * cov[1][1]).max(0.0).sqrt();
         let s = noise.levels[0].std(form, c, ym as f32) as f64;
         std_mid += s / 3.0;
-        rel += if s > 0.0 {
-            var_se / (2.0 * s * s) / 3.0
-        } else {
-            f64::INFINITY
-        };
+        rel += if s > 0.0 { var_se / (2.0 * s * s) / 3.0 } else { f64::INFINITY };
     }
-    let before: f64 = samples[0]
-        .var
-        .iter()
-        .flatten()
-        .map(|&v| (v as f64).powi(2))
-        .sum::<f64>()
+    let before: f64 = samples[0].var.iter().flatten().map(|&v| (v as f64).powi(2)).sum::<f64>()
         / (3 * samples[0].y.len()).max(1) as f64;
-    let present =
-        std_mid > 1e-4 && rel.is_finite() && std_mid * (1.0 - 3.0 * rel) > 0.0 && rel < 1.0 / 3.0;
-    let status = if present {
-        Status::Present
-    } else {
-        Status::Absent
-    };
+    let present = std_mid > 1e-4 && rel.is_finite() && std_mid * (1.0 - 3.0 * rel) > 0.0 && rel < 1.0 / 3.0;
+    let status = if present { Status::Present } else { Status::Absent };
     let reason = if present {
         format!(
             "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood); \
@@ -486,12 +431,7 @@ fn plot_data(points: &[LevelPoints]) -> NoisePlotData {
         levels: points
             .iter()
             .map(|p| {
-                let s = |c: usize| {
-                    p.var[c]
-                        .iter()
-                        .map(|x| x.max(0.0).sqrt())
-                        .collect::<Vec<_>>()
-                };
+                let s = |c: usize| p.var[c].iter().map(|x| x.max(0.0).sqrt()).collect::<Vec<_>>();
                 (p.y.clone(), [s(0), s(1), s(2)])
             })
             .collect(),
@@ -506,28 +446,17 @@ fn luma_range(samples: &LevelSamples) -> [f32; 2] {
     // 1st–99th percentile: the luma range the samples actually constrain.
     let lo = percentile(&mut y, 0.01);
     let hi = percentile(&mut y, 0.99);
-    [
-        lo.clamp(0.0, 1.0),
-        hi.clamp(0.0, 1.0).max(lo.clamp(0.0, 1.0)),
-    ]
+    [lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0).max(lo.clamp(0.0, 1.0))]
 }
 
 /// Accurate tier: I and I_noNoise.
-pub fn fit_accurate(
-    image: &Rgb,
-    denoised: &Rgb,
-    opts: &super::FitOptions,
-) -> (Noise, NoisePlotData) {
+pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let residual = Rgb {
         width: image.width,
         height: image.height,
         channels: std::array::from_fn(|c| {
-            image.channels[c]
-                .iter()
-                .zip(&denoised.channels[c])
-                .map(|(a, b)| a - b)
-                .collect()
+            image.channels[c].iter().zip(&denoised.channels[c]).map(|(a, b)| a - b).collect()
         }),
     };
     let bands = pyramids(&residual);
@@ -535,31 +464,15 @@ pub fn fit_accurate(
     let samples = collect_samples(&bands, &luma, &clip_mask(image), opts.noise_stride_px);
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).
-    let usable = if samples[NOISE_LEVELS].y.is_empty() {
-        NOISE_LEVELS
-    } else {
-        NOISE_LEVELS + 1
-    };
+    let usable = if samples[NOISE_LEVELS].y.is_empty() { NOISE_LEVELS } else { NOISE_LEVELS + 1 };
     let points: Vec<LevelPoints> = samples
         .iter()
         .take(usable)
-        .map(|s| LevelPoints {
-            y: s.y.clone(),
-            y2: s.y2.clone(),
-            var: s.var.clone(),
-            weights: None,
-        })
+        .map(|s| LevelPoints { y: s.y.clone(), y2: s.y2.clone(), var: s.var.clone(), weights: None })
         .collect();
-    let fitted = if points.iter().all(|p| !p.y.is_empty()) {
-        fit_levels(&points)
-    } else {
-        None
-    };
+    let fitted = if points.iter().all(|p| !p.y.is_empty()) { fit_levels(&points) } else { None };
     let range = luma_range(&samples[0]);
-    (
-        finish("accurate", started, fitted, &samples, range, true),
-        plot_data(&points),
-    )
+    (finish("accurate", started, fitted, &samples, range, true), plot_data(&points))
 }
 
 /// Median / mean of level-0 local variances (9×9, σ = 4 window) of white noise:
@@ -574,12 +487,8 @@ fn white_noise_median_to_mean() -> f32 {
         let mut sum = 0.0f64;
         let win = window(0);
         for c in 0..3u32 {
-            let data = (0..n * n)
-                .map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c, 0xb1d))
-                .collect();
-            let band = laplacian_pyramid(&Plane::from_vec(n, n, data), 1)
-                .bands
-                .swap_remove(0);
+            let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c, 0xb1d)).collect();
+            let band = laplacian_pyramid(&Plane::from_vec(n, n, data), 1).bands.swap_remove(0);
             for y in grid(n, 4) {
                 for x in grid(n, 4) {
                     let m = local_mean_sq(&band, x, y, &win);
@@ -611,7 +520,8 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
     let gp = gaussian_pyramid(&image.luma(), 1);
     let luma0 = crate::image::expand(&gp[1], gp[0].width, gp[0].height);
     let luma: Vec<Plane> = vec![luma0; NOISE_LEVELS + 1];
-    let stride0 = (opts.noise_stride_px / 2).max(1);
+    let _ = opts;
+    let stride0 = BLIND_STRIDE_PX;
     let clip = clip_mask(image);
     let win0 = window(0);
     let win2 = window(2);
@@ -623,30 +533,16 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
             if clip.box_sum(x, y, 5 * 4 + 8) > 0.0 {
                 continue;
             }
-            let structure = local_mean_sq(
-                band2,
-                (x / 4).min(band2.width - 1),
-                (y / 4).min(band2.height - 1),
-                &win2,
-            );
+            let structure = local_mean_sq(band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
             let v = std::array::from_fn(|c| local_mean_sq(&bands[c][0], x, y, &win0));
-            pts.push((
-                local_mean(&luma[0], x, y, &win0),
-                local_mean_sq(&luma[0], x, y, &win0),
-                structure,
-                v,
-            ));
+            pts.push((local_mean(&luma[0], x, y, &win0), local_mean_sq(&luma[0], x, y, &win0), structure, v));
         }
     }
     let median_to_mean = white_noise_median_to_mean();
     let (mut ys, mut y2s, mut vs, mut ws) = (vec![], vec![], [vec![], vec![], vec![]], vec![]);
     for b in 0..BLIND_BINS {
-        let (lo, hi) = (
-            b as f32 / BLIND_BINS as f32,
-            (b + 1) as f32 / BLIND_BINS as f32,
-        );
-        let mut bin: Vec<&(f32, f32, f32, [f32; 3])> =
-            pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
+        let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
+        let mut bin: Vec<&(f32, f32, f32, [f32; 3])> = pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
         if bin.len() < BLIND_MIN_PER_BIN {
             continue;
         }
@@ -673,53 +569,27 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
             break;
         }
         let keep: Vec<bool> = (0..ys.len())
-            .map(|i| {
-                (0..3).all(|c| {
-                    vs[c][i] as f64 <= 1.3 * (lines[c].0 + lines[c].1 * ys[i] as f64).max(1e-12)
-                })
-            })
+            .map(|i| (0..3).all(|c| vs[c][i] as f64 <= 1.3 * (lines[c].0 + lines[c].1 * ys[i] as f64).max(1e-12)))
             .collect();
         if keep.iter().all(|&k| k) || keep.iter().filter(|&&k| k).count() < 3 {
             break;
         }
-        let filt = |v: &Vec<f32>| {
-            v.iter()
-                .zip(&keep)
-                .filter(|(_, &k)| k)
-                .map(|(x, _)| *x)
-                .collect::<Vec<f32>>()
-        };
+        let filt = |v: &Vec<f32>| v.iter().zip(&keep).filter(|(_, &k)| k).map(|(x, _)| *x).collect::<Vec<f32>>();
         ys = filt(&ys);
         y2s = filt(&y2s);
         ws = filt(&ws);
         vs = [filt(&vs[0]), filt(&vs[1]), filt(&vs[2])];
     }
     let samples_used = ws.iter().sum::<f32>() as usize;
-    let points = vec![LevelPoints {
-        y: ys,
-        y2: y2s,
-        var: vs,
-        weights: Some(ws),
-    }];
-    let fitted = if points[0].y.is_empty() {
-        None
-    } else {
-        fit_levels(&points)
-    };
+    let points = vec![LevelPoints { y: ys, y2: y2s, var: vs, weights: Some(ws) }];
+    let fitted = if points[0].y.is_empty() { None } else { fit_levels(&points) };
     let fitted = fitted.map(|(form, lv, covs, rel)| {
         let unit = crate::synth::unit_band_std();
         let levels = (0..NOISE_LEVELS)
             .map(|l| {
                 let r = unit[l] / unit[0];
-                let k = if form == NoiseForm::LinearStd {
-                    r
-                } else {
-                    r * r
-                };
-                NoiseLevel {
-                    slope: lv[0].slope.map(|v| v * k),
-                    intercept: lv[0].intercept.map(|v| v * k),
-                }
+                let k = if form == NoiseForm::LinearStd { r } else { r * r };
+                NoiseLevel { slope: lv[0].slope.map(|v| v * k), intercept: lv[0].intercept.map(|v| v * k) }
             })
             .collect();
         (form, levels, covs, rel)
@@ -732,11 +602,7 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
         let hi = y.iter().cloned().fold(0.0f32, f32::max);
         [lo, hi.max(lo)]
     };
-    let level0 = LevelSamples {
-        y: y.clone(),
-        y2: points[0].y2.clone(),
-        var: points[0].var.clone(),
-    };
+    let level0 = LevelSamples { y: y.clone(), y2: points[0].y2.clone(), var: points[0].var.clone() };
     let mut noise = finish("fast", started, fitted, &[level0], range, false);
     noise.diagnostics.samples_used = samples_used as u64;
     (noise, plot_data(&points))

@@ -21,20 +21,12 @@ pub struct Plane {
 
 impl Plane {
     pub fn new(width: usize, height: usize, fill: f32) -> Self {
-        Self {
-            width,
-            height,
-            data: vec![fill; width * height],
-        }
+        Self { width, height, data: vec![fill; width * height] }
     }
 
     pub fn from_vec(width: usize, height: usize, data: Vec<f32>) -> Self {
         debug_assert_eq!(data.len(), width * height);
-        Self {
-            width,
-            height,
-            data,
-        }
+        Self { width, height, data }
     }
 
     #[inline]
@@ -84,11 +76,7 @@ pub const LUMA_WEIGHTS: [f32; 3] = [0.299, 0.587, 0.114];
 impl Rgb {
     pub fn new(width: usize, height: usize, fill: [f32; 3]) -> Self {
         let n = width * height;
-        Self {
-            width,
-            height,
-            channels: [vec![fill[0]; n], vec![fill[1]; n], vec![fill[2]; n]],
-        }
+        Self { width, height, channels: [vec![fill[0]; n], vec![fill[1]; n], vec![fill[2]; n]] }
     }
 
     pub fn len(&self) -> usize {
@@ -105,11 +93,7 @@ impl Rgb {
 
     pub fn from_planes(planes: [Plane; 3]) -> Self {
         let [r, g, b] = planes;
-        Self {
-            width: r.width,
-            height: r.height,
-            channels: [r.data, g.data, b.data],
-        }
+        Self { width: r.width, height: r.height, channels: [r.data, g.data, b.data] }
     }
 
     /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
@@ -140,11 +124,7 @@ impl Rgb {
         Rgb {
             width: self.width,
             height: self.height,
-            channels: [
-                ch(&self.channels[0]),
-                ch(&self.channels[1]),
-                ch(&self.channels[2]),
-            ],
+            channels: [ch(&self.channels[0]), ch(&self.channels[1]), ch(&self.channels[2])],
         }
     }
 }
@@ -160,12 +140,7 @@ pub struct Flow {
 
 impl Flow {
     pub fn uniform(width: usize, height: usize, dx: f32, dy: f32) -> Self {
-        Self {
-            width,
-            height,
-            dx: vec![dx; width * height],
-            dy: vec![dy; width * height],
-        }
+        Self { width, height, dx: vec![dx; width * height], dy: vec![dy; width * height] }
     }
 }
 
@@ -201,11 +176,7 @@ impl IntegralImage {
                 sums[(y + 1) * (w + 1) + x + 1] = sums[y * (w + 1) + x + 1] + row;
             }
         }
-        Self {
-            width: w,
-            height: h,
-            sums,
-        }
+        Self { width: w, height: h, sums }
     }
 
     pub fn width(&self) -> usize {
@@ -223,7 +194,6 @@ impl IntegralImage {
         let x1 = (x + r + 1).min(self.width);
         let y1 = (y + r + 1).min(self.height);
         let w = self.width + 1;
-        self.sums[y1 * w + x1] - self.sums[y0 * w + x1] - self.sums[y1 * w + x0]
-            + self.sums[y0 * w + x0]
+        self.sums[y1 * w + x1] - self.sums[y0 * w + x1] - self.sums[y1 * w + x0] + self.sums[y0 * w + x0]
     }
 }

@@ -116,10 +116,7 @@ pub fn laplacian_pyramid(p: &Plane, levels: usize) -> LaplacianPyramid {
         bands.push(cur);
         cur = down;
     }
-    LaplacianPyramid {
-        bands,
-        lowpass: cur,
-    }
+    LaplacianPyramid { bands, lowpass: cur }
 }
 
 impl LaplacianPyramid {

@@ -191,10 +191,7 @@ impl Diagnostics {
 }
 
 impl NoiseLevel {
-    pub const ZERO: NoiseLevel = NoiseLevel {
-        slope: [0.0; 3],
-        intercept: [0.0; 3],
-    };
+    pub const ZERO: NoiseLevel = NoiseLevel { slope: [0.0; 3], intercept: [0.0; 3] };
 
     /// Noise std of channel `c` at luma `y` (already clamped), never negative.
     #[inline]
@@ -245,23 +242,16 @@ impl DofCurve {
 
 impl DepthOfField {
     pub fn absent(units: DepthUnits, diagnostics: Diagnostics) -> Self {
-        Self {
-            present: false,
-            units,
-            curve: None,
-            depth_range: [0.0, 0.0],
-            diagnostics,
-        }
+        Self { present: false, units, curve: None, depth_range: [0.0, 0.0], diagnostics }
     }
 
     /// δ(Z) in reference pixels; 0 for absent effects and invalid depth. Z is clamped
     /// to the fitted range first.
     pub fn sigma_px(&self, z: f32) -> f32 {
         match (&self.curve, self.present) {
-            (Some(curve), true) if z.is_finite() => curve.sigma_px(
-                self.units,
-                z.clamp(self.depth_range[0], self.depth_range[1]),
-            ),
+            (Some(curve), true) if z.is_finite() => {
+                curve.sigma_px(self.units, z.clamp(self.depth_range[0], self.depth_range[1]))
+            }
             _ => 0.0,
         }
     }
@@ -269,11 +259,7 @@ impl DepthOfField {
 
 impl MotionBlur {
     pub fn absent(diagnostics: Diagnostics) -> Self {
-        Self {
-            present: false,
-            exposure: None,
-            diagnostics,
-        }
+        Self { present: false, exposure: None, diagnostics }
     }
 
     /// λ the renderer should use: 0 when absent or unknown.
@@ -291,25 +277,16 @@ impl CameraModel {
     pub fn empty(width: u32, height: u32) -> Self {
         Self {
             schema: SCHEMA.to_string(),
-            reference: Reference {
-                width,
-                height,
-                pixels_per_radian: None,
-                frame_interval_s: None,
-            },
+            reference: Reference { width, height, pixels_per_radian: None, frame_interval_s: None },
             noise: Noise::absent(Diagnostics::not_fitted("not fitted")),
             motion_blur: MotionBlur::absent(Diagnostics::not_fitted("not fitted")),
-            depth_of_field: DepthOfField::absent(
-                DepthUnits::MetricM,
-                Diagnostics::not_fitted("not fitted"),
-            ),
+            depth_of_field: DepthOfField::absent(DepthUnits::MetricM, Diagnostics::not_fitted("not fitted")),
         }
     }
 
     /// Parse and validate a JSON document.
     pub fn from_json(text: &str) -> Result<Self, ModelError> {
-        let model: CameraModel =
-            serde_json::from_str(text).map_err(|e| ModelError::Parse(e.to_string()))?;
+        let model: CameraModel = serde_json::from_str(text).map_err(|e| ModelError::Parse(e.to_string()))?;
         model.validate()?;
         Ok(model)
     }

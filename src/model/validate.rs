@@ -12,10 +12,7 @@ pub enum ModelError {
 }
 
 fn bad(field: impl Into<String>, problem: impl Into<String>) -> ModelError {
-    ModelError::Field {
-        field: field.into(),
-        problem: problem.into(),
-    }
+    ModelError::Field { field: field.into(), problem: problem.into() }
 }
 
 fn finite(field: &str, v: f32) -> Result<(), ModelError> {
@@ -34,20 +31,11 @@ fn finite_opt(field: &str, v: Option<f64>) -> Result<(), ModelError> {
 }
 
 fn check_diagnostics(prefix: &str, d: &Diagnostics) -> Result<(), ModelError> {
-    finite_opt(
-        &format!("{prefix}.diagnostics.residual_before"),
-        d.residual_before,
-    )?;
-    finite_opt(
-        &format!("{prefix}.diagnostics.residual_after"),
-        d.residual_after,
-    )?;
+    finite_opt(&format!("{prefix}.diagnostics.residual_before"), d.residual_before)?;
+    finite_opt(&format!("{prefix}.diagnostics.residual_after"), d.residual_after)?;
     finite_opt(&format!("{prefix}.diagnostics.stderr"), d.stderr)?;
     if !d.fit_time_s.is_finite() || d.fit_time_s < 0.0 {
-        return Err(bad(
-            format!("{prefix}.diagnostics.fit_time_s"),
-            "must be finite and ≥ 0",
-        ));
+        return Err(bad(format!("{prefix}.diagnostics.fit_time_s"), "must be finite and ≥ 0"));
     }
     Ok(())
 }
@@ -55,10 +43,7 @@ fn check_diagnostics(prefix: &str, d: &Diagnostics) -> Result<(), ModelError> {
 impl CameraModel {
     pub fn validate(&self) -> Result<(), ModelError> {
         if self.schema != SCHEMA {
-            return Err(bad(
-                "schema",
-                format!("expected \"{SCHEMA}\", got \"{}\"", self.schema),
-            ));
+            return Err(bad("schema", format!("expected \"{SCHEMA}\", got \"{}\"", self.schema)));
         }
         let r = &self.reference;
         if r.width == 0 || r.height == 0 {
@@ -66,18 +51,12 @@ impl CameraModel {
         }
         if let Some(p) = r.pixels_per_radian {
             if !p.is_finite() || p <= 0.0 {
-                return Err(bad(
-                    "reference.pixels_per_radian",
-                    format!("must be finite and > 0, got {p}"),
-                ));
+                return Err(bad("reference.pixels_per_radian", format!("must be finite and > 0, got {p}")));
             }
         }
         if let Some(t) = r.frame_interval_s {
             if !t.is_finite() || t <= 0.0 {
-                return Err(bad(
-                    "reference.frame_interval_s",
-                    format!("must be finite and > 0, got {t}"),
-                ));
+                return Err(bad("reference.frame_interval_s", format!("must be finite and > 0, got {t}")));
             }
         }
         self.validate_noise()?;
@@ -89,19 +68,13 @@ impl CameraModel {
         let n = &self.noise;
         check_diagnostics("noise", &n.diagnostics)?;
         if n.levels.len() != NOISE_LEVELS {
-            return Err(bad(
-                "noise.levels",
-                format!("must have {NOISE_LEVELS} levels, got {}", n.levels.len()),
-            ));
+            return Err(bad("noise.levels", format!("must have {NOISE_LEVELS} levels, got {}", n.levels.len())));
         }
         let [lo, hi] = n.luminance_range;
         finite("noise.luminance_range[0]", lo)?;
         finite("noise.luminance_range[1]", hi)?;
         if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo > hi {
-            return Err(bad(
-                "noise.luminance_range",
-                format!("must satisfy 0 ≤ lo ≤ hi ≤ 1, got [{lo}, {hi}]"),
-            ));
+            return Err(bad("noise.luminance_range", format!("must satisfy 0 ≤ lo ≤ hi ≤ 1, got [{lo}, {hi}]")));
         }
         let named = n
             .levels
@@ -117,10 +90,7 @@ impl CameraModel {
                 for y in [lo, hi] {
                     let s = level.std(n.form, c, y);
                     if s > 1.0 {
-                        return Err(bad(
-                            name.clone(),
-                            format!("std {s} at luma {y} (channel {c}) exceeds 1"),
-                        ));
+                        return Err(bad(name.clone(), format!("std {s} at luma {y} (channel {c}) exceeds 1")));
                     }
                 }
             }
@@ -132,14 +102,10 @@ impl CameraModel {
         let m = &self.motion_blur;
         check_diagnostics("motion_blur", &m.diagnostics)?;
         match m.exposure {
-            Some(l) if !l.is_finite() || !(0.0..=1.0).contains(&l) => Err(bad(
-                "motion_blur.exposure",
-                format!("must be in [0, 1], got {l}"),
-            )),
-            None if m.present => Err(bad(
-                "motion_blur.exposure",
-                "must be set when present is true",
-            )),
+            Some(l) if !l.is_finite() || !(0.0..=1.0).contains(&l) => {
+                Err(bad("motion_blur.exposure", format!("must be in [0, 1], got {l}")))
+            }
+            None if m.present => Err(bad("motion_blur.exposure", "must be set when present is true")),
             _ => Ok(()),
         }
     }
@@ -151,25 +117,16 @@ impl CameraModel {
         finite("depth_of_field.depth_range[0]", lo)?;
         finite("depth_of_field.depth_range[1]", hi)?;
         if lo > hi {
-            return Err(bad(
-                "depth_of_field.depth_range",
-                format!("lo {lo} > hi {hi}"),
-            ));
+            return Err(bad("depth_of_field.depth_range", format!("lo {lo} > hi {hi}")));
         }
         let Some(curve) = d.curve else {
             if d.present {
-                return Err(bad(
-                    "depth_of_field.curve",
-                    "must be set when present is true",
-                ));
+                return Err(bad("depth_of_field.curve", "must be set when present is true"));
             }
             return Ok(());
         };
         if d.units == DepthUnits::MetricM && lo <= 0.0 {
-            return Err(bad(
-                "depth_of_field.depth_range[0]",
-                format!("metric depth must be > 0, got {lo}"),
-            ));
+            return Err(bad("depth_of_field.depth_range[0]", format!("metric depth must be > 0, got {lo}")));
         }
         match curve {
             DofCurve::Quadratic { a, b, c } => {
@@ -182,25 +139,16 @@ impl CameraModel {
                 finite("depth_of_field.curve.focus_depth", focus_depth)?;
                 finite("depth_of_field.curve.c0", c0)?;
                 if k < 0.0 {
-                    return Err(bad(
-                        "depth_of_field.curve.k",
-                        format!("must be ≥ 0, got {k}"),
-                    ));
+                    return Err(bad("depth_of_field.curve.k", format!("must be ≥ 0, got {k}")));
                 }
                 if d.units == DepthUnits::MetricM && focus_depth <= 0.0 {
-                    return Err(bad(
-                        "depth_of_field.curve.focus_depth",
-                        format!("must be > 0 m, got {focus_depth}"),
-                    ));
+                    return Err(bad("depth_of_field.curve.focus_depth", format!("must be > 0 m, got {focus_depth}")));
                 }
             }
             DofCurve::Constant { c } => {
                 finite("depth_of_field.curve.c", c)?;
                 if !(0.0..=MAX_DOF_SIGMA_PX).contains(&c) {
-                    return Err(bad(
-                        "depth_of_field.curve.c",
-                        format!("must be in [0, {MAX_DOF_SIGMA_PX}], got {c}"),
-                    ));
+                    return Err(bad("depth_of_field.curve.c", format!("must be in [0, {MAX_DOF_SIGMA_PX}], got {c}")));
                 }
             }
         }

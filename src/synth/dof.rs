@@ -35,26 +35,13 @@ pub fn for_each_cascade_interval(
 
 /// Per-pixel σ map from depth through the model (0 where depth is invalid).
 pub fn dof_sigma_map(depth: &Plane, dof: &DepthOfField) -> Plane {
-    Plane::from_vec(
-        depth.width,
-        depth.height,
-        depth.data.iter().map(|&z| dof.sigma_px(z)).collect(),
-    )
+    Plane::from_vec(depth.width, depth.height, depth.data.iter().map(|&z| dof.sigma_px(z)).collect())
 }
 
 /// Blur each pixel with its own σ from `sigma_px` (clamped to [0, MAX_DOF_SIGMA_PX]).
 pub fn add_defocus(sharp: &Rgb, sigma_px: &Plane) -> Rgb {
-    let sig: Vec<f32> = sigma_px
-        .data
-        .iter()
-        .map(|&s| {
-            if s.is_finite() {
-                s.clamp(0.0, MAX_DOF_SIGMA_PX)
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let sig: Vec<f32> =
+        sigma_px.data.iter().map(|&s| if s.is_finite() { s.clamp(0.0, MAX_DOF_SIGMA_PX) } else { 0.0 }).collect();
     let max_sigma = sig.iter().cloned().fold(0.0f32, f32::max);
     if max_sigma == 0.0 {
         return sharp.clone();
@@ -79,11 +66,7 @@ pub fn add_defocus(sharp: &Rgb, sigma_px: &Plane) -> Rgb {
         .collect();
     let mut it = planes.into_iter();
     let mut next = || it.next().unwrap_or_default();
-    Rgb {
-        width: sharp.width,
-        height: sharp.height,
-        channels: [next(), next(), next()],
-    }
+    Rgb { width: sharp.width, height: sharp.height, channels: [next(), next(), next()] }
 }
 
 /// addDoF(I, δ, Z).

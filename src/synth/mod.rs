@@ -7,9 +7,7 @@ mod motion_blur;
 mod noise;
 mod rng;
 
-pub use dof::{
-    add_defocus, add_dof, dof_sigma_map, for_each_cascade_interval, DOF_NODE_SPACING_PX,
-};
+pub use dof::{add_defocus, add_dof, dof_sigma_map, for_each_cascade_interval, DOF_NODE_SPACING_PX};
 pub use motion_blur::{add_motion_blur, MB_MAX_SAMPLE_SPACING_PX};
 pub use noise::{add_noise, noise_field, unit_band_std};
 pub use rng::gaussian;
@@ -31,9 +29,7 @@ pub fn apply_camera_model(
     if model.depth_of_field.present {
         match depth {
             Some(z) => img = add_dof(&img, z, &model.depth_of_field),
-            None => log::warn!(
-                "depth of field is present in the model but no depth map was given: skipped"
-            ),
+            None => log::warn!("depth of field is present in the model but no depth map was given: skipped"),
         }
     }
     let lambda = model.motion_blur.exposure_or_zero();

@@ -14,11 +14,7 @@ pub const MB_MAX_SAMPLE_SPACING_PX: f32 = 0.1;
 
 /// Apply motion blur with exposure `lambda` ∈ [0, 1] (clamped; non-finite → 0).
 pub fn add_motion_blur(sharp: &Rgb, flow: &Flow, lambda: f32) -> Rgb {
-    let lambda = if lambda.is_finite() {
-        lambda.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let lambda = if lambda.is_finite() { lambda.clamp(0.0, 1.0) } else { 0.0 };
     if lambda == 0.0 {
         return sharp.clone();
     }

@@ -31,16 +31,9 @@ pub fn unit_band_std() -> &'static [f32; NOISE_LEVELS + 1] {
         let mut sums = [0.0f64; NOISE_LEVELS + 1];
         let mut counts = [0usize; NOISE_LEVELS + 1];
         for c in 0..3u32 {
-            let data = (0..n * n)
-                .map(|i| gaussian((i % n) as u32, (i / n) as u32, c, 0x5eed_c0de))
-                .collect();
+            let data = (0..n * n).map(|i| gaussian((i % n) as u32, (i / n) as u32, c, 0x5eed_c0de)).collect();
             let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
-            for (l, band) in pyr
-                .bands
-                .iter()
-                .chain(std::iter::once(&pyr.lowpass))
-                .enumerate()
-            {
+            for (l, band) in pyr.bands.iter().chain(std::iter::once(&pyr.lowpass)).enumerate() {
                 sums[l] += band.data.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
                 counts[l] += band.data.len();
             }
@@ -64,9 +57,7 @@ pub fn noise_field(luma: &Plane, noise: &Noise, seed: u64) -> Rgb {
     let planes: Vec<Plane> = (0..3usize)
         .into_par_iter()
         .map(|c| {
-            let white = (0..w * h)
-                .map(|i| gaussian((i % w) as u32, (i / w) as u32, c as u32, seed))
-                .collect();
+            let white = (0..w * h).map(|i| gaussian((i % w) as u32, (i / w) as u32, c as u32, seed)).collect();
             let mut pyr = laplacian_pyramid(&Plane::from_vec(w, h, white), NOISE_LEVELS);
             for (l, band) in pyr.bands.iter_mut().enumerate() {
                 let level = &noise.levels[l];
@@ -88,9 +79,7 @@ pub fn noise_field(luma: &Plane, noise: &Noise, seed: u64) -> Rgb {
             pyr.collapse()
         })
         .collect();
-    let [r, g, b]: [Plane; 3] = planes
-        .try_into()
-        .unwrap_or_else(|_| unreachable!("three channels mapped"));
+    let [r, g, b]: [Plane; 3] = planes.try_into().unwrap_or_else(|_| unreachable!("three channels mapped"));
     Rgb::from_planes([r, g, b])
 }
 

@@ -31,9 +31,7 @@ mod tests {
     #[test]
     fn gaussian_moments_and_independence() {
         let (w, h) = (1000u32, 1000u32);
-        let v: Vec<f32> = (0..h)
-            .flat_map(|y| (0..w).map(move |x| gaussian(x, y, 1, 7)))
-            .collect();
+        let v: Vec<f32> = (0..h).flat_map(|y| (0..w).map(move |x| gaussian(x, y, 1, 7))).collect();
         let n = v.len() as f64;
         let mean = v.iter().map(|&a| a as f64).sum::<f64>() / n;
         let var = v.iter().map(|&a| (a as f64 - mean).powi(2)).sum::<f64>() / n;

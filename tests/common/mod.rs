@@ -7,9 +7,7 @@ use blind_augment::io;
 use std::path::PathBuf;
 
 pub fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
 }
 
 pub fn photo(name: &str) -> Rgb {
@@ -72,12 +70,8 @@ pub fn add_sensor_noise(clean: &Rgb, a: [f32; 3], b: [f32; 3], seed: u64) -> Rgb
     for c in 0..3 {
         for i in 0..clean.len() {
             let s = (a[c] + b[c] * y.data[i]).max(0.0).sqrt();
-            let n = blind_augment::synth::gaussian(
-                (i % clean.width) as u32,
-                (i / clean.width) as u32,
-                c as u32 + 10,
-                seed,
-            );
+            let n =
+                blind_augment::synth::gaussian((i % clean.width) as u32, (i / clean.width) as u32, c as u32 + 10, seed);
             out.channels[c][i] += s * n;
         }
     }

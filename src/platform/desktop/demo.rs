@@ -19,9 +19,7 @@ const PHOTO: &[u8] = include_bytes!("../../../assets/motorcycle_left_333x497.png
 const DISPARITY_X64: &[u8] = include_bytes!("../../../assets/motorcycle_disp_333x497_x64.png");
 
 fn decode_photo() -> Result<Rgb> {
-    let img = image::load_from_memory(PHOTO)
-        .context("decoding the embedded photograph")?
-        .to_rgb32f();
+    let img = image::load_from_memory(PHOTO).context("decoding the embedded photograph")?.to_rgb32f();
     let (w, h) = (img.width() as usize, img.height() as usize);
     let raw = img.into_raw();
     let mut out = Rgb::new(w, h, [0.0; 3]);
@@ -34,16 +32,10 @@ fn decode_photo() -> Result<Rgb> {
 }
 
 fn decode_disparity() -> Result<Plane> {
-    let img = image::load_from_memory(DISPARITY_X64)
-        .context("decoding the embedded disparity")?
-        .to_luma16();
+    let img = image::load_from_memory(DISPARITY_X64).context("decoding the embedded disparity")?.to_luma16();
     let (w, h) = (img.width() as usize, img.height() as usize);
     // Stored as disparity × 64 in 16 bits; 0 marks pixels without ground truth.
-    let data = img
-        .into_raw()
-        .into_iter()
-        .map(|v| if v == 0 { f32::NAN } else { v as f32 / 64.0 })
-        .collect();
+    let data = img.into_raw().into_iter().map(|v| if v == 0 { f32::NAN } else { v as f32 / 64.0 }).collect();
     Ok(Plane::from_vec(w, h, data))
 }
 
@@ -81,32 +73,20 @@ fn sensor_noise_model(a: [f32; 3], b: [f32; 3]) -> Noise {
 }
 
 fn truth_model(w: usize, h: usize, disparity: &Plane) -> CameraModel {
-    let valid: Vec<f32> = disparity
-        .data
-        .iter()
-        .cloned()
-        .filter(|v| v.is_finite())
-        .collect();
+    let valid: Vec<f32> = disparity.data.iter().cloned().filter(|v| v.is_finite()).collect();
     let lo = valid.iter().cloned().fold(f32::INFINITY, f32::min);
     let hi = valid.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
     let mut m = CameraModel::empty(w as u32, h as u32);
     m.reference.frame_interval_s = Some(1.0 / 30.0);
     m.noise = sensor_noise_model([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3]);
-    m.motion_blur = MotionBlur {
-        present: true,
-        exposure: Some(0.4),
-        diagnostics: Diagnostics::not_fitted("ground truth"),
-    };
+    m.motion_blur =
+        MotionBlur { present: true, exposure: Some(0.4), diagnostics: Diagnostics::not_fitted("ground truth") };
     m.depth_of_field = DepthOfField {
         present: true,
         units: DepthUnits::RelativeInverse,
         // Focused at disparity 30 (the motorcycle's mid-body); 0.12 px of blur per
         // disparity unit away from it.
-        curve: Some(DofCurve::ThinLens {
-            k: 0.12,
-            focus_depth: 30.0,
-            c0: 0.2,
-        }),
+        curve: Some(DofCurve::ThinLens { k: 0.12, focus_depth: 30.0, c0: 0.2 }),
         depth_range: [lo, hi],
         diagnostics: Diagnostics::not_fitted("ground truth"),
     };
@@ -143,13 +123,7 @@ fn side_by_side(panels: &[&Rgb]) -> Rgb {
     out
 }
 
-fn fit_one(
-    image: &Rgb,
-    reference: &Rgb,
-    effects: Effects,
-    depth: &Plane,
-    flow: &Flow,
-) -> Result<FitOutput> {
+fn fit_one(image: &Rgb, reference: &Rgb, effects: Effects, depth: &Plane, flow: &Flow) -> Result<FitOutput> {
     let inputs = FitInputs {
         image,
         denoised: effects.noise.then_some(reference),
@@ -159,13 +133,7 @@ fn fit_one(
         depth_units: DepthUnits::RelativeInverse,
         flow: Some(flow),
     };
-    Ok(fit(
-        &inputs,
-        &FitOptions {
-            effects,
-            ..Default::default()
-        },
-    )?)
+    Ok(fit(&inputs, &FitOptions { effects, ..Default::default() })?)
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
@@ -180,32 +148,16 @@ pub fn run(args: DemoArgs) -> Result<()> {
 
     // Per-effect distorted frames (the accurate tier's OPTIMIZATION setting) and the
     // combined camera frame (DoF → MB → noise), all through an 8-bit PNG's quantisation.
-    let only = |n, m, d| Effects {
-        noise: n,
-        motion_blur: m,
-        depth_of_field: d,
-    };
+    let only = |n, m, d| Effects { noise: n, motion_blur: m, depth_of_field: d };
     let i_dof = quantize8(&synth::add_dof(&clean, &disparity, &truth.depth_of_field));
     let i_mb = quantize8(&synth::add_motion_blur(&clean, &flow, 0.4));
     let i_noise = quantize8(&synth::add_noise(&clean, &truth.noise, 1));
-    let i_all = quantize8(&synth::apply_camera_model(
-        &clean,
-        &truth,
-        Some(&disparity),
-        Some(&flow),
-        1,
-    ));
+    let i_all = quantize8(&synth::apply_camera_model(&clean, &truth, Some(&disparity), Some(&flow), 1));
 
     eprintln!("fitting: accurate tier (one clean reference per effect)");
     let dof = fit_one(&i_dof, &clean, only(false, false, true), &disparity, &flow)?;
     let mb = fit_one(&i_mb, &clean, only(false, true, false), &disparity, &flow)?;
-    let noise = fit_one(
-        &i_noise,
-        &clean,
-        only(true, false, false),
-        &disparity,
-        &flow,
-    )?;
+    let noise = fit_one(&i_noise, &clean, only(true, false, false), &disparity, &flow)?;
     let mut accurate = truth.clone();
     accurate.noise = noise.model.noise.clone();
     accurate.motion_blur = mb.model.motion_blur.clone();
@@ -231,31 +183,17 @@ pub fn run(args: DemoArgs) -> Result<()> {
     };
     let fast_out = fit(&fast_inputs, &FitOptions::default())?;
 
-    for (name, m) in [
-        ("truth.json", &truth),
-        ("camera_accurate.json", &accurate),
-        ("camera_fast.json", &fast_out.model),
-    ] {
+    for (name, m) in
+        [("truth.json", &truth), ("camera_accurate.json", &accurate), ("camera_fast.json", &fast_out.model)]
+    {
         let p = out.join(name);
         std::fs::write(&p, m.to_json()?).with_context(|| format!("writing {}", p.display()))?;
     }
     super::fit_cmd::write_plots(&out.join("plots_accurate"), &acc_out)?;
     super::fit_cmd::write_plots(&out.join("plots_fast"), &fast_out)?;
 
-    let resynth_acc = quantize8(&synth::apply_camera_model(
-        &clean,
-        &accurate,
-        Some(&disparity),
-        Some(&flow),
-        2,
-    ));
-    let resynth_fast = quantize8(&synth::apply_camera_model(
-        &clean,
-        &fast_out.model,
-        Some(&disparity),
-        Some(&flow),
-        2,
-    ));
+    let resynth_acc = quantize8(&synth::apply_camera_model(&clean, &accurate, Some(&disparity), Some(&flow), 2));
+    let resynth_fast = quantize8(&synth::apply_camera_model(&clean, &fast_out.model, Some(&disparity), Some(&flow), 2));
     io::save_rgb(&out.join("clean.png"), &clean, BitDepth::Eight)?;
     io::save_rgb(&out.join("distorted.png"), &i_all, BitDepth::Eight)?;
     io::save_rgb(
@@ -281,19 +219,14 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel) -> String 
     let mut r = String::new();
     let _ = writeln!(r, "# blind-augment demo report\n");
     let _ = writeln!(r, "Middlebury 2014 Motorcycle ({}×{}), real ground-truth disparity; distortions with known parameters, 8-bit quantised.\n", truth.reference.width, truth.reference.height);
-    let _ = writeln!(
-        r,
-        "## Motion blur exposure λ\n\n| | λ | ± | status | fit time |\n|---|---|---|---|---|"
-    );
+    let _ = writeln!(r, "## Motion blur exposure λ\n\n| | λ | ± | status | fit time |\n|---|---|---|---|---|");
     for (name, m) in [("truth", truth), ("accurate", acc), ("fast", fast)] {
         let mb = &m.motion_blur;
         let _ = writeln!(
             r,
             "| {name} | {} | {} | {} | {:.1} ms |",
             mb.exposure.map_or("n/a".into(), |l| format!("{l:.4}")),
-            mb.diagnostics
-                .stderr
-                .map_or("".into(), |s| format!("{s:.4}")),
+            mb.diagnostics.stderr.map_or("".into(), |s| format!("{s:.4}")),
             mb.diagnostics.status_str(),
             mb.diagnostics.fit_time_s * 1e3
         );
@@ -304,11 +237,7 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel) -> String 
     let _ = writeln!(
         r,
         "| | {} | form | status | fit time |",
-        depths
-            .iter()
-            .map(|d| format!("{d:.1}"))
-            .collect::<Vec<_>>()
-            .join(" | ")
+        depths.iter().map(|d| format!("{d:.1}")).collect::<Vec<_>>().join(" | ")
     );
     let _ = writeln!(r, "|---|{}---|---|---|", "---|".repeat(depths.len()));
     for (name, m) in [("truth", truth), ("accurate", acc), ("fast", fast)] {
@@ -322,27 +251,17 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel) -> String 
         let _ = writeln!(
             r,
             "| {name} | {} | {form} | {} | {:.1} ms |",
-            depths
-                .iter()
-                .map(|&z| format!("{:.3}", d.sigma_px(z)))
-                .collect::<Vec<_>>()
-                .join(" | "),
+            depths.iter().map(|&z| format!("{:.3}", d.sigma_px(z))).collect::<Vec<_>>().join(" | "),
             d.diagnostics.status_str(),
             d.diagnostics.fit_time_s * 1e3
         );
     }
-    let _ = writeln!(
-        r,
-        "\n## Noise: std that `synth` adds to a flat grey of luma Y (R, G, B)\n"
-    );
+    let _ = writeln!(r, "\n## Noise: std that `synth` adds to a flat grey of luma Y (R, G, B)\n");
     let ys = [0.2f32, 0.4, 0.6, 0.8];
     let _ = writeln!(
         r,
         "| | {} | status | fit time |",
-        ys.iter()
-            .map(|y| format!("Y={y}"))
-            .collect::<Vec<_>>()
-            .join(" | ")
+        ys.iter().map(|y| format!("Y={y}")).collect::<Vec<_>>().join(" | ")
     );
     let _ = writeln!(r, "|---|{}---|---|", "---|".repeat(ys.len()));
     for (name, m) in [("truth", truth), ("accurate", acc), ("fast", fast)] {

@@ -28,19 +28,14 @@ fn load_opt_rgb(p: &Option<PathBuf>) -> Result<Option<Rgb>> {
 /// In folder mode, the file in `dir` with the same stem as `frame` (any extension).
 fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
     let stem = frame.file_stem().context("frame without a file name")?;
-    let entries = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {what} folder {}", dir.display()))?;
+    let entries = std::fs::read_dir(dir).with_context(|| format!("reading {what} folder {}", dir.display()))?;
     for e in entries.flatten() {
         let p = e.path();
         if p.file_stem() == Some(stem) {
             return Ok(p);
         }
     }
-    anyhow::bail!(
-        "{what} folder {} has no file named like {}",
-        dir.display(),
-        frame.display()
-    )
+    anyhow::bail!("{what} folder {} has no file named like {}", dir.display(), frame.display())
 }
 
 fn run_one(args: &FitArgs, inp: &Loaded, opts: &FitOptions) -> Result<FitOutput> {
@@ -57,11 +52,7 @@ fn run_one(args: &FitArgs, inp: &Loaded, opts: &FitOptions) -> Result<FitOutput>
 }
 
 pub fn run(args: FitArgs) -> Result<()> {
-    let opts = FitOptions {
-        tier: super::tier(args.tier),
-        effects: super::effects(&args.only),
-        ..Default::default()
-    };
+    let opts = FitOptions { tier: super::tier(args.tier), effects: super::effects(&args.only), ..Default::default() };
     let g = &args.geometry;
     let output = if let Some(dir) = &args.frames {
         let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -75,26 +66,15 @@ pub fn run(args: FitArgs) -> Result<()> {
             })
             .collect();
         frames.sort();
-        anyhow::ensure!(
-            !frames.is_empty(),
-            "frames folder {} holds no images",
-            dir.display()
-        );
+        anyhow::ensure!(!frames.is_empty(), "frames folder {} holds no images", dir.display());
         let bar = indicatif::ProgressBar::new(frames.len() as u64).with_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         let mut models = vec![];
         let mut last = None;
         for frame in &frames {
-            bar.set_message(
-                frame
-                    .file_name()
-                    .map(|f| f.to_string_lossy().to_string())
-                    .unwrap_or_default(),
-            );
+            bar.set_message(frame.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default());
             let load = |d: &Option<PathBuf>, what: &str| -> Result<Option<Rgb>> {
                 match d {
                     Some(d) => Ok(Some(io::load_rgb(&sibling(d, frame, what)?)?.0)),
@@ -107,10 +87,7 @@ pub fn run(args: FitArgs) -> Result<()> {
                 motion_deblurred: load(&args.motion_deblurred, "motion-deblurred")?,
                 defocus_deblurred: load(&args.defocus_deblurred, "defocus-deblurred")?,
                 depth: match &g.depth {
-                    Some(d) => Some(io::load_depth(
-                        &sibling(d, frame, "depth")?,
-                        g.depth_png_scale,
-                    )?),
+                    Some(d) => Some(io::load_depth(&sibling(d, frame, "depth")?, g.depth_png_scale)?),
                     None => None,
                 },
                 flow: match &g.flow {
@@ -118,33 +95,22 @@ pub fn run(args: FitArgs) -> Result<()> {
                     None => None,
                 },
             };
-            let out = run_one(&args, &inp, &opts)
-                .with_context(|| format!("fitting {}", frame.display()))?;
+            let out = run_one(&args, &inp, &opts).with_context(|| format!("fitting {}", frame.display()))?;
             models.push(out.model.clone());
             last = Some(out);
             bar.inc(1);
         }
         bar.finish();
         let model = aggregate_models(&models)?;
-        FitOutput {
-            model,
-            plots: last.map(|o| o.plots).unwrap_or_default(),
-        }
+        FitOutput { model, plots: last.map(|o| o.plots).unwrap_or_default() }
     } else {
-        let image = args
-            .image
-            .as_ref()
-            .context("--image or --frames is required")?;
+        let image = args.image.as_ref().context("--image or --frames is required")?;
         let inp = Loaded {
             image: io::load_rgb(image)?.0,
             denoised: load_opt_rgb(&args.denoised)?,
             motion_deblurred: load_opt_rgb(&args.motion_deblurred)?,
             defocus_deblurred: load_opt_rgb(&args.defocus_deblurred)?,
-            depth: g
-                .depth
-                .as_ref()
-                .map(|p| io::load_depth(p, g.depth_png_scale))
-                .transpose()?,
+            depth: g.depth.as_ref().map(|p| io::load_depth(p, g.depth_png_scale)).transpose()?,
             flow: g.flow.as_ref().map(|p| io::load_flow(p)).transpose()?,
         };
         run_one(&args, &inp, &opts).with_context(|| format!("fitting {}", image.display()))?
@@ -161,26 +127,11 @@ pub fn run(args: FitArgs) -> Result<()> {
 
 pub fn summarize(m: &blind_augment::model::CameraModel) {
     let d = &m.noise.diagnostics;
-    eprintln!(
-        "  noise:          {:<17} {} ({:.1} ms)",
-        d.status_str(),
-        d.reason,
-        d.fit_time_s * 1e3
-    );
+    eprintln!("  noise:          {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
     let d = &m.motion_blur.diagnostics;
-    eprintln!(
-        "  motion blur:    {:<17} {} ({:.1} ms)",
-        d.status_str(),
-        d.reason,
-        d.fit_time_s * 1e3
-    );
+    eprintln!("  motion blur:    {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
     let d = &m.depth_of_field.diagnostics;
-    eprintln!(
-        "  depth of field: {:<17} {} ({:.1} ms)",
-        d.status_str(),
-        d.reason,
-        d.fit_time_s * 1e3
-    );
+    eprintln!("  depth of field: {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
 }
 
 pub fn write_plots(dir: &Path, out: &FitOutput) -> Result<()> {

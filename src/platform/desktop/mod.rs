@@ -160,32 +160,15 @@ pub fn tier(t: Option<TierArg>) -> Option<Tier> {
 
 fn synth(args: SynthArgs) -> Result<()> {
     let (img, depth_bits) = blind_augment::io::load_rgb(&args.image)?;
-    let text = std::fs::read_to_string(&args.camera)
-        .with_context(|| format!("reading {}", args.camera.display()))?;
+    let text = std::fs::read_to_string(&args.camera).with_context(|| format!("reading {}", args.camera.display()))?;
     let model = blind_augment::model::CameraModel::from_json(&text)
         .with_context(|| format!("camera model {}", args.camera.display()))?;
     let g = &args.geometry;
-    let depth = g
-        .depth
-        .as_ref()
-        .map(|p| blind_augment::io::load_depth(p, g.depth_png_scale))
-        .transpose()?;
-    let flow = g
-        .flow
-        .as_ref()
-        .map(|p| blind_augment::io::load_flow(p))
-        .transpose()?;
+    let depth = g.depth.as_ref().map(|p| blind_augment::io::load_depth(p, g.depth_png_scale)).transpose()?;
+    let flow = g.flow.as_ref().map(|p| blind_augment::io::load_flow(p)).transpose()?;
     for (name, w, h) in [
-        (
-            "depth",
-            depth.as_ref().map(|d| d.width),
-            depth.as_ref().map(|d| d.height),
-        ),
-        (
-            "flow",
-            flow.as_ref().map(|f| f.width),
-            flow.as_ref().map(|f| f.height),
-        ),
+        ("depth", depth.as_ref().map(|d| d.width), depth.as_ref().map(|d| d.height)),
+        ("flow", flow.as_ref().map(|f| f.width), flow.as_ref().map(|f| f.height)),
     ] {
         if let (Some(w), Some(h)) = (w, h) {
             anyhow::ensure!(
@@ -203,13 +186,7 @@ fn synth(args: SynthArgs) -> Result<()> {
     if model.motion_blur.present && flow.is_none() {
         anyhow::bail!("the camera model has motion blur but no --flow was given");
     }
-    let out = blind_augment::synth::apply_camera_model(
-        &img,
-        &model,
-        depth.as_ref(),
-        flow.as_ref(),
-        args.seed,
-    );
+    let out = blind_augment::synth::apply_camera_model(&img, &model, depth.as_ref(), flow.as_ref(), args.seed);
     blind_augment::io::save_rgb(&args.out, &out, depth_bits)?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
@@ -218,10 +195,7 @@ fn synth(args: SynthArgs) -> Result<()> {
 pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
-        if let Err(e) = rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-        {
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global() {
             eprintln!("error: cannot set up {n} threads: {e}");
             return std::process::ExitCode::FAILURE;
         }

@@ -1,0 +1,177 @@
+//! The speed/accuracy trade of every fit setting, measured: for each setting, the
+//! single-threaded median wall time of the fit (7 runs, 512×512 unless stated) next
+//! to its error against known truth on the vendored photographs. Prints Markdown
+//! tables for BENCHMARKS.md. Run: `cargo bench --bench quality`.
+
+use blind_augment::fit::{fit, Effects, FitInputs, FitOptions};
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::model::*;
+use blind_augment::synth;
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn photo(name: &str) -> Rgb {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name);
+    blind_augment::io::load_rgb(&p).expect("vendored photo").0
+}
+
+fn q8(i: &Rgb) -> Rgb {
+    i.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0)
+}
+
+fn base<'a>(image: &'a Rgb) -> FitInputs<'a> {
+    FitInputs {
+        image,
+        denoised: None,
+        motion_deblurred: None,
+        defocus_deblurred: None,
+        depth: None,
+        depth_units: DepthUnits::MetricM,
+        flow: None,
+    }
+}
+
+/// Median wall time (ms) of `f` over 7 runs on one thread, and its last result.
+fn timed<T: Send>(pool: &rayon::ThreadPool, f: impl Fn() -> T + Sync) -> (f64, T) {
+    let mut times = vec![];
+    let mut last = None;
+    for _ in 0..7 {
+        let t = Instant::now();
+        last = Some(pool.install(&f));
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(|a, b| a.total_cmp(b));
+    (times[3], last.expect("ran"))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+fn main() {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let img = photo("astronaut.png");
+    let (w, h) = (img.width, img.height);
+
+    // Noise: stride of the sample grid.
+    let (a, b) = ([2e-5f32, 1.2e-5, 4e-5], [8e-4f32, 5e-4, 1.2e-3]);
+    let y = img.luma();
+    let mut noisy = img.clone();
+    for c in 0..3 {
+        for i in 0..img.len() {
+            let s = (a[c] + b[c] * y.data[i]).sqrt();
+            noisy.channels[c][i] += s * synth::gaussian((i % w) as u32, (i / w) as u32, c as u32 + 10, 5);
+        }
+    }
+    println!("### Noise (accurate): sample stride at level 0\n\n| stride px | median rel. error of synth std | max | time ms |\n|---|---|---|---|");
+    for stride in [32usize, 16, 8, 4] {
+        let opts = FitOptions {
+            noise_stride_px: stride,
+            effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
+            ..Default::default()
+        };
+        let inp = FitInputs { denoised: Some(&img), ..base(&noisy) };
+        let (ms, out) = timed(&pool, || fit(&inp, &opts).expect("fit"));
+        let n = &out.model.noise;
+        let mut errs = vec![];
+        for k in 0..9 {
+            let yy = n.luminance_range[0] + (n.luminance_range[1] - n.luminance_range[0]) * (k as f32 + 0.5) / 9.0;
+            let f = synth::noise_field(&Plane::new(256, 256, yy), n, 77);
+            for c in 0..3 {
+                let s = (f.channels[c].iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / 65536.0).sqrt();
+                errs.push((s / ((a[c] + b[c] * yy) as f64).sqrt() - 1.0).abs());
+            }
+        }
+        let max = errs.iter().cloned().fold(0.0, f64::max);
+        println!("| {stride} | {:.2}% | {:.2}% | {ms:.1} |", 100.0 * median(errs), 100.0 * max);
+    }
+
+    // Motion blur: pixel budget.
+    let mut flow = Flow::uniform(w, h, 0.0, 0.0);
+    for yy in 0..h {
+        for x in 0..w {
+            flow.dx[yy * w + x] = 8.0 * (0.8 - 0.9 * (yy as f32 / h as f32 - 0.5));
+            flow.dy[yy * w + x] = 8.0 * (0.3 + 0.9 * (x as f32 / w as f32 - 0.5));
+        }
+    }
+    let lambdas = [0.1f32, 0.3, 0.5, 0.7, 0.9];
+    let blurred: Vec<Rgb> = lambdas.iter().map(|&l| q8(&synth::add_motion_blur(&img, &flow, l))).collect();
+    println!("\n### Motion blur (accurate): pixel budget\n\n| max samples | median abs. λ error (λ = 0.1…0.9) | max | time ms |\n|---|---|---|---|");
+    for budget in [2048usize, 4096, 8192, 16384, 32768] {
+        let opts = FitOptions {
+            mb_max_samples: budget,
+            effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+            ..Default::default()
+        };
+        let mut errs = vec![];
+        let mut times = vec![];
+        for (l, bl) in lambdas.iter().zip(&blurred) {
+            let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..base(bl) };
+            let (ms, out) = timed(&pool, || fit(&inp, &opts).expect("fit"));
+            times.push(ms);
+            errs.push((out.model.motion_blur.exposure.unwrap_or(f32::NAN) - l).abs() as f64);
+        }
+        let max = errs.iter().cloned().fold(0.0, f64::max);
+        println!("| {budget} | {:.4} | {max:.4} | {:.1} |", median(errs), median(times));
+    }
+
+    // Depth of field: stack node spacing and pyramid handoff.
+    let mut depth = Plane::new(w, h, 0.0);
+    for yy in 0..h {
+        for x in 0..w {
+            let u = (x as f32 + 0.5) / w as f32;
+            let v = (yy as f32 + 0.5) / h as f32;
+            let t = (0.7 * v + 0.3 * u + 0.08 * (6.0 * u).sin() * (4.0 * v).cos()).clamp(0.0, 1.0);
+            depth.data[yy * w + x] = 0.5 + 3.5 * t;
+        }
+    }
+    let curves = [
+        ("mild (≤ 2.6 px)", DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
+        ("strong (≤ 9.4 px)", DofCurve::ThinLens { k: 8.0, focus_depth: 0.7, c0: 0.0 }),
+    ];
+    let truths: Vec<DepthOfField> = curves
+        .iter()
+        .map(|(_, c)| DepthOfField {
+            present: true,
+            units: DepthUnits::MetricM,
+            curve: Some(*c),
+            depth_range: [0.5, 4.0],
+            diagnostics: Diagnostics::not_fitted("truth"),
+        })
+        .collect();
+    let frames: Vec<Rgb> = truths.iter().map(|t| q8(&synth::add_dof(&img, &depth, t))).collect();
+    println!(
+        "\n### Depth of field (accurate): stack node spacing and pyramid handoff\n\n| node spacing px | pyramid from px | RMSE mild px | RMSE strong px | time ms (strong) |\n|---|---|---|---|---|"
+    );
+    for (spacing, handoff) in
+        [(0.25f32, None), (0.5, None), (0.5, Some(5.0f32)), (0.5, Some(4.0)), (0.5, Some(3.0)), (1.0, Some(3.0))]
+    {
+        let opts = FitOptions {
+            dof_node_spacing_px: spacing,
+            dof_pyramid_from_px: handoff,
+            effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
+            ..Default::default()
+        };
+        let mut cells = vec![];
+        let mut ms_strong = 0.0;
+        for (t, fr) in truths.iter().zip(&frames) {
+            let inp = FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..base(fr) };
+            let (ms, out) = timed(&pool, || fit(&inp, &opts).expect("fit"));
+            ms_strong = ms;
+            let d = &out.model.depth_of_field;
+            let [lo, hi] = d.depth_range;
+            let rmse = ((0..=200)
+                .map(|i| {
+                    let z = lo + (hi - lo) * i as f32 / 200.0;
+                    ((d.sigma_px(z) - t.sigma_px(z)) as f64).powi(2)
+                })
+                .sum::<f64>()
+                / 201.0)
+                .sqrt();
+            cells.push(format!("{rmse:.4}"));
+        }
+        let hand = handoff.map_or("none (full res)".to_string(), |h| format!("{h}"));
+        println!("| {spacing} | {hand} | {} | {} | {ms_strong:.1} |", cells[0], cells[1]);
+    }
+}
