@@ -269,6 +269,54 @@ fn sanitize(model: &mut CameraModel) {
     }
 }
 
+fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<NoisePlotData>) {
+    if !opts.effects.noise {
+        return (Noise::absent(Diagnostics::not_fitted("not requested (--only)")), None);
+    }
+    let (noise, data) = match (tier, inp.denoised) {
+        (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, opts),
+        _ => noise::fit_fast(inp.image, opts),
+    };
+    (noise, Some(data))
+}
+
+fn fit_motion_blur(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (MotionBlur, Option<MbPlotData>) {
+    if !opts.effects.motion_blur {
+        return (MotionBlur::absent(Diagnostics::not_fitted("not requested (--only)")), None);
+    }
+    let started = Instant::now();
+    let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
+    match (inp.flow, tier, inp.motion_deblurred) {
+        (None, _, _) => (
+            MotionBlur::absent(not_identifiable(method, "no flow map given: exposure not identifiable", started)),
+            None,
+        ),
+        (Some(flow), Tier::Accurate, Some(sharp)) => {
+            motion_blur::fit_accurate(inp.image, sharp, flow, opts.mb_max_samples)
+        }
+        (Some(flow), _, _) => motion_blur::fit_fast(inp.image, flow),
+    }
+}
+
+fn fit_depth_of_field(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (DepthOfField, Option<DofPlotData>) {
+    if !opts.effects.depth_of_field {
+        return (DepthOfField::absent(inp.depth_units, Diagnostics::not_fitted("not requested (--only)")), None);
+    }
+    let started = Instant::now();
+    let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
+    match (inp.depth, tier, inp.defocus_deblurred) {
+        (None, _, _) => (
+            DepthOfField::absent(
+                inp.depth_units,
+                not_identifiable(method, "no depth map given: δ(Z) not identifiable", started),
+            ),
+            None,
+        ),
+        (Some(depth), Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
+        (Some(depth), _, _) => dof::fit_fast(inp.image, depth, inp.depth_units, opts),
+    }
+}
+
 /// Fit the camera model of one frame.
 pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     check_inputs(inp, opts)?;
@@ -277,68 +325,18 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     model.depth_of_field.units = inp.depth_units;
     let mut plots = PlotData::default();
 
-    if opts.effects.noise {
-        let (noise, data) = match tier_for(opts, inp.denoised, "noise", "denoised")? {
-            Tier::Accurate => noise::fit_accurate(inp.image, inp.denoised.unwrap_or(inp.image), opts),
-            Tier::Fast => noise::fit_fast(inp.image, opts),
-        };
-        model.noise = noise;
-        plots.noise = Some(data);
-    } else {
-        model.noise = Noise::absent(Diagnostics::not_fitted("not requested (--only)"));
-    }
-
-    if opts.effects.motion_blur {
-        let started = Instant::now();
-        let tier = tier_for(opts, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
-        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
-        match inp.flow {
-            None => {
-                model.motion_blur = MotionBlur::absent(not_identifiable(
-                    method,
-                    "no flow map given: exposure not identifiable",
-                    started,
-                ))
-            }
-            Some(flow) => {
-                let (mb, data) = match (tier, inp.motion_deblurred) {
-                    (Tier::Accurate, Some(sharp)) => {
-                        motion_blur::fit_accurate(inp.image, sharp, flow, opts.mb_max_samples)
-                    }
-                    _ => motion_blur::fit_fast(inp.image, flow),
-                };
-                model.motion_blur = mb;
-                plots.motion_blur = data;
-            }
-        }
-    } else {
-        model.motion_blur = MotionBlur::absent(Diagnostics::not_fitted("not requested (--only)"));
-    }
-
-    if opts.effects.depth_of_field {
-        let started = Instant::now();
-        let tier = tier_for(opts, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
-        let method = if tier == Tier::Accurate { "accurate" } else { "fast" };
-        match inp.depth {
-            None => {
-                model.depth_of_field = DepthOfField::absent(
-                    inp.depth_units,
-                    not_identifiable(method, "no depth map given: δ(Z) not identifiable", started),
-                )
-            }
-            Some(depth) => {
-                let (dof, data) = match (tier, inp.defocus_deblurred) {
-                    (Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
-                    _ => dof::fit_fast(inp.image, depth, inp.depth_units, opts),
-                };
-                model.depth_of_field = dof;
-                plots.depth_of_field = data;
-            }
-        }
-    } else {
-        model.depth_of_field = DepthOfField::absent(inp.depth_units, Diagnostics::not_fitted("not requested (--only)"));
-    }
-
+    // The three effects are independent: fit them concurrently (rayon::join), so
+    // the wall time on several cores is the slowest effect, not the sum.
+    let noise_tier = tier_for(opts, inp.denoised, "noise", "denoised")?;
+    let mb_tier = tier_for(opts, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
+    let dof_tier = tier_for(opts, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
+    let ((noise, mb), dof) = rayon::join(
+        || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier)),
+        || fit_depth_of_field(inp, opts, dof_tier),
+    );
+    (model.noise, plots.noise) = noise;
+    (model.motion_blur, plots.motion_blur) = mb;
+    (model.depth_of_field, plots.depth_of_field) = dof;
     sanitize(&mut model);
     Ok(FitOutput { model, plots })
 }

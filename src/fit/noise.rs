@@ -38,8 +38,8 @@ use std::time::Instant;
 /// 16 keeps the worst case at 0.55% for 2.5 ms more; 8 and 4 buy nothing further.
 pub const DEFAULT_STRIDE_PX: usize = 16;
 const BLIND_FLAT_FRACTION: f64 = 0.2;
-/// The blind tier's level-0 grid: only 20% of its samples are kept (the flattest),
-/// so it samples 4× denser than the accurate tier.
+/// The blind tier's finest level-0 grid: only 20% of its samples are kept (the
+/// flattest), so it samples denser than the accurate tier.
 const BLIND_STRIDE_PX: usize = 4;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
@@ -78,29 +78,37 @@ fn window(level: usize) -> [[f32; 9]; 9] {
     w
 }
 
+/// Window-weighted sum of f(value) around (x, y); direct slices in the interior,
+/// clamp-to-edge reads only where the 9×9 window leaves the plane.
 #[inline]
-fn local_mean(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
+fn window_sum(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9], f: impl Fn(f32) -> f32) -> f32 {
     let mut acc = 0.0;
+    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
+        for (j, row) in w.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (wt, &v) in row.iter().zip(&p.data[start..start + 9]) {
+                acc += wt * f(v);
+            }
+        }
+        return acc;
+    }
     for (j, row) in w.iter().enumerate() {
         let yy = y as isize + j as isize - 4;
         for (i, wt) in row.iter().enumerate() {
-            acc += wt * p.get_clamped(x as isize + i as isize - 4, yy);
+            acc += wt * f(p.get_clamped(x as isize + i as isize - 4, yy));
         }
     }
     acc
 }
 
 #[inline]
+fn local_mean(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
+    window_sum(p, x, y, w, |v| v)
+}
+
+#[inline]
 fn local_mean_sq(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
-    let mut acc = 0.0;
-    for (j, row) in w.iter().enumerate() {
-        let yy = y as isize + j as isize - 4;
-        for (i, wt) in row.iter().enumerate() {
-            let v = p.get_clamped(x as isize + i as isize - 4, yy);
-            acc += wt * v * v;
-        }
-    }
-    acc
+    window_sum(p, x, y, w, |v| v * v)
 }
 
 /// Grid positions at a level: stride max(1, stride0 >> l), offset half a stride.
@@ -118,7 +126,7 @@ struct LevelSamples {
 fn collect_samples(
     bands: &[Vec<Plane>; 3], // [channel][level 0..=4]
     luma: &[Plane],          // Gaussian pyramid 0..=4
-    clip: &IntegralImage,
+    clip: &ClipMask,
     stride0: usize,
 ) -> Vec<LevelSamples> {
     (0..=NOISE_LEVELS)
@@ -135,8 +143,7 @@ fn collect_samples(
             let mut out = LevelSamples { y: vec![], y2: vec![], var: [vec![], vec![], vec![]] };
             for y in grid(band0.height, stride) {
                 for x in grid(band0.width, stride) {
-                    let (x0, y0) = ((x * scale).min(clip.width() - 1), (y * scale).min(clip.height() - 1));
-                    if clip.box_sum(x0, y0, radius) > 0.0 {
+                    if clip.touches(x * scale, y * scale, radius) {
                         continue;
                     }
                     // Window-averaged luma: the window pools noise whose variance is
@@ -309,21 +316,33 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
 /// (dark, ≤ 0.1). This finds 8-bit 255s, 16-bit 65535s and float frames clipped at
 /// any white level, while unclipped float frames (over- and undershoot included)
 /// have no repeated extreme and lose nothing.
-fn clip_mask(img: &Rgb) -> IntegralImage {
+fn clip_mask(img: &Rgb) -> ClipMask {
     let n = img.len();
     let min_count = (n / 2000).max(2);
+    // One pass per channel: extremes and how often each occurs.
     let limits: Vec<(Option<f32>, Option<f32>)> = img
         .channels
         .iter()
         .map(|ch| {
-            let lo = ch.iter().cloned().fold(f32::INFINITY, f32::min);
-            let hi = ch.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-            let count = |v: f32| ch.iter().filter(|&&x| x == v).count();
-            let lo = (lo <= 0.1 && count(lo) >= min_count).then_some(lo);
-            let hi = (hi >= 0.6 && count(hi) >= min_count).then_some(hi);
-            (lo, hi)
+            let (mut lo, mut hi, mut nlo, mut nhi) = (f32::INFINITY, f32::NEG_INFINITY, 0usize, 0usize);
+            for &v in ch {
+                if v < lo {
+                    (lo, nlo) = (v, 1);
+                } else if v == lo {
+                    nlo += 1;
+                }
+                if v > hi {
+                    (hi, nhi) = (v, 1);
+                } else if v == hi {
+                    nhi += 1;
+                }
+            }
+            ((lo <= 0.1 && nlo >= min_count).then_some(lo), (hi >= 0.6 && nhi >= min_count).then_some(hi))
         })
         .collect();
+    if limits.iter().all(|l| l.0.is_none() && l.1.is_none()) {
+        return ClipMask(None);
+    }
     let data = (0..n)
         .map(|i| {
             let clipped = (0..3).any(|c| {
@@ -333,7 +352,20 @@ fn clip_mask(img: &Rgb) -> IntegralImage {
             clipped as u8 as f32
         })
         .collect();
-    IntegralImage::new(&Plane::from_vec(img.width, img.height, data))
+    ClipMask(Some(IntegralImage::new(&Plane::from_vec(img.width, img.height, data))))
+}
+
+/// Clipped-pixel counts over boxes; `None` when the frame has no clipping at all.
+struct ClipMask(Option<IntegralImage>);
+
+impl ClipMask {
+    /// Whether any clipped pixel lies within `r` of (x, y) (level-0 coordinates).
+    fn touches(&self, x: usize, y: usize, r: usize) -> bool {
+        match &self.0 {
+            None => false,
+            Some(ii) => ii.box_sum(x.min(ii.width() - 1), y.min(ii.height() - 1), r) > 0.0,
+        }
+    }
 }
 
 fn pyramids(img: &Rgb) -> [Vec<Plane>; 3] {
@@ -514,28 +546,34 @@ fn white_noise_median_to_mean() -> f32 {
 /// assumption (ISP-correlated noise breaks it) stated in the README.
 pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
     let started = Instant::now();
-    let bands = pyramids(image);
-    let luma_bands = laplacian_pyramid(&image.luma(), 3);
-    // Bin by a smoothed luma (one level coarser), since I's own luma carries the noise.
-    let gp = gaussian_pyramid(&image.luma(), 1);
-    let luma0 = crate::image::expand(&gp[1], gp[0].width, gp[0].height);
-    let luma: Vec<Plane> = vec![luma0; NOISE_LEVELS + 1];
     let _ = opts;
-    let stride0 = BLIND_STRIDE_PX;
+    // Only level 0 of each channel is needed: band = x − expand(reduce(x)).
+    let bands: Vec<Plane> =
+        (0..3).into_par_iter().map(|c| laplacian_pyramid(&image.plane(c), 1).bands.swap_remove(0)).collect();
+    // Luma Gaussian pyramid 0..=3: level 1 (expanded) is the smoothed luma used for
+    // binning, since I's own luma carries the noise; band 2 = G2 − expand(G3) is the
+    // structure measure.
+    let gp = gaussian_pyramid(&image.luma(), 3);
+    let luma0 = crate::image::expand(&gp[1], gp[0].width, gp[0].height);
+    let mut band2 = crate::image::expand(&gp[3], gp[2].width, gp[2].height);
+    for (b, g) in band2.data.iter_mut().zip(&gp[2].data) {
+        *b = g - *b;
+    }
+    // About 20 000 grid points whatever the frame size (4 px at 512², 8 px at 1280×960).
+    let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as usize).max(BLIND_STRIDE_PX);
     let clip = clip_mask(image);
     let win0 = window(0);
     let win2 = window(2);
-    let band2 = &luma_bands.bands[2];
     // (B(Y), B(Y²), structure, var r, g, b) at level-0 grid points, unclipped footprints.
     let mut pts: Vec<(f32, f32, f32, [f32; 3])> = vec![];
     for y in grid(image.height, stride0) {
         for x in grid(image.width, stride0) {
-            if clip.box_sum(x, y, 5 * 4 + 8) > 0.0 {
+            if clip.touches(x, y, 5 * 4 + 8) {
                 continue;
             }
-            let structure = local_mean_sq(band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
-            let v = std::array::from_fn(|c| local_mean_sq(&bands[c][0], x, y, &win0));
-            pts.push((local_mean(&luma[0], x, y, &win0), local_mean_sq(&luma[0], x, y, &win0), structure, v));
+            let structure = local_mean_sq(&band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
+            let v = std::array::from_fn(|c| local_mean_sq(&bands[c], x, y, &win0));
+            pts.push((local_mean(&luma0, x, y, &win0), local_mean_sq(&luma0, x, y, &win0), structure, v));
         }
     }
     let median_to_mean = white_noise_median_to_mean();

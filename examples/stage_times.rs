@@ -1,0 +1,64 @@
+//! Per-effect fit times (from each fit's own `fit_time_s`, single thread) at
+//! 1280×960, for profiling the fast tier between `cargo bench` runs.
+use blind_augment::fit::{fit, FitInputs, FitOptions, Tier};
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::model::DepthUnits;
+
+fn main() {
+    let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/astronaut.png");
+    let photo = blind_augment::io::load_rgb(&p).expect("photo").0;
+    let (w, h) = (1280usize, 960usize);
+    let mut img = Rgb::new(w, h, [0.0; 3]);
+    let m = |i: usize, n: usize| {
+        let q = i % (2 * n);
+        if q < n {
+            q
+        } else {
+            2 * n - 1 - q
+        }
+    };
+    for c in 0..3 {
+        for y in 0..h {
+            for x in 0..w {
+                img.channels[c][y * w + x] = photo.channels[c][m(y, 512) * 512 + m(x, 512)];
+            }
+        }
+    }
+    let depth = Plane::new(w, h, 2.0);
+    let flow = Flow::uniform(w, h, 6.0, 2.0);
+    let inp = FitInputs {
+        image: &img,
+        denoised: None,
+        motion_deblurred: None,
+        defocus_deblurred: None,
+        depth: Some(&depth),
+        depth_units: DepthUnits::MetricM,
+        flow: Some(&flow),
+    };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    for _ in 0..3 {
+        let t = std::time::Instant::now();
+        let out = pool
+            .install(|| fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: effects(), ..Default::default() }))
+            .expect("fit");
+        let m = &out.model;
+        println!(
+            "total {:.1} ms: noise {:.1}, mb {:.1}, dof {:.1}",
+            t.elapsed().as_secs_f64() * 1e3,
+            m.noise.diagnostics.fit_time_s * 1e3,
+            m.motion_blur.diagnostics.fit_time_s * 1e3,
+            m.depth_of_field.diagnostics.fit_time_s * 1e3
+        );
+    }
+}
+
+/// `ONLY=noise|mb|dof` profiles one effect.
+fn effects() -> blind_augment::fit::Effects {
+    let only = std::env::var("ONLY").unwrap_or_default();
+    let all = only.is_empty();
+    blind_augment::fit::Effects {
+        noise: all || only == "noise",
+        motion_blur: all || only == "mb",
+        depth_of_field: all || only == "dof",
+    }
+}
