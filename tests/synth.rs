@@ -1,0 +1,153 @@
+//! Properties of the CPU reference effects (the ground truth the GPU passes will be
+//! held to) and the image operations under them.
+
+// Per-channel loops index several parallel arrays; see src/lib.rs.
+#![allow(clippy::needless_range_loop)]
+
+mod common;
+
+use blind_augment::image::{discrete_gaussian_kernel, laplacian_pyramid, Flow, Plane, Rgb};
+use blind_augment::model::*;
+use blind_augment::synth::{self, add_defocus, add_motion_blur, noise_field};
+use common::*;
+
+/// Laplacian collapse is exact for every size (1e-5: f32 rounding over 4 levels).
+#[test]
+fn laplacian_pyramid_reconstructs_exactly() {
+    for (w, h) in [(1, 1), (2, 3), (7, 5), (64, 64), (101, 37)] {
+        let data: Vec<f32> = (0..w * h).map(|i| ((i * 7919) % 101) as f32 / 101.0).collect();
+        let p = Plane::from_vec(w, h, data.clone());
+        let back = laplacian_pyramid(&p, 4).collapse();
+        assert_eq!((back.width, back.height), (w, h));
+        for (a, b) in back.data.iter().zip(&data) {
+            assert!((a - b).abs() < 1e-5, "{w}×{h}: {a} vs {b}");
+        }
+    }
+}
+
+/// σ = 0 everywhere is the identity, bit for bit; λ = 0 likewise.
+#[test]
+fn effects_are_exact_at_zero() {
+    let img = photo("chelsea.png");
+    let zero = Plane::new(img.width, img.height, 0.0);
+    assert_eq!(add_defocus(&img, &zero), img);
+    let flow = flow_field(img.width, img.height, 10.0);
+    assert_eq!(add_motion_blur(&img, &flow, 0.0), img);
+}
+
+/// A uniform σ on an impulse gives a kernel with variance σ² per axis, for σ on and
+/// between stack nodes (variance-matched blend), within 1% (interior impulse, f32).
+#[test]
+fn defocus_kernel_has_the_requested_variance() {
+    let n = 97;
+    let mut img = Rgb::new(n, n, [0.0; 3]);
+    for c in 0..3 {
+        img.channels[c][48 * n + 48] = 1.0;
+    }
+    for sigma in [0.1f32, 0.25, 0.6, 1.0, 2.37, 5.0, 9.9] {
+        let out = add_defocus(&img, &Plane::new(n, n, sigma));
+        let ch = &out.channels[1];
+        let sum: f64 = ch.iter().map(|&v| v as f64).sum();
+        let var_x: f64 = (0..n * n).map(|i| ch[i] as f64 * ((i % n) as f64 - 48.0).powi(2)).sum::<f64>() / sum;
+        assert!((sum - 1.0).abs() < 1e-4, "σ {sigma}: mass {sum}");
+        assert!((var_x / (sigma as f64).powi(2) - 1.0).abs() < 0.01, "σ {sigma}: variance {var_x}");
+    }
+    // The discrete Gaussian itself: variance exact (see image::blur tests).
+    assert_eq!(discrete_gaussian_kernel(0.0).len(), 1);
+}
+
+/// Motion blur of a vertical edge moving horizontally is a linear ramp of exactly
+/// λ·|F| pixels: the 10–90% width of the profile is 0.8·λ|F| (±0.1 px).
+#[test]
+fn motion_blur_streak_has_the_exposure_length() {
+    let (w, h) = (80, 4);
+    let mut img = Rgb::new(w, h, [0.0; 3]);
+    for c in 0..3 {
+        for y in 0..h {
+            for x in 40..w {
+                img.channels[c][y * w + x] = 1.0;
+            }
+        }
+    }
+    // Streaks ≥ 8 px: shorter ones are dominated by the 1 px ramp that bilinear
+    // interpolation gives a pixel-sampled edge.
+    for (speed, lambda) in [(20.0f32, 0.5f32), (10.0, 1.0), (32.0, 0.25)] {
+        let out = add_motion_blur(&img, &Flow::uniform(w, h, speed, 0.0), lambda);
+        let row: Vec<f32> = (0..w).map(|x| out.channels[0][w + x]).collect();
+        let cross = |t: f32| {
+            let i = row.iter().position(|&v| v >= t).expect("edge");
+            (i - 1) as f32 + (t - row[i - 1]) / (row[i] - row[i - 1])
+        };
+        let width = cross(0.9) - cross(0.1);
+        let want = 0.8 * lambda * speed;
+        assert!((width - want).abs() < 0.1, "speed {speed} λ {lambda}: 10–90% width {width} vs {want}");
+    }
+}
+
+fn band_stds(p: &Plane) -> Vec<f64> {
+    let pyr = laplacian_pyramid(p, 4);
+    pyr.bands
+        .iter()
+        .map(|b| (b.data.iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / b.data.len() as f64).sqrt())
+        .collect()
+}
+
+/// Grain statistics on flat greys, for a noise spectrum far from white: the
+/// per-level stds of demosaic-like correlated noise (white noise blurred by a
+/// σ = 0.7 px Gaussian) become the model; the synthesised noise, re-analysed, must
+/// reproduce them per level — which is what the synthesis calibration is for.
+/// Tolerance 4%: at level 3 a 512² field has 64² samples per channel (≈1.1%
+/// standard error of a std), so 3.5 standard errors.
+#[test]
+fn noise_synthesis_matches_the_model_per_level() {
+    let n = 512;
+    let k = discrete_gaussian_kernel(0.49);
+    let truth: Vec<Vec<f64>> = (0..3u32)
+        .map(|c| {
+            let white = Plane::from_vec(
+                n,
+                n,
+                (0..n * n).map(|i| synth::gaussian((i % n) as u32, (i / n) as u32, c, 21)).collect(),
+            );
+            let mut b = blind_augment::image::blur_separable(&white, &k);
+            b.data.iter_mut().for_each(|v| *v *= 0.02 * (1.0 + c as f32 * 0.3));
+            band_stds(&b)
+        })
+        .collect();
+    let level = |l: usize| NoiseLevel { slope: [0.0; 3], intercept: std::array::from_fn(|c| truth[c][l] as f32) };
+    let noise = Noise {
+        present: true,
+        form: NoiseForm::LinearStd,
+        levels: (0..NOISE_LEVELS).map(level).collect(),
+        lowpass: None,
+        luminance_range: [0.0, 1.0],
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    let field = noise_field(&Plane::new(n, n, 0.4), &noise, 11);
+    for c in 0..3 {
+        let got = band_stds(&field.plane(c));
+        for l in 0..NOISE_LEVELS {
+            assert!((got[l] / truth[c][l] - 1.0).abs() < 0.04, "c {c} level {l}: {} vs {}", got[l], truth[c][l]);
+        }
+    }
+}
+
+/// A model round trip: the same seed gives the same frame, another seed another.
+#[test]
+fn synthesis_is_deterministic_per_seed() {
+    let img = photo("chelsea.png");
+    let mut model = CameraModel::empty(img.width as u32, img.height as u32);
+    model.noise = Noise {
+        present: true,
+        form: NoiseForm::AffineVariance,
+        levels: vec![NoiseLevel { slope: [1e-4; 3], intercept: [1e-5; 3] }; NOISE_LEVELS],
+        lowpass: None,
+        luminance_range: [0.0, 1.0],
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    let a = synth::apply_camera_model(&img, &model, None, None, 1);
+    let b = synth::apply_camera_model(&img, &model, None, None, 1);
+    let c = synth::apply_camera_model(&img, &model, None, None, 2);
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+}
