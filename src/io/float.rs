@@ -82,7 +82,7 @@ pub fn read_npy_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>), IoError> {
     }
     let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
     let dtype = npy.dtype();
-    let data: Vec<f32> = match dtype.descr().as_str() {
+    let data: Vec<f32> = match dtype.descr().trim_matches('\'') {
         "<f4" => npy.into_vec::<f32>().map_err(|e| fmt_err(path, e.to_string()))?,
         "<f8" => {
             npy.into_vec::<f64>().map_err(|e| fmt_err(path, e.to_string()))?.into_iter().map(|v| v as f32).collect()

@@ -1,0 +1,165 @@
+//! The camera-model schema (validation names the field) and the file formats
+//! (round trips, bit depths, errors naming the file).
+
+mod common;
+
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::io::{self, BitDepth};
+use blind_augment::model::*;
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("model_io");
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    dir.join(name)
+}
+
+fn sample_model() -> CameraModel {
+    let mut m = CameraModel::empty(640, 480);
+    m.reference.pixels_per_radian = Some(500.0);
+    m.reference.frame_interval_s = Some(1.0 / 30.0);
+    m.motion_blur = MotionBlur { present: true, exposure: Some(0.4), diagnostics: Diagnostics::not_fitted("x") };
+    m.depth_of_field = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 2.0, focus_depth: 1.5, c0: 0.1 }),
+        depth_range: [0.3, 5.0],
+        diagnostics: Diagnostics::not_fitted("x"),
+    };
+    m
+}
+
+#[test]
+fn json_round_trip_and_schema_tag() {
+    let m = sample_model();
+    let text = m.to_json().expect("valid");
+    assert!(text.contains("\"schema\": \"blind-augment/camera-model/1\""));
+    assert!(text.contains("\"form\": \"thin_lens\""));
+    assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
+}
+
+/// Each bad value is rejected with an error naming its field.
+#[test]
+fn validation_names_the_field() {
+    let good = serde_json::to_value(sample_model()).expect("serialises");
+    let cases: Vec<(&str, serde_json::Value, &str)> = vec![
+        ("/motion_blur/exposure", serde_json::json!(1.5), "motion_blur.exposure"),
+        ("/motion_blur/exposure", serde_json::json!(-0.1), "motion_blur.exposure"),
+        ("/schema", serde_json::json!("blind-augment/camera-model/0"), "schema"),
+        ("/noise/luminance_range", serde_json::json!([0.8, 0.2]), "noise.luminance_range"),
+        ("/depth_of_field/curve/k", serde_json::json!(-1.0), "depth_of_field.curve.k"),
+        ("/depth_of_field/curve/focus_depth", serde_json::json!(0.0), "depth_of_field.curve.focus_depth"),
+        ("/depth_of_field/depth_range", serde_json::json!([5.0, 0.3]), "depth_of_field.depth_range"),
+        ("/reference/frame_interval_s", serde_json::json!(0.0), "reference.frame_interval_s"),
+        ("/noise/levels/2/slope/1", serde_json::json!(5.0), "noise.levels[2]"),
+    ];
+    for (ptr, value, field) in cases {
+        let mut v = good.clone();
+        *v.pointer_mut(ptr).unwrap_or_else(|| panic!("pointer {ptr}")) = value;
+        let err = CameraModel::from_json(&v.to_string()).expect_err(ptr);
+        assert!(err.to_string().contains(field), "{ptr}: {err}");
+    }
+    // Three levels (the official code's layout) is not this schema.
+    let mut v = good.clone();
+    v["noise"]["levels"].as_array_mut().expect("array").pop();
+    assert!(CameraModel::from_json(&v.to_string()).expect_err("3 levels").to_string().contains("noise.levels"));
+    // NaN/Inf cannot be written in JSON; overflowing literals are parse errors.
+    let text = good.to_string().replace("0.4", "1e999");
+    assert!(matches!(CameraModel::from_json(&text), Err(ModelError::Parse(_))));
+    // Unknown fields are typos, not extensions.
+    let mut v = good.clone();
+    v["motion_blur"]["exposur"] = serde_json::json!(0.2);
+    assert!(CameraModel::from_json(&v.to_string()).is_err());
+}
+
+#[test]
+fn evaluation_clamps_to_the_fitted_range() {
+    let m = sample_model();
+    let d = &m.depth_of_field;
+    assert_eq!(d.sigma_px(100.0), d.sigma_px(5.0));
+    assert_eq!(d.sigma_px(0.01), d.sigma_px(0.3));
+    assert_eq!(d.sigma_px(f32::NAN), 0.0);
+    // The thin lens stays bounded where the quadratic would explode.
+    let quad = DofCurve::Quadratic { a: 1.0, b: 0.0, c: 0.0 };
+    assert_eq!(quad.sigma_px(DepthUnits::MetricM, 1e6), MAX_DOF_SIGMA_PX);
+}
+
+fn gradient(w: usize, h: usize) -> Rgb {
+    let mut img = Rgb::new(w, h, [0.0; 3]);
+    for c in 0..3 {
+        for i in 0..w * h {
+            img.channels[c][i] = ((i % w) as f32 / w as f32 + c as f32 * 0.1).min(1.0);
+        }
+    }
+    img
+}
+
+#[test]
+fn image_round_trips_keep_bit_depth_and_floats() {
+    let img = gradient(37, 11);
+    let p16 = tmp("g16.png");
+    io::save_rgb(&p16, &img, BitDepth::Sixteen).expect("write 16-bit");
+    let (back, depth) = io::load_rgb(&p16).expect("read");
+    assert_eq!(depth, BitDepth::Sixteen);
+    for (a, b) in back.channels[0].iter().zip(&img.channels[0]) {
+        assert!((a - b).abs() <= 0.5 / 65535.0 + 1e-7);
+    }
+    let p8 = tmp("g8.png");
+    io::save_rgb(&p8, &img, BitDepth::Eight).expect("write 8-bit");
+    assert_eq!(io::load_rgb(&p8).expect("read").1, BitDepth::Eight);
+    // Float formats: no clipping, no quantisation.
+    let hdr = img.map(|v| v * 3.0 - 1.0);
+    for name in ["f.npy", "f.pfm"] {
+        let p = tmp(name);
+        io::save_rgb(&p, &hdr, BitDepth::Float).expect("write float");
+        let (back, depth) = io::load_rgb(&p).expect("read float");
+        assert_eq!(depth, BitDepth::Float);
+        assert_eq!(back, hdr, "{name}");
+    }
+}
+
+#[test]
+fn depth_and_flow_round_trips() {
+    let mut depth = Plane::new(9, 4, 2.5);
+    depth.data[3] = 0.75;
+    for name in ["d.pfm", "d.npy"] {
+        let p = tmp(name);
+        io::save_depth(&p, &depth).expect("write");
+        assert_eq!(io::load_depth(&p, 1.0).expect("read"), depth);
+    }
+    let mut flow = Flow::uniform(9, 4, 1.5, -2.0);
+    flow.dx[5] = 7.25;
+    for name in ["f.flo", "f2.npy"] {
+        let p = tmp(name);
+        io::save_flow(&p, &flow).expect("write");
+        assert_eq!(io::load_flow(&p).expect("read"), flow);
+    }
+    // 16-bit PNG depth: scaled, 0 is invalid (NaN).
+    let png = tmp("d16.png");
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(2, 1, vec![0u16, 1500]).expect("buf").save(&png).expect("save");
+    let d = io::load_depth(&png, 0.001).expect("read");
+    assert!(d.data[0].is_nan() && (d.data[1] - 1.5).abs() < 1e-6);
+}
+
+#[test]
+fn bad_files_are_named_with_the_problem() {
+    let missing = tmp("does_not_exist.png");
+    let err = io::load_rgb(&missing).expect_err("missing");
+    assert!(err.to_string().contains("does_not_exist.png"), "{err}");
+    let trunc = tmp("trunc.flo");
+    std::fs::write(&trunc, [0u8; 6]).expect("write");
+    let err = io::load_flow(&trunc).expect_err("truncated");
+    assert!(err.to_string().contains("trunc.flo") && err.to_string().contains("magic"), "{err}");
+    let bad_pfm = tmp("bad.pfm");
+    std::fs::write(&bad_pfm, b"PF\n4 4\n-1.0\n\x00\x00").expect("write");
+    let err = io::load_depth(&bad_pfm, 1.0).expect_err("truncated pfm");
+    assert!(err.to_string().contains("bad.pfm"), "{err}");
+    let mut nan_flow = Flow::uniform(3, 3, 0.0, 0.0);
+    nan_flow.dx[4] = f32::NAN;
+    let p = tmp("nan.npy");
+    io::save_flow(&p, &nan_flow).expect("write");
+    let err = io::load_flow(&p).expect_err("nan");
+    assert!(err.to_string().contains("non-finite flow at x=1, y=1"), "{err}");
+    let ext = tmp("depth.txt");
+    std::fs::write(&ext, "1").expect("write");
+    assert!(io::load_depth(&ext, 1.0).expect_err("ext").to_string().contains("unsupported depth format"));
+}
