@@ -121,23 +121,24 @@ fn bench(cr: &mut Criterion) {
         let c = case(w, h);
         let mut g = cr.benchmark_group(format!("fit_{}", c.name));
         g.sample_size(20).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+        // Every benchmarked fit must succeed: timing an early error would be a lie.
         for (pool_name, pool) in [("1thread", &single), ("all_threads", &all)] {
             let label = if pool_name == "1thread" { pool_name.to_string() } else { format!("{threads}threads") };
             g.bench_function(BenchmarkId::new("noise_accurate", &label), |b| {
                 let inp = FitInputs { denoised: Some(&c.clean), ..inputs(&c, &c.noisy) };
-                b.iter(|| pool.install(|| fit(&inp, &only(true, false, false, Tier::Accurate))))
+                b.iter(|| pool.install(|| fit(&inp, &only(true, false, false, Tier::Accurate)).expect("fit")))
             });
             g.bench_function(BenchmarkId::new("motion_blur_accurate", &label), |b| {
                 let inp = FitInputs { motion_deblurred: Some(&c.clean), ..inputs(&c, &c.blurred_mb) };
-                b.iter(|| pool.install(|| fit(&inp, &only(false, true, false, Tier::Accurate))))
+                b.iter(|| pool.install(|| fit(&inp, &only(false, true, false, Tier::Accurate)).expect("fit")))
             });
             g.bench_function(BenchmarkId::new("dof_accurate", &label), |b| {
                 let inp = FitInputs { defocus_deblurred: Some(&c.clean), ..inputs(&c, &c.blurred_dof) };
-                b.iter(|| pool.install(|| fit(&inp, &only(false, false, true, Tier::Accurate))))
+                b.iter(|| pool.install(|| fit(&inp, &only(false, false, true, Tier::Accurate)).expect("fit")))
             });
             g.bench_function(BenchmarkId::new("fast_all_effects", &label), |b| {
                 let inp = inputs(&c, &c.all);
-                b.iter(|| pool.install(|| fit(&inp, &only(true, true, true, Tier::Fast))))
+                b.iter(|| pool.install(|| fit(&inp, &only(true, true, true, Tier::Fast)).expect("fit")))
             });
         }
         g.finish();

@@ -3,7 +3,7 @@
 //! to its error against known truth on the vendored photographs. Prints Markdown
 //! tables for BENCHMARKS.md. Run: `cargo bench --bench quality`.
 
-use blind_augment::fit::{fit, Effects, FitInputs, FitOptions};
+use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::model::*;
 use blind_augment::synth;
@@ -173,5 +173,78 @@ fn main() {
         }
         let hand = handoff.map_or("none (full res)".to_string(), |h| format!("{h}"));
         println!("| {spacing} | {hand} | {} | {} | {ms_strong:.1} |", cells[0], cells[1]);
+    }
+
+    // Where the time goes at the defaults: the fits' own stage timers (median of 7).
+    println!("\n### Stage breakdown at the defaults (512×512, one thread, ms)\n\n| fit | blur | search | least squares | total |\n|---|---|---|---|---|");
+    let fits: Vec<(&str, FitInputs, FitOptions)> = vec![
+        (
+            "noise, accurate",
+            FitInputs { denoised: Some(&img), ..base(&noisy) },
+            FitOptions {
+                effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
+                ..Default::default()
+            },
+        ),
+        (
+            "motion blur, accurate",
+            FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..base(&blurred[2]) },
+            FitOptions {
+                effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+                ..Default::default()
+            },
+        ),
+        (
+            "depth of field, accurate",
+            FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..base(&frames[1]) },
+            FitOptions {
+                effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
+                ..Default::default()
+            },
+        ),
+        (
+            "noise, fast",
+            base(&noisy),
+            FitOptions {
+                tier: Some(Tier::Fast),
+                effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
+                ..Default::default()
+            },
+        ),
+        (
+            "motion blur, fast",
+            FitInputs { flow: Some(&flow), ..base(&blurred[2]) },
+            FitOptions {
+                tier: Some(Tier::Fast),
+                effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+                ..Default::default()
+            },
+        ),
+        (
+            "depth of field, fast",
+            FitInputs { depth: Some(&depth), ..base(&frames[1]) },
+            FitOptions {
+                tier: Some(Tier::Fast),
+                effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
+                ..Default::default()
+            },
+        ),
+    ];
+    for (name, inp, opts) in fits {
+        let mut runs: Vec<(f64, std::collections::BTreeMap<String, f64>)> = (0..7)
+            .map(|_| {
+                let m = pool.install(|| fit(&inp, &opts).expect("fit")).model;
+                let d = [&m.noise.diagnostics, &m.motion_blur.diagnostics, &m.depth_of_field.diagnostics]
+                    .into_iter()
+                    .find(|d| d.status != Status::NotFitted)
+                    .expect("one effect fitted")
+                    .clone();
+                (d.fit_time_s, d.stages_s)
+            })
+            .collect();
+        runs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (total, stages) = &runs[3];
+        let ms = |k: &str| stages.get(k).map_or("–".to_string(), |v| format!("{:.1}", v * 1e3));
+        println!("| {name} | {} | {} | {} | {:.1} |", ms("blur"), ms("search"), ms("least_squares"), total * 1e3);
     }
 }

@@ -210,6 +210,22 @@ fn mismatched_sizes_and_missing_references_are_named() {
     assert!(matches!(fit(&bare(&empty), &FitOptions::default()), Err(FitError::Empty { .. })));
 }
 
+/// Forcing the accurate tier only requires the references of the effects asked for.
+#[test]
+fn accurate_tier_needs_only_the_requested_references() {
+    let img = photo("chelsea.png");
+    let flow = Flow::uniform(img.width, img.height, 4.0, 1.0);
+    let blurred = quantize8(&add_motion_blur(&img, &flow, 0.5));
+    let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..bare(&blurred) };
+    let opts = FitOptions {
+        tier: Some(Tier::Accurate),
+        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+        ..Default::default()
+    };
+    let mb = fit(&inp, &opts).expect("no other reference needed").model.motion_blur;
+    assert!((mb.exposure.expect("identifiable") - 0.5).abs() < 0.01);
+}
+
 #[test]
 fn depth_with_only_invalid_values_is_not_identifiable() {
     let img = photo("chelsea.png");

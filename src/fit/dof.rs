@@ -74,6 +74,7 @@ fn finish(
     s: Vec<f32>,
     units: DepthUnits,
     started: Instant,
+    mut st: super::Stages,
     residual_at: impl Fn(&DepthOfField) -> Option<(f64, f64)>,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let n = z.len();
@@ -84,6 +85,7 @@ fn finish(
         return (DepthOfField::absent(units, d), None);
     }
     let range = depth_range(&z);
+    st.lap("search");
     let Some(fit) = fit_dof_curve(&z, &s, units, range) else {
         let mut d = super::not_identifiable(method, "robust depth-model fit failed (degenerate design)", started);
         d.samples_used = n as u64;
@@ -99,6 +101,7 @@ fn finish(
     let max_sigma =
         (0..=64).map(|i| dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0)).fold(0.0f32, f32::max);
     let present = max_sigma >= 0.1 && (max_sigma as f64) > 3.0 * fit.stderr_px;
+    st.lap("least_squares");
     let residuals = residual_at(&dof);
     let form = match fit.curve {
         crate::model::DofCurve::Quadratic { .. } => "quadratic",
@@ -120,6 +123,7 @@ fn finish(
         samples_used: n as u64,
         fit_time_s: started.elapsed().as_secs_f64(),
         stderr: Some(fit.stderr_px),
+        stages_s: st.done(),
     };
     let plot = DofPlotData { depth: z, sigma_px: s, quadratic: fit.quadratic, thin_lens: fit.thin_lens };
     (dof, Some(plot))
@@ -183,6 +187,7 @@ pub fn fit_accurate(
     opts: &super::FitOptions,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
+    let mut st = super::Stages::start();
     let (yi, ys) = (image.luma(), sharp.luma());
     let grad = gradient_sq(&ys);
     let (w, h) = (yi.width, yi.height);
@@ -267,6 +272,7 @@ pub fn fit_accurate(
             }
         }
     }
+    st.lap("blur");
     // Residual and best blend of sample s in interval k of a level.
     let eval = |lv: &(f32, usize, IntervalStats), s: usize, k: usize, wgt: Option<f32>| -> (f32, f32) {
         let (lo, intervals, st) = lv;
@@ -317,7 +323,7 @@ pub fn fit_accurate(
         let m = (9 * n).max(1) as f64;
         Some((before / m, after / m))
     };
-    finish("accurate", zs.clone(), sig, units, started, residual_at)
+    finish("accurate", zs.clone(), sig, units, started, st, residual_at)
 }
 
 /// Raw Zhuo–Sim estimate → true σ, from a 1-D simulation (see module docs).
@@ -392,8 +398,10 @@ pub fn fit_fast(
     opts: &super::FitOptions,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
+    let mut st = super::Stages::start();
     let y = image.luma();
     let re = blur_separable(&y, &discrete_gaussian_kernel(ZS_SIGMA0 * ZS_SIGMA0));
+    st.lap("blur");
     let (w, h) = (y.width, y.height);
     let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {
         (0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy)), 0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1)))
@@ -437,5 +445,5 @@ pub fn fit_fast(
             zs.push(z);
         }
     }
-    finish("fast", zs, sig, units, started, |_| None)
+    finish("fast", zs, sig, units, started, st, |_| None)
 }

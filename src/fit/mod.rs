@@ -210,6 +210,29 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     Ok(())
 }
 
+/// Stage timer for `Diagnostics::stages_s`: `lap(name)` adds the time since the
+/// previous lap to `name` (stages may recur, e.g. per pyramid level).
+pub(crate) struct Stages {
+    last: Instant,
+    map: std::collections::BTreeMap<String, f64>,
+}
+
+impl Stages {
+    pub(crate) fn start() -> Self {
+        Self { last: Instant::now(), map: Default::default() }
+    }
+
+    pub(crate) fn lap(&mut self, name: &str) {
+        let now = Instant::now();
+        *self.map.entry(name.to_string()).or_insert(0.0) += (now - self.last).as_secs_f64();
+        self.last = now;
+    }
+
+    pub(crate) fn done(self) -> std::collections::BTreeMap<String, f64> {
+        self.map
+    }
+}
+
 /// Which tier an effect runs at, or the missing-reference error.
 fn tier_for(
     opts: &FitOptions,
@@ -235,6 +258,7 @@ fn not_identifiable(method: &str, reason: impl Into<String>, started: Instant) -
         samples_used: 0,
         fit_time_s: started.elapsed().as_secs_f64(),
         stderr: None,
+        stages_s: Default::default(),
     }
 }
 
@@ -327,9 +351,18 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
 
     // The three effects are independent: fit them concurrently (rayon::join), so
     // the wall time on several cores is the slowest effect, not the sum.
-    let noise_tier = tier_for(opts, inp.denoised, "noise", "denoised")?;
-    let mb_tier = tier_for(opts, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
-    let dof_tier = tier_for(opts, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
+    // Tiers (and missing-reference errors) only for the effects asked for.
+    let fx = opts.effects;
+    let tier = |wanted: bool, r: Option<&Rgb>, effect, input| {
+        if wanted {
+            tier_for(opts, r, effect, input)
+        } else {
+            Ok(Tier::Fast)
+        }
+    };
+    let noise_tier = tier(fx.noise, inp.denoised, "noise", "denoised")?;
+    let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
+    let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
     let ((noise, mb), dof) = rayon::join(
         || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier)),
         || fit_depth_of_field(inp, opts, dof_tier),

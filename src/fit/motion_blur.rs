@@ -22,6 +22,10 @@ use std::time::Instant;
 
 const PROFILE_SPACING_PX: f32 = 0.2;
 const MIN_SAMPLES: usize = 64;
+/// Blind tier: pixels (each with 4 profiles) and interleaved subsets for the
+/// standard error.
+const FAST_SAMPLES: usize = 4096;
+const FAST_SUBSETS: usize = 4;
 /// Default pixel budget of the accurate fit. Measured at 512² (BENCHMARKS.md):
 /// 2048 to 32768 samples all give a median |λ error| below 0.001; 4096 keeps a 2×
 /// margin over the smallest for frames with less texture, at 6 ms instead of 19.
@@ -178,6 +182,7 @@ fn decide(
             samples_used: n as u64,
             fit_time_s: started.elapsed().as_secs_f64(),
             stderr: Some(stderr),
+            stages_s: Default::default(),
         },
     }
 }
@@ -185,7 +190,9 @@ fn decide(
 /// Accurate tier: I, I_noMB and F.
 pub fn fit_accurate(image: &Rgb, sharp: &Rgb, flow: &Flow, max_samples: usize) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
+    let mut st = super::Stages::start();
     let prof = build_profiles(&image.luma(), &sharp.luma(), flow, max_samples);
+    st.lap("blur");
     let n = prof.len();
     if n < MIN_SAMPLES {
         let reason = format!(
@@ -209,11 +216,14 @@ pub fn fit_accurate(image: &Rgb, sharp: &Rgb, flow: &Flow, max_samples: usize) -
         }
     }
     let after = prof.loss(lambda);
+    st.lap("search");
     let eps = 1e-3f32;
     let (l0, l1) = ((lambda - eps).max(0.0), (lambda + eps).min(1.0));
     let jj: f64 = (0..n).map(|i| ((prof.blurred(i, l1) - prof.blurred(i, l0)) / (l1 - l0)) as f64).map(|j| j * j).sum();
     let stderr = if jj > 0.0 { (after * n as f64 / (n as f64 - 1.0) / jj).sqrt() } else { 1.0 };
-    let mb = decide("accurate", lambda, stderr, Some((losses[0], after)), n, started);
+    st.lap("least_squares");
+    let mut mb = decide("accurate", lambda, stderr, Some((losses[0], after)), n, started);
+    mb.diagnostics.stages_s = st.done();
     (mb, Some(MbPlotData { lambdas, losses, estimate: Some(lambda) }))
 }
 
@@ -247,9 +257,10 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
 /// pixel. Isotropic blur (DoF, optics) cancels out. Anisotropic scenes (all edges
 /// parallel) bias it; sample pixels are picked by gradient *magnitude* only, so the
 /// selection does not prefer any direction. Standard error: spread of the root over
-/// 8 interleaved subsets / √8.
+/// `FAST_SUBSETS` interleaved subsets / √subsets.
 pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
+    let mut st = super::Stages::start();
     let y = image.luma();
     let (w, h) = (y.width, y.height);
     let mut cand = vec![];
@@ -268,7 +279,7 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
             }
         }
     }
-    let keep = cand.len().div_ceil(8192).max(1);
+    let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
     // Per sample: profiles along v (length |F|) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
     for &(px, py) in cand.iter().step_by(keep) {
@@ -283,6 +294,7 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
         }
         prof.target.push(0.0);
     }
+    st.lap("blur");
     let n = prof.len();
     if n < MIN_SAMPLES {
         let reason = format!(
@@ -310,7 +322,8 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
             return 1.0;
         }
         let (mut lo, mut hi) = (0.0f32, 1.0f32);
-        for _ in 0..20 {
+        // 14 halvings: λ to 6e-5, far below the estimator's spread.
+        for _ in 0..14 {
             let mid = 0.5 * (lo + hi);
             if imbalance(mid, subset, of) < 0.0 {
                 lo = mid;
@@ -321,8 +334,12 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
         0.5 * (lo + hi)
     };
     let lambda = root(0, 1);
-    let parts: Vec<f64> = (0..8).map(|k| root(k, 8) as f64).collect();
-    let mean = parts.iter().sum::<f64>() / 8.0;
-    let stderr = (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / 7.0).sqrt() / 8f64.sqrt();
-    (decide("fast", lambda, stderr, None, n, started), None)
+    let parts: Vec<f64> = (0..FAST_SUBSETS).map(|k| root(k, FAST_SUBSETS) as f64).collect();
+    let k = FAST_SUBSETS as f64;
+    let mean = parts.iter().sum::<f64>() / k;
+    let stderr = (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt();
+    st.lap("search");
+    let mut mb = decide("fast", lambda, stderr, None, n, started);
+    mb.diagnostics.stages_s = st.done();
+    (mb, None)
 }

@@ -453,6 +453,7 @@ fn finish(
             samples_used: n_used as u64,
             fit_time_s: started.elapsed().as_secs_f64(),
             stderr: Some(if rel.is_finite() { rel } else { 1.0 }),
+            stages_s: Default::default(),
         },
         ..noise
     }
@@ -484,6 +485,7 @@ fn luma_range(samples: &LevelSamples) -> [f32; 2] {
 /// Accurate tier: I and I_noNoise.
 pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
     let started = Instant::now();
+    let mut st = super::Stages::start();
     let residual = Rgb {
         width: image.width,
         height: image.height,
@@ -493,7 +495,9 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
     };
     let bands = pyramids(&residual);
     let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
+    st.lap("blur");
     let samples = collect_samples(&bands, &luma, &clip_mask(image), opts.noise_stride_px);
+    st.lap("search");
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).
     let usable = if samples[NOISE_LEVELS].y.is_empty() { NOISE_LEVELS } else { NOISE_LEVELS + 1 };
@@ -503,8 +507,11 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
         .map(|s| LevelPoints { y: s.y.clone(), y2: s.y2.clone(), var: s.var.clone(), weights: None })
         .collect();
     let fitted = if points.iter().all(|p| !p.y.is_empty()) { fit_levels(&points) } else { None };
+    st.lap("least_squares");
     let range = luma_range(&samples[0]);
-    (finish("accurate", started, fitted, &samples, range, true), plot_data(&points))
+    let mut noise = finish("accurate", started, fitted, &samples, range, true);
+    noise.diagnostics.stages_s = st.done();
+    (noise, plot_data(&points))
 }
 
 /// Median / mean of level-0 local variances (9×9, σ = 4 window) of white noise:
@@ -546,6 +553,7 @@ fn white_noise_median_to_mean() -> f32 {
 /// assumption (ISP-correlated noise breaks it) stated in the README.
 pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
     let started = Instant::now();
+    let mut st = super::Stages::start();
     let _ = opts;
     // Only level 0 of each channel is needed: band = x − expand(reduce(x)).
     let bands: Vec<Plane> =
@@ -559,6 +567,7 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
     for (b, g) in band2.data.iter_mut().zip(&gp[2].data) {
         *b = g - *b;
     }
+    st.lap("blur");
     // About 20 000 grid points whatever the frame size (4 px at 512², 8 px at 1280×960).
     let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as usize).max(BLIND_STRIDE_PX);
     let clip = clip_mask(image);
@@ -576,6 +585,7 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
             pts.push((local_mean(&luma0, x, y, &win0), local_mean_sq(&luma0, x, y, &win0), structure, v));
         }
     }
+    st.lap("search");
     let median_to_mean = white_noise_median_to_mean();
     let (mut ys, mut y2s, mut vs, mut ws) = (vec![], vec![], [vec![], vec![], vec![]], vec![]);
     for b in 0..BLIND_BINS {
@@ -641,7 +651,9 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
         [lo, hi.max(lo)]
     };
     let level0 = LevelSamples { y: y.clone(), y2: points[0].y2.clone(), var: points[0].var.clone() };
+    st.lap("least_squares");
     let mut noise = finish("fast", started, fitted, &[level0], range, false);
     noise.diagnostics.samples_used = samples_used as u64;
+    noise.diagnostics.stages_s = st.done();
     (noise, plot_data(&points))
 }

@@ -164,6 +164,10 @@ pub struct Diagnostics {
     /// One-sigma uncertainty of the headline parameter (λ; δ RMS over the range in px;
     /// relative std of the level-0 noise std at mid-range luma).
     pub stderr: Option<f64>,
+    /// Wall time of the fit's stages in seconds (e.g. "blur", "search",
+    /// "least_squares"), for profiling; empty when not measured.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub stages_s: std::collections::BTreeMap<String, f64>,
 }
 
 impl Diagnostics {
@@ -186,6 +190,7 @@ impl Diagnostics {
             samples_used: 0,
             fit_time_s: 0.0,
             stderr: None,
+            stages_s: Default::default(),
         }
     }
 }

@@ -1,1 +1,54 @@
-fn main() {}
+//! Project automation (`cargo xtask <command>`), so CI and developers need nothing
+//! but cargo: `bench` runs every benchmark and keeps the raw output for
+//! BENCHMARKS.md; `ci` runs the same checks as `.ci/run` minus the installs.
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."))
+}
+
+fn cargo(args: &[&str]) -> Result<String> {
+    eprintln!("$ cargo {}", args.join(" "));
+    let out = Command::new(env!("CARGO"))
+        .args(args)
+        .current_dir(root())
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .with_context(|| format!("running cargo {}", args.join(" ")))?;
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    print!("{stdout}");
+    if !out.status.success() {
+        bail!("cargo {} failed with {}", args.join(" "), out.status);
+    }
+    Ok(stdout)
+}
+
+fn bench() -> Result<()> {
+    let dir = root().join("target/bench");
+    std::fs::create_dir_all(&dir).context("creating target/bench")?;
+    let quality = cargo(&["bench", "--bench", "quality"])?;
+    std::fs::write(dir.join("quality.md"), quality).context("writing target/bench/quality.md")?;
+    let fit = cargo(&["bench", "--bench", "fit"])?;
+    std::fs::write(dir.join("fit.txt"), fit).context("writing target/bench/fit.txt")?;
+    eprintln!("raw results in {}; copy the figures into BENCHMARKS.md", dir.display());
+    Ok(())
+}
+
+fn ci() -> Result<()> {
+    cargo(&["fmt", "--all", "--", "--check"])?;
+    cargo(&["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"])?;
+    cargo(&["test", "--workspace"])?;
+    cargo(&["check", "--target", "aarch64-linux-android", "--lib"])?;
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    match std::env::args().nth(1).as_deref() {
+        Some("bench") => bench(),
+        Some("ci") => ci(),
+        other => bail!("usage: cargo xtask <bench|ci> (got {other:?})"),
+    }
+}
