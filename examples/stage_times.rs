@@ -42,13 +42,15 @@ fn main() {
             .install(|| fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: effects(), ..Default::default() }))
             .expect("fit");
         let m = &out.model;
-        println!(
-            "total {:.1} ms: noise {:.1}, mb {:.1}, dof {:.1}",
-            t.elapsed().as_secs_f64() * 1e3,
-            m.noise.diagnostics.fit_time_s * 1e3,
-            m.motion_blur.diagnostics.fit_time_s * 1e3,
-            m.depth_of_field.diagnostics.fit_time_s * 1e3
-        );
+        println!("total {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        for (name, d) in [
+            ("noise", &m.noise.diagnostics),
+            ("mb", &m.motion_blur.diagnostics),
+            ("dof", &m.depth_of_field.diagnostics),
+        ] {
+            let stages: Vec<String> = d.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect();
+            println!("  {name}: {:.1} ms [{}]", d.fit_time_s * 1e3, stages.join(", "));
+        }
     }
 }
 

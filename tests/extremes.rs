@@ -126,7 +126,7 @@ fn saturated_and_black_regions_are_excluded() {
     .expect("valid")
     .model
     .noise;
-    assert!(noise.present);
+    assert!(noise.present, "{:?}", noise.diagnostics);
     assert!(noise.luminance_range[1] < 0.99 && noise.luminance_range[0] > 0.0, "{:?}", noise.luminance_range);
     let f = noise_field(&Plane::new(256, 256, 0.5), &noise, 1);
     let s = (f.channels[1].iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / f.channels[1].len() as f64).sqrt();

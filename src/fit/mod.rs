@@ -299,7 +299,7 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     }
     let (noise, data) = match (tier, inp.denoised) {
         (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, opts),
-        _ => noise::fit_fast(inp.image, opts),
+        _ => noise::fit_fast(inp.image),
     };
     (noise, Some(data))
 }

@@ -316,7 +316,7 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
 /// (dark, ≤ 0.1). This finds 8-bit 255s, 16-bit 65535s and float frames clipped at
 /// any white level, while unclipped float frames (over- and undershoot included)
 /// have no repeated extreme and lose nothing.
-fn clip_mask(img: &Rgb) -> ClipMask {
+fn clip_mask(img: &Rgb, block: usize) -> ClipMask {
     let n = img.len();
     let min_count = (n / 2000).max(2);
     // One pass per channel: extremes and how often each occurs.
@@ -343,27 +343,38 @@ fn clip_mask(img: &Rgb) -> ClipMask {
     if limits.iter().all(|l| l.0.is_none() && l.1.is_none()) {
         return ClipMask(None);
     }
-    let data = (0..n)
-        .map(|i| {
-            let clipped = (0..3).any(|c| {
-                let v = img.channels[c][i];
-                limits[c].0 == Some(v) || limits[c].1 == Some(v)
-            });
-            clipped as u8 as f32
-        })
-        .collect();
-    ClipMask(Some(IntegralImage::new(&Plane::from_vec(img.width, img.height, data))))
+    // Mark block×block tiles holding any clipped pixel; footprint tests then run on
+    // the tile grid (conservative by up to one tile). The accurate tier uses 1 (exact),
+    // the blind tier 8 (a 1/64-size table; it can afford to lose border samples).
+    let (bw, bh) = (img.width.div_ceil(block), img.height.div_ceil(block));
+    let mut blocks = Plane::new(bw, bh, 0.0);
+    for i in 0..n {
+        let clipped = (0..3).any(|c| {
+            let v = img.channels[c][i];
+            limits[c].0 == Some(v) || limits[c].1 == Some(v)
+        });
+        if clipped {
+            let (x, y) = (i % img.width, i / img.width);
+            blocks.data[(y / block) * bw + x / block] = 1.0;
+        }
+    }
+    ClipMask(Some((IntegralImage::new(&blocks), block)))
 }
 
-/// Clipped-pixel counts over boxes; `None` when the frame has no clipping at all.
-struct ClipMask(Option<IntegralImage>);
+/// Clipped-tile counts over boxes (and the tile size); `None` when the frame has no
+/// clipping at all.
+struct ClipMask(Option<(IntegralImage, usize)>);
 
 impl ClipMask {
-    /// Whether any clipped pixel lies within `r` of (x, y) (level-0 coordinates).
+    /// Whether any clipped pixel may lie within `r` of (x, y) (level-0 pixels):
+    /// the box is widened to whole tiles, so the test errs on the safe side.
     fn touches(&self, x: usize, y: usize, r: usize) -> bool {
         match &self.0 {
             None => false,
-            Some(ii) => ii.box_sum(x.min(ii.width() - 1), y.min(ii.height() - 1), r) > 0.0,
+            Some((ii, block)) => {
+                let (bx, by) = ((x / block).min(ii.width() - 1), (y / block).min(ii.height() - 1));
+                ii.box_sum(bx, by, r.div_ceil(*block)) > 0.0
+            }
         }
     }
 }
@@ -496,7 +507,7 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
     let bands = pyramids(&residual);
     let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
     st.lap("blur");
-    let samples = collect_samples(&bands, &luma, &clip_mask(image), opts.noise_stride_px);
+    let samples = collect_samples(&bands, &luma, &clip_mask(image, 1), opts.noise_stride_px);
     st.lap("search");
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).
@@ -551,10 +562,9 @@ fn white_noise_median_to_mean() -> f32 {
 /// level-0 variance the way picking the lowest variances would. Levels 1–3 follow
 /// from level 0 by the white-noise band ratios c_l/c_0 (`synth::unit_band_std`): an
 /// assumption (ISP-correlated noise breaks it) stated in the README.
-pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
+pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let _ = opts;
     // Only level 0 of each channel is needed: band = x − expand(reduce(x)).
     let bands: Vec<Plane> =
         (0..3).into_par_iter().map(|c| laplacian_pyramid(&image.plane(c), 1).bands.swap_remove(0)).collect();
@@ -570,19 +580,20 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
     st.lap("blur");
     // About 20 000 grid points whatever the frame size (4 px at 512², 8 px at 1280×960).
     let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as usize).max(BLIND_STRIDE_PX);
-    let clip = clip_mask(image);
+    let clip = clip_mask(image, 8);
     let win0 = window(0);
     let win2 = window(2);
-    // (B(Y), B(Y²), structure, var r, g, b) at level-0 grid points, unclipped footprints.
-    let mut pts: Vec<(f32, f32, f32, [f32; 3])> = vec![];
+    // Phase 1, cheap: (B(Y), B(Y²), structure) at level-0 grid points with
+    // unclipped footprints. Phase 2 computes the three channel variances only for
+    // the flattest BLIND_FLAT_FRACTION of each luma bin.
+    let mut pts: Vec<(usize, usize, f32, f32, f32)> = vec![];
     for y in grid(image.height, stride0) {
         for x in grid(image.width, stride0) {
             if clip.touches(x, y, 5 * 4 + 8) {
                 continue;
             }
             let structure = local_mean_sq(&band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
-            let v = std::array::from_fn(|c| local_mean_sq(&bands[c], x, y, &win0));
-            pts.push((local_mean(&luma0, x, y, &win0), local_mean_sq(&luma0, x, y, &win0), structure, v));
+            pts.push((x, y, local_mean(&luma0, x, y, &win0), local_mean_sq(&luma0, x, y, &win0), structure));
         }
     }
     st.lap("search");
@@ -590,18 +601,18 @@ pub fn fit_fast(image: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData)
     let (mut ys, mut y2s, mut vs, mut ws) = (vec![], vec![], [vec![], vec![], vec![]], vec![]);
     for b in 0..BLIND_BINS {
         let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
-        let mut bin: Vec<&(f32, f32, f32, [f32; 3])> = pts.iter().filter(|p| p.0 >= lo && p.0 < hi).collect();
+        let mut bin: Vec<&(usize, usize, f32, f32, f32)> = pts.iter().filter(|p| p.2 >= lo && p.2 < hi).collect();
         if bin.len() < BLIND_MIN_PER_BIN {
             continue;
         }
-        bin.sort_by(|a, b| a.2.total_cmp(&b.2));
+        bin.sort_by(|a, b| a.4.total_cmp(&b.4));
         let flat = &bin[..(bin.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize];
         let n = flat.len() as f32;
-        ys.push(flat.iter().map(|p| p.0).sum::<f32>() / n);
-        y2s.push(flat.iter().map(|p| p.1).sum::<f32>() / n);
+        ys.push(flat.iter().map(|p| p.2).sum::<f32>() / n);
+        y2s.push(flat.iter().map(|p| p.3).sum::<f32>() / n);
         ws.push(n);
         for c in 0..3 {
-            let mut v: Vec<f32> = flat.iter().map(|p| p.3[c]).collect();
+            let mut v: Vec<f32> = flat.iter().map(|p| local_mean_sq(&bands[c], p.0, p.1, &win0)).collect();
             vs[c].push(percentile(&mut v, 0.5) / median_to_mean);
         }
     }
