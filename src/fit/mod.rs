@@ -63,7 +63,8 @@ pub struct FitOptions {
     /// `None`: accurate where the effect's reference image is given, fast otherwise.
     pub tier: Option<Tier>,
     pub effects: Effects,
-    /// Noise sample stride at level 0 in pixels, halved per level (paper: 32).
+    /// Largest noise sample stride at level 0 in pixels, halved per level (paper: 32);
+    /// small frames use a finer one to keep ~1000 samples.
     pub noise_stride_px: usize,
     /// DoF stack node spacing for the per-pixel σ search, px.
     pub dof_node_spacing_px: f32,

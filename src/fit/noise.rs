@@ -33,10 +33,18 @@ use crate::model::{Diagnostics, Noise, NoiseForm, NoiseLevel, Status, NOISE_LEVE
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Sample stride at level 0, halved per level. Measured at 512² (BENCHMARKS.md):
-/// the paper's 32 gives a 0.44% median but 1.7% worst-luma error of synth's std;
-/// 16 keeps the worst case at 0.55% for 2.5 ms more; 8 and 4 buy nothing further.
+/// Largest sample stride at level 0, halved per level. Measured at 512²
+/// (BENCHMARKS.md): the paper's 32 gives a 0.4% median but 1.9% worst-luma error of
+/// synth's std; 16 keeps the worst case at 0.8% for 3 ms more; 8 and 4 buy nothing.
 pub const DEFAULT_STRIDE_PX: usize = 16;
+
+/// The stride actually used: at most `max_stride`, and small enough that a frame
+/// keeps ≥ ~1000 level-0 samples (√(pixels/1000), at least 4). At 512² and above
+/// that is `max_stride`; a 451×300 frame gets 11 (its error at 16 px: 1.3%, at
+/// 11 px: see tests/validation.rs).
+fn effective_stride(pixels: usize, max_stride: usize) -> usize {
+    (((pixels as f64 / 1000.0).sqrt()) as usize).clamp(4.min(max_stride), max_stride.max(1))
+}
 const BLIND_FLAT_FRACTION: f64 = 0.2;
 /// The blind tier's finest level-0 grid: only 20% of its samples are kept (the
 /// flattest), so it samples denser than the accurate tier.
@@ -186,7 +194,8 @@ fn ols(y: &[f32], v: &[f32], wts: Option<&[f32]>) -> Option<(f64, f64, f64, [[f6
         (sv / sw, 0.0)
     };
     let ssr: f64 = (0..n).map(|i| wts.map_or(1.0, |w| w[i] as f64) * (v[i] as f64 - a - b * y[i] as f64).powi(2)).sum();
-    let s2 = ssr / (n as f64 - 2.0).max(1.0) / (sw / n as f64);
+    // Weighted LS: Cov(β) = (Σ w r² / (n − 2)) · (XᵀWX)⁻¹, for weights of any scale.
+    let s2 = ssr / (n as f64 - 2.0).max(1.0);
     let cov = if n >= 4 && det.abs() > 1e-12 * sw * sw {
         [[s2 * syy / det, -s2 * sy / det], [-s2 * sy / det, s2 * sw / det]]
     } else {
@@ -507,7 +516,8 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
     let bands = pyramids(&residual);
     let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
     st.lap("blur");
-    let samples = collect_samples(&bands, &luma, &clip_mask(image, 1), opts.noise_stride_px);
+    let stride = effective_stride(image.len(), opts.noise_stride_px);
+    let samples = collect_samples(&bands, &luma, &clip_mask(image, 1), stride);
     st.lap("search");
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).

@@ -196,11 +196,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let resynth_fast = quantize8(&synth::apply_camera_model(&clean, &fast_out.model, Some(&disparity), Some(&flow), 2));
     io::save_rgb(&out.join("clean.png"), &clean, BitDepth::Eight)?;
     io::save_rgb(&out.join("distorted.png"), &i_all, BitDepth::Eight)?;
-    io::save_rgb(
-        &out.join("depth_disparity.pfm"),
-        &Rgb::from_planes([disparity.clone(), disparity.clone(), disparity.clone()]),
-        BitDepth::Float,
-    )?;
+    io::save_depth(&out.join("depth_disparity.pfm"), &disparity)?;
     io::save_flow(&out.join("flow.flo"), &flow)?;
     let sbs = side_by_side(&[&clean, &i_all, &resynth_acc, &resynth_fast]);
     io::save_rgb(&out.join("side_by_side.png"), &sbs, BitDepth::Eight)?;
