@@ -1,15 +1,17 @@
 //! blind-augment: blind estimation of a camera's noise, motion blur and depth of
 //! field (Prakash et al., "Blind Augmentation", TVCG 2025) and their CPU reference
 //! synthesis. See ARCHITECTURE.md for the module map and invariants.
-// The CPU core has no `unsafe`; only `gpu` and `xr` (to come) may opt out, per module.
+// The CPU core has no `unsafe`; only `gpu` (and `xr`, to come) opt out, per module.
 #![deny(unsafe_code)]
 // Numeric kernels index several parallel arrays (channels, levels, samples) with one
 // index; iterator zips of four slices read worse than the index they replace.
 #![allow(clippy::needless_range_loop)]
 
 pub mod fit;
+pub mod gpu;
 pub mod image;
 pub mod io;
 pub mod model;
 pub mod plots;
+pub mod render;
 pub mod synth;

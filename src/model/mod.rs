@@ -17,6 +17,12 @@ pub const NOISE_LEVELS: usize = 4;
 /// Largest DoF blur std the estimators search and the model may express, in
 /// reference pixels (the paper searches [0, 10]).
 pub const MAX_DOF_SIGMA_PX: f32 = 10.0;
+/// Motion blur is defined as the exposure-window line integral sampled by the
+/// trapezoid rule with nodes at most this far apart (px) ...
+pub const MB_MAX_SAMPLE_SPACING_PX: f32 = 0.1;
+/// ... and at least this many intervals per pixel. Both the CPU reference
+/// (`synth`) and the GPU pass (`render`) read these, so they define one effect.
+pub const MB_MIN_INTERVALS: u32 = 8;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

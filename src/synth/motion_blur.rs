@@ -10,7 +10,7 @@
 use crate::image::{Flow, Rgb};
 use rayon::prelude::*;
 
-pub const MB_MAX_SAMPLE_SPACING_PX: f32 = 0.1;
+pub use crate::model::{MB_MAX_SAMPLE_SPACING_PX, MB_MIN_INTERVALS};
 
 /// Apply motion blur with exposure `lambda` ∈ [0, 1] (clamped; non-finite → 0).
 pub fn add_motion_blur(sharp: &Rgb, flow: &Flow, lambda: f32) -> Rgb {
@@ -36,7 +36,7 @@ pub fn add_motion_blur(sharp: &Rgb, flow: &Flow, lambda: f32) -> Rgb {
                     }
                     continue;
                 }
-                let intervals = ((streak_px / MB_MAX_SAMPLE_SPACING_PX).ceil() as usize).max(8);
+                let intervals = ((streak_px / MB_MAX_SAMPLE_SPACING_PX).ceil() as usize).max(MB_MIN_INTERVALS as usize);
                 let mut acc = [0.0f32; 3];
                 for k in 0..=intervals {
                     let t = lambda * (k as f32 / intervals as f32 - 0.5);

@@ -1,0 +1,472 @@
+//! Vulkan (ash) foundation: instance and device, validation-message capture, RAII
+//! buffers with staging upload/readback, compute pipelines, one-shot submission.
+//!
+//! Teardown order (enforced by lifetimes, not by convention): every `Buffer<'a>` and
+//! `ComputePipeline<'a>` borrows the `GpuContext`, so the borrow checker makes them
+//! drop first; `GpuContext::drop` then waits for the device to idle and destroys the
+//! command pool, the device, the debug messenger and the instance, in that order
+//! (Vulkan spec: child objects before their parents, VUID-vkDestroyDevice-device-
+//! 05137, VUID-vkDestroyInstance-instance-00629).
+#![allow(unsafe_code)]
+
+mod pipeline;
+
+pub use pipeline::ComputePipeline;
+
+use ash::vk;
+use std::ffi::{c_void, CStr};
+use std::sync::{Arc, Mutex};
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("Vulkan loader not available: {0}")]
+    Loader(String),
+    #[error("no Vulkan device with a compute queue{0}")]
+    NoDevice(String),
+    #[error("Vulkan call {call} failed: {result}")]
+    Vk { call: &'static str, result: vk::Result },
+    #[error("no memory type for {0}")]
+    NoMemoryType(&'static str),
+    #[error("invalid input `{input}`: {problem}")]
+    Input { input: &'static str, problem: String },
+}
+
+/// `map_err` helper naming the failed call.
+pub(crate) fn vkr(call: &'static str) -> impl Fn(vk::Result) -> GpuError {
+    move |result| GpuError::Vk { call, result }
+}
+
+/// Options for context creation.
+#[derive(Clone, Debug, Default)]
+pub struct GpuOptions {
+    /// Enable VK_LAYER_KHRONOS_validation when installed (tests do).
+    pub validation: bool,
+    /// Substring of the device name to prefer (e.g. "llvmpipe"); else discrete >
+    /// integrated > CPU.
+    pub prefer_device: Option<String>,
+}
+
+/// Severity-filtered validation and driver messages, kept for the caller to check.
+type Messages = Arc<Mutex<Vec<String>>>;
+
+pub struct GpuContext {
+    // Field order is not the drop order: `Drop` below destroys explicitly.
+    _entry: ash::Entry,
+    instance: ash::Instance,
+    debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT, *const Mutex<Vec<String>>)>,
+    debug_device: Option<ash::ext::debug_utils::Device>,
+    messages: Messages,
+    validation: bool,
+    physical: vk::PhysicalDevice,
+    memory: vk::PhysicalDeviceMemoryProperties,
+    pub(crate) device: ash::Device,
+    queue: vk::Queue,
+    command_pool: vk::CommandPool,
+    device_name: String,
+}
+
+unsafe extern "system" fn on_message(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    // SAFETY: `data` is valid for the duration of the callback (Vulkan spec,
+    // PFN_vkDebugUtilsMessengerCallbackEXT); `user` is the `Mutex` leaked from an
+    // `Arc` in `GpuContext::new`, alive until the messenger is destroyed in `Drop`.
+    let (text, sink) = unsafe {
+        let text = (*data).message_as_c_str().map(|m| m.to_string_lossy().into_owned()).unwrap_or_default();
+        (text, &*(user as *const Mutex<Vec<String>>))
+    };
+    if severity
+        .intersects(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
+    {
+        if let Ok(mut v) = sink.lock() {
+            v.push(text);
+        }
+    }
+    vk::FALSE
+}
+
+impl GpuContext {
+    /// Load Vulkan, create an instance (validation if asked and installed), pick a
+    /// device with a compute queue, create it.
+    pub fn new(opts: &GpuOptions) -> Result<Self, GpuError> {
+        // SAFETY: loading the system Vulkan loader library; no other Vulkan state
+        // exists yet.
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| GpuError::Loader(e.to_string()))?;
+        // SAFETY: plain queries on a loaded entry.
+        let layers = unsafe { entry.enumerate_instance_layer_properties() }.map_err(vkr("enumerate layers"))?;
+        let extensions =
+            unsafe { entry.enumerate_instance_extension_properties(None) }.map_err(vkr("enumerate extensions"))?;
+        let has_layer = |name: &CStr| layers.iter().any(|l| l.layer_name_as_c_str() == Ok(name));
+        let has_ext = |name: &CStr| extensions.iter().any(|e| e.extension_name_as_c_str() == Ok(name));
+        let validation = c"VK_LAYER_KHRONOS_validation";
+        let use_validation = opts.validation && has_layer(validation);
+        let use_debug = has_ext(ash::ext::debug_utils::NAME);
+        let layer_ptrs: Vec<*const std::ffi::c_char> = if use_validation { vec![validation.as_ptr()] } else { vec![] };
+        let ext_ptrs: Vec<*const std::ffi::c_char> =
+            if use_debug { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let app = vk::ApplicationInfo::default()
+            .application_name(c"blind-augment")
+            .engine_name(c"blind-augment")
+            .api_version(vk::API_VERSION_1_1);
+        let info = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layer_ptrs)
+            .enabled_extension_names(&ext_ptrs);
+        // SAFETY: `info` and everything it points to live until the call returns.
+        let instance = unsafe { entry.create_instance(&info, None) }.map_err(vkr("vkCreateInstance"))?;
+
+        let messages: Messages = Arc::new(Mutex::new(Vec::new()));
+        let debug = if use_debug {
+            let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let user = Arc::into_raw(messages.clone());
+            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+                .message_severity(
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                )
+                .message_type(
+                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+                )
+                .pfn_user_callback(Some(on_message))
+                .user_data(user as *mut c_void);
+            // SAFETY: valid instance with the debug-utils extension enabled; `user`
+            // stays alive (leaked Arc) until `Drop` destroys the messenger first.
+            match unsafe { loader.create_debug_utils_messenger(&info, None) } {
+                Ok(m) => Some((loader, m, user)),
+                Err(_) => {
+                    // SAFETY: reclaim the leaked Arc; no messenger refers to it.
+                    drop(unsafe { Arc::from_raw(user) });
+                    None
+                }
+            }
+        } else {
+            None
+        };
+
+        match create_device(&instance, opts) {
+            Ok(parts) => {
+                let debug_device = debug.as_ref().map(|_| ash::ext::debug_utils::Device::new(&instance, &parts.device));
+                Ok(Self {
+                    _entry: entry,
+                    instance,
+                    debug,
+                    debug_device,
+                    messages,
+                    validation: use_validation,
+                    physical: parts.physical,
+                    memory: parts.memory,
+                    device: parts.device,
+                    queue: parts.queue,
+                    command_pool: parts.command_pool,
+                    device_name: parts.name,
+                })
+            }
+            Err(e) => {
+                // SAFETY: nothing created from the instance survives; destroy in order.
+                unsafe {
+                    if let Some((loader, m, user)) = debug {
+                        loader.destroy_debug_utils_messenger(m, None);
+                        drop(Arc::from_raw(user));
+                    }
+                    instance.destroy_instance(None);
+                }
+                Err(e)
+            }
+        }
+    }
+
+    pub fn device_name(&self) -> &str {
+        &self.device_name
+    }
+
+    /// Whether VK_LAYER_KHRONOS_validation is active on this instance.
+    pub fn validation_enabled(&self) -> bool {
+        self.validation
+    }
+
+    pub fn physical_device(&self) -> vk::PhysicalDevice {
+        self.physical
+    }
+
+    /// Validation/driver warnings and errors since the last call (tests fail on any).
+    pub fn take_messages(&self) -> Vec<String> {
+        self.messages.lock().map(|mut v| std::mem::take(&mut *v)).unwrap_or_default()
+    }
+
+    /// Name a Vulkan object for debuggers and validation messages (no-op without
+    /// VK_EXT_debug_utils).
+    pub fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
+        let Some(dd) = &self.debug_device else { return };
+        let Ok(cname) = std::ffi::CString::new(name) else { return };
+        let info = vk::DebugUtilsObjectNameInfoEXT::default().object_handle(handle).object_name(&cname);
+        // SAFETY: `handle` is a live object of this device; the name outlives the call.
+        let _ = unsafe { dd.set_debug_utils_object_name(&info) };
+    }
+
+    fn memory_type(&self, bits: u32, props: vk::MemoryPropertyFlags) -> Option<u32> {
+        (0..self.memory.memory_type_count)
+            .find(|&i| bits & (1 << i) != 0 && self.memory.memory_types[i as usize].property_flags.contains(props))
+    }
+
+    /// Record with `f` into a fresh command buffer, submit, wait (fence).
+    pub fn submit_and_wait(&self, f: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(self.command_pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool belongs to this device and is only used from this thread
+        // (GpuContext is not Sync).
+        let cmd = unsafe { self.device.allocate_command_buffers(&alloc) }.map_err(vkr("allocate command buffer"))?[0];
+        let result = (|| {
+            let begin = vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+            // SAFETY: freshly allocated primary command buffer.
+            unsafe { self.device.begin_command_buffer(cmd, &begin) }.map_err(vkr("begin command buffer"))?;
+            f(cmd);
+            // SAFETY: recording state, ends the recording started above.
+            unsafe { self.device.end_command_buffer(cmd) }.map_err(vkr("end command buffer"))?;
+            // SAFETY: valid device.
+            let fence = unsafe { self.device.create_fence(&vk::FenceCreateInfo::default(), None) }
+                .map_err(vkr("create fence"))?;
+            let submit = vk::SubmitInfo::default().command_buffers(std::slice::from_ref(&cmd));
+            // SAFETY: executable command buffer, unsignalled fence; we wait before
+            // destroying either.
+            let r = unsafe {
+                self.device
+                    .queue_submit(self.queue, &[submit], fence)
+                    .and_then(|_| self.device.wait_for_fences(&[fence], true, u64::MAX))
+            };
+            // SAFETY: the fence is signalled or the submit failed; not in use.
+            unsafe { self.device.destroy_fence(fence, None) };
+            r.map_err(vkr("queue submit / wait"))
+        })();
+        // SAFETY: execution finished (or never started).
+        unsafe { self.device.free_command_buffers(self.command_pool, &[cmd]) };
+        result
+    }
+
+    /// A device-local storage buffer holding `data`, uploaded through a staging buffer.
+    pub fn upload(&self, data: &[u8], name: &str) -> Result<Buffer<'_>, GpuError> {
+        let size = data.len().max(4) as u64;
+        let staging = Buffer::new(
+            self,
+            size,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
+            &format!("{name} (staging)"),
+        )?;
+        staging.write(data)?;
+        let buffer = self.storage_buffer(size, name)?;
+        self.submit_and_wait(|cmd| {
+            let region = vk::BufferCopy::default().size(size);
+            // SAFETY: both buffers are live, large enough, and not in use elsewhere.
+            unsafe { self.device.cmd_copy_buffer(cmd, staging.buffer, buffer.buffer, &[region]) };
+        })?;
+        Ok(buffer)
+    }
+
+    /// An uninitialised device-local storage buffer (also a copy source/target).
+    pub fn storage_buffer(&self, size: u64, name: &str) -> Result<Buffer<'_>, GpuError> {
+        Buffer::new(
+            self,
+            size.max(4),
+            vk::BufferUsageFlags::STORAGE_BUFFER
+                | vk::BufferUsageFlags::TRANSFER_DST
+                | vk::BufferUsageFlags::TRANSFER_SRC,
+            vk::MemoryPropertyFlags::DEVICE_LOCAL,
+            name,
+        )
+    }
+
+    /// Copy a device buffer back to the host.
+    pub fn download(&self, src: &Buffer<'_>) -> Result<Vec<u8>, GpuError> {
+        let readback = Buffer::new(
+            self,
+            src.size,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
+            "readback",
+        )?;
+        self.submit_and_wait(|cmd| {
+            let region = vk::BufferCopy::default().size(src.size);
+            // SAFETY: both buffers live; the caller's earlier submissions completed
+            // (submit_and_wait waits), so `src` is not being written.
+            unsafe { self.device.cmd_copy_buffer(cmd, src.buffer, readback.buffer, &[region]) };
+        })?;
+        readback.read()
+    }
+}
+
+/// What `create_device` hands back to `GpuContext::new`.
+struct DeviceParts {
+    physical: vk::PhysicalDevice,
+    memory: vk::PhysicalDeviceMemoryProperties,
+    device: ash::Device,
+    queue: vk::Queue,
+    command_pool: vk::CommandPool,
+    name: String,
+}
+
+/// Pick a device with a compute queue (preferred name, else discrete > integrated >
+/// CPU) and create it with one queue and a command pool. Cleans up after itself on
+/// error; the caller owns the instance.
+fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DeviceParts, GpuError> {
+    // SAFETY: valid instance.
+    let devices = unsafe { instance.enumerate_physical_devices() }.map_err(vkr("enumerate devices"))?;
+    let mut candidates = vec![];
+    for pd in devices {
+        // SAFETY: `pd` comes from this instance.
+        let props = unsafe { instance.get_physical_device_properties(pd) };
+        let name = props.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
+        // SAFETY: as above.
+        let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+        let Some(qf) = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)) else {
+            continue;
+        };
+        let rank = match (&opts.prefer_device, props.device_type) {
+            (Some(want), _) if name.contains(want.as_str()) => 0,
+            (_, vk::PhysicalDeviceType::DISCRETE_GPU) => 1,
+            (_, vk::PhysicalDeviceType::INTEGRATED_GPU) => 2,
+            _ => 3,
+        };
+        candidates.push((rank, pd, qf as u32, name));
+    }
+    candidates.sort_by_key(|c| c.0);
+    let (_, physical, family, name) = candidates.into_iter().next().ok_or(GpuError::NoDevice(String::new()))?;
+    let priorities = [1.0f32];
+    let queue_info = vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities);
+    let info = vk::DeviceCreateInfo::default().queue_create_infos(std::slice::from_ref(&queue_info));
+    // SAFETY: `physical` belongs to `instance`; create info valid for the call.
+    let device = unsafe { instance.create_device(physical, &info, None) }.map_err(vkr("vkCreateDevice"))?;
+    // SAFETY: family/index 0 were requested at device creation.
+    let queue = unsafe { device.get_device_queue(family, 0) };
+    let pool_info = vk::CommandPoolCreateInfo::default()
+        .queue_family_index(family)
+        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+    // SAFETY: valid device.
+    let command_pool = match unsafe { device.create_command_pool(&pool_info, None) } {
+        Ok(p) => p,
+        Err(r) => {
+            // SAFETY: the device has no children yet.
+            unsafe { device.destroy_device(None) };
+            return Err(GpuError::Vk { call: "vkCreateCommandPool", result: r });
+        }
+    };
+    // SAFETY: valid physical device.
+    let memory = unsafe { instance.get_physical_device_memory_properties(physical) };
+    Ok(DeviceParts { physical, memory, device, queue, command_pool, name })
+}
+
+impl Drop for GpuContext {
+    fn drop(&mut self) {
+        // SAFETY: all child objects (buffers, pipelines) borrow `self` and are gone;
+        // wait for the queue, then destroy children before parents.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            self.device.destroy_command_pool(self.command_pool, None);
+            self.device.destroy_device(None);
+            if let Some((loader, m, user)) = self.debug.take() {
+                loader.destroy_debug_utils_messenger(m, None);
+                drop(Arc::from_raw(user));
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+/// A buffer and its memory, freed on drop; cannot outlive its context.
+pub struct Buffer<'a> {
+    ctx: &'a GpuContext,
+    pub(crate) buffer: vk::Buffer,
+    memory: vk::DeviceMemory,
+    pub size: u64,
+}
+
+impl<'a> Buffer<'a> {
+    pub fn new(
+        ctx: &'a GpuContext,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        props: vk::MemoryPropertyFlags,
+        name: &str,
+    ) -> Result<Self, GpuError> {
+        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid device and create info.
+        let buffer = unsafe { ctx.device.create_buffer(&info, None) }.map_err(vkr("vkCreateBuffer"))?;
+        // SAFETY: `buffer` was just created on this device.
+        let reqs = unsafe { ctx.device.get_buffer_memory_requirements(buffer) };
+        let Some(type_index) = ctx.memory_type(reqs.memory_type_bits, props) else {
+            // SAFETY: unbound, unused buffer.
+            unsafe { ctx.device.destroy_buffer(buffer, None) };
+            return Err(GpuError::NoMemoryType("buffer"));
+        };
+        let alloc = vk::MemoryAllocateInfo::default().allocation_size(reqs.size).memory_type_index(type_index);
+        // SAFETY: valid allocation info for this device.
+        let memory = match unsafe { ctx.device.allocate_memory(&alloc, None) } {
+            Ok(m) => m,
+            Err(r) => {
+                // SAFETY: unbound, unused buffer.
+                unsafe { ctx.device.destroy_buffer(buffer, None) };
+                return Err(GpuError::Vk { call: "vkAllocateMemory", result: r });
+            }
+        };
+        // SAFETY: memory of a compatible type and size, offset 0, both unbound.
+        if let Err(r) = unsafe { ctx.device.bind_buffer_memory(buffer, memory, 0) } {
+            // SAFETY: neither object is in use.
+            unsafe {
+                ctx.device.destroy_buffer(buffer, None);
+                ctx.device.free_memory(memory, None);
+            }
+            return Err(GpuError::Vk { call: "vkBindBufferMemory", result: r });
+        }
+        ctx.set_name(buffer, name);
+        Ok(Self { ctx, buffer, memory, size })
+    }
+
+    /// Copy `data` in (host-visible, coherent buffers only).
+    pub fn write(&self, data: &[u8]) -> Result<(), GpuError> {
+        let n = (data.len() as u64).min(self.size) as usize;
+        // SAFETY: host-visible coherent memory, mapped for its whole size, written
+        // within bounds, unmapped before any GPU use (callers submit afterwards).
+        unsafe {
+            let ptr = self
+                .ctx
+                .device
+                .map_memory(self.memory, 0, self.size, vk::MemoryMapFlags::empty())
+                .map_err(vkr("vkMapMemory"))? as *mut u8;
+            std::ptr::copy_nonoverlapping(data.as_ptr(), ptr, n);
+            self.ctx.device.unmap_memory(self.memory);
+        }
+        Ok(())
+    }
+
+    /// Copy the contents out (host-visible, coherent buffers only).
+    pub fn read(&self) -> Result<Vec<u8>, GpuError> {
+        let mut out = vec![0u8; self.size as usize];
+        // SAFETY: as in `write`; the GPU finished writing (submit_and_wait waited).
+        unsafe {
+            let ptr = self
+                .ctx
+                .device
+                .map_memory(self.memory, 0, self.size, vk::MemoryMapFlags::empty())
+                .map_err(vkr("vkMapMemory"))? as *const u8;
+            std::ptr::copy_nonoverlapping(ptr, out.as_mut_ptr(), out.len());
+            self.ctx.device.unmap_memory(self.memory);
+        }
+        Ok(out)
+    }
+}
+
+impl Drop for Buffer<'_> {
+    fn drop(&mut self) {
+        // SAFETY: every submission that used this buffer was waited on
+        // (submit_and_wait); buffer before memory.
+        unsafe {
+            self.ctx.device.destroy_buffer(self.buffer, None);
+            self.ctx.device.free_memory(self.memory, None);
+        }
+    }
+}

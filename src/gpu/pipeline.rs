@@ -1,0 +1,157 @@
+//! Compute pipelines over storage buffers with push constants: one descriptor set,
+//! bindings 0..n, all storage buffers (the layout every effect pass uses).
+#![allow(unsafe_code)]
+
+use super::{vkr, Buffer, GpuContext, GpuError};
+use ash::vk;
+
+/// A compute pipeline and its descriptor set; destroyed on drop, before its context.
+pub struct ComputePipeline<'a> {
+    ctx: &'a GpuContext,
+    set_layout: vk::DescriptorSetLayout,
+    layout: vk::PipelineLayout,
+    pipeline: vk::Pipeline,
+    pool: vk::DescriptorPool,
+    set: vk::DescriptorSet,
+    bindings: u32,
+    push_size: u32,
+}
+
+impl<'a> ComputePipeline<'a> {
+    /// `spirv`: SPIR-V bytes (entry point `main`); `bindings` storage buffers;
+    /// `push_size` bytes of push constants.
+    pub fn new(ctx: &'a GpuContext, spirv: &[u8], bindings: u32, push_size: u32, name: &str) -> Result<Self, GpuError> {
+        let words = ash::util::read_spv(&mut std::io::Cursor::new(spirv))
+            .map_err(|e| GpuError::Input { input: "spirv", problem: e.to_string() })?;
+        let d = &ctx.device;
+        // Build step by step; on error, destroy what exists (in reverse).
+        let mut p = Self {
+            ctx,
+            set_layout: vk::DescriptorSetLayout::null(),
+            layout: vk::PipelineLayout::null(),
+            pipeline: vk::Pipeline::null(),
+            pool: vk::DescriptorPool::null(),
+            set: vk::DescriptorSet::null(),
+            bindings,
+            push_size,
+        };
+        let binding_info: Vec<_> = (0..bindings)
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        // SAFETY (this and the calls below): valid device, create infos alive for
+        // the call; partially built objects are destroyed by `Drop` (null handles
+        // are ignored by vkDestroy*, Vulkan spec "Object Lifetime").
+        p.set_layout = unsafe {
+            d.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&binding_info), None)
+        }
+        .map_err(vkr("vkCreateDescriptorSetLayout"))?;
+        let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(push_size)];
+        let set_layouts = [p.set_layout];
+        let layout_info = vk::PipelineLayoutCreateInfo::default()
+            .set_layouts(&set_layouts)
+            .push_constant_ranges(if push_size > 0 { &ranges } else { &[] });
+        p.layout = unsafe { d.create_pipeline_layout(&layout_info, None) }.map_err(vkr("vkCreatePipelineLayout"))?;
+        let module = unsafe { d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None) }
+            .map_err(vkr("vkCreateShaderModule"))?;
+        let stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::COMPUTE)
+            .module(module)
+            .name(c"main");
+        let info = vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout);
+        let created = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &[info], None) };
+        // SAFETY: the module is only needed during pipeline creation.
+        unsafe { d.destroy_shader_module(module, None) };
+        p.pipeline = created.map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
+        ctx.set_name(p.pipeline, name);
+        let sizes =
+            [vk::DescriptorPoolSize::default().ty(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(bindings)];
+        p.pool = unsafe {
+            d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
+        }
+        .map_err(vkr("vkCreateDescriptorPool"))?;
+        p.set = unsafe {
+            d.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&set_layouts),
+            )
+        }
+        .map_err(vkr("vkAllocateDescriptorSets"))?[0];
+        Ok(p)
+    }
+
+    /// Point bindings 0..n at `buffers` (whole ranges).
+    pub fn bind(&self, buffers: &[&Buffer<'_>]) -> Result<(), GpuError> {
+        if buffers.len() != self.bindings as usize {
+            return Err(GpuError::Input {
+                input: "buffers",
+                problem: format!("pipeline has {} bindings, got {} buffers", self.bindings, buffers.len()),
+            });
+        }
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+            .iter()
+            .map(|b| [vk::DescriptorBufferInfo::default().buffer(b.buffer).offset(0).range(vk::WHOLE_SIZE)])
+            .collect();
+        let writes: Vec<_> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(self.set)
+                    .dst_binding(i as u32)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        // SAFETY: the set is not in use by any pending submission (all waited on).
+        unsafe { self.ctx.device.update_descriptor_sets(&writes, &[]) };
+        Ok(())
+    }
+
+    /// Record a dispatch of `groups` workgroups with `push` constants, followed by a
+    /// compute→transfer/compute barrier so results can be copied or read next.
+    pub fn record(&self, cmd: vk::CommandBuffer, push: &[u8], groups: [u32; 3]) {
+        let d = &self.ctx.device;
+        // SAFETY: `cmd` is recording; pipeline, layout and set are live; `push` is
+        // exactly the declared push-constant size (checked by the pass structs'
+        // static size assertions).
+        unsafe {
+            d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+            d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[self.set], &[]);
+            if self.push_size > 0 {
+                d.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
+            }
+            d.cmd_dispatch(cmd, groups[0], groups[1], groups[2]);
+            let barrier = vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+                .dst_access_mask(vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::SHADER_READ);
+            d.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::DependencyFlags::empty(),
+                &[barrier],
+                &[],
+                &[],
+            );
+        }
+    }
+}
+
+impl Drop for ComputePipeline<'_> {
+    fn drop(&mut self) {
+        let d = &self.ctx.device;
+        // SAFETY: no pending submission uses these (all waited on); children
+        // (set via its pool) before the layouts they were made from.
+        unsafe {
+            d.destroy_descriptor_pool(self.pool, None);
+            d.destroy_pipeline(self.pipeline, None);
+            d.destroy_pipeline_layout(self.layout, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}

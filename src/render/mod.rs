@@ -1,0 +1,7 @@
+//! Effect passes on the GPU, one file per pass, each the twin of a `synth` function
+//! and held to it by a lavapipe test (tests/gpu_effects.rs). Depends on `gpu` and
+//! `model` only: inputs are plain planar slices, not `image` types.
+
+pub mod motion_blur;
+
+pub use motion_blur::MotionBlurPass;
