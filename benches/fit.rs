@@ -3,12 +3,14 @@
 //! astronaut photograph (mirror-tiled to 1280×960) with known synthetic distortions.
 //! Run: `cargo bench --bench fit` (or `cargo xtask bench`); figures in BENCHMARKS.md.
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::model::*;
 use blind_augment::synth;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use std::path::PathBuf;
 use std::time::Duration;
 
 struct Case {
@@ -22,30 +24,8 @@ struct Case {
     flow: Flow,
 }
 
-fn mirror_tile(src: &Rgb, w: usize, h: usize) -> Rgb {
-    let mut out = Rgb::new(w, h, [0.0; 3]);
-    let m = |i: usize, n: usize| {
-        let p = i % (2 * n);
-        if p < n {
-            p
-        } else {
-            2 * n - 1 - p
-        }
-    };
-    for c in 0..3 {
-        for y in 0..h {
-            for x in 0..w {
-                out.channels[c][y * w + x] = src.channels[c][m(y, src.height) * src.width + m(x, src.width)];
-            }
-        }
-    }
-    out
-}
-
 fn case(w: usize, h: usize) -> Case {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/astronaut.png");
-    let photo = blind_augment::io::load_rgb(&path).expect("vendored photo").0;
-    let clean = mirror_tile(&photo, w, h);
+    let clean = common::mirror_tile(&common::photo("astronaut.png"), w, h);
     let mut depth = Plane::new(w, h, 0.0);
     for y in 0..h {
         for x in 0..w {
@@ -94,15 +74,7 @@ fn case(w: usize, h: usize) -> Case {
 }
 
 fn inputs<'a>(c: &'a Case, image: &'a Rgb) -> FitInputs<'a> {
-    FitInputs {
-        image,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
-        depth: Some(&c.depth),
-        depth_units: DepthUnits::MetricM,
-        flow: Some(&c.flow),
-    }
+    FitInputs { depth: Some(&c.depth), flow: Some(&c.flow), ..FitInputs::new(image) }
 }
 
 fn only(noise: bool, mb: bool, dof: bool, tier: Tier) -> FitOptions {

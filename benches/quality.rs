@@ -3,33 +3,14 @@
 //! to its error against known truth on the vendored photographs. Prints Markdown
 //! tables for BENCHMARKS.md. Run: `cargo bench --bench quality`.
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::model::*;
 use blind_augment::synth;
-use std::path::PathBuf;
 use std::time::Instant;
-
-fn photo(name: &str) -> Rgb {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name);
-    blind_augment::io::load_rgb(&p).expect("vendored photo").0
-}
-
-fn q8(i: &Rgb) -> Rgb {
-    i.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0)
-}
-
-fn base<'a>(image: &'a Rgb) -> FitInputs<'a> {
-    FitInputs {
-        image,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
-        depth: None,
-        depth_units: DepthUnits::MetricM,
-        flow: None,
-    }
-}
 
 /// Median wall time (ms) of `f` over 7 runs on one thread, and its last result.
 fn timed<T: Send>(pool: &rayon::ThreadPool, f: impl Fn() -> T + Sync) -> (f64, T) {
@@ -51,7 +32,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
-    let img = photo("astronaut.png");
+    let img = common::photo("astronaut.png");
     let (w, h) = (img.width, img.height);
 
     // Noise: stride of the sample grid.
@@ -71,7 +52,7 @@ fn main() {
             effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
             ..Default::default()
         };
-        let inp = FitInputs { denoised: Some(&img), ..base(&noisy) };
+        let inp = FitInputs { denoised: Some(&img), ..FitInputs::new(&noisy) };
         let (ms, out) = timed(&pool, || fit(&inp, &opts).expect("fit"));
         let n = &out.model.noise;
         let mut errs = vec![];
@@ -96,7 +77,8 @@ fn main() {
         }
     }
     let lambdas = [0.1f32, 0.3, 0.5, 0.7, 0.9];
-    let blurred: Vec<Rgb> = lambdas.iter().map(|&l| q8(&synth::add_motion_blur(&img, &flow, l))).collect();
+    let blurred: Vec<Rgb> =
+        lambdas.iter().map(|&l| common::quantize8(&synth::add_motion_blur(&img, &flow, l))).collect();
     println!("\n### Motion blur (accurate): pixel budget\n\n| max samples | median abs. λ error (λ = 0.1…0.9) | max | time ms |\n|---|---|---|---|");
     for budget in [2048usize, 4096, 8192, 16384, 32768] {
         let opts = FitOptions {
@@ -107,7 +89,7 @@ fn main() {
         let mut errs = vec![];
         let mut times = vec![];
         for (l, bl) in lambdas.iter().zip(&blurred) {
-            let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..base(bl) };
+            let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..FitInputs::new(bl) };
             let (ms, out) = timed(&pool, || fit(&inp, &opts).expect("fit"));
             times.push(ms);
             errs.push((out.model.motion_blur.exposure.unwrap_or(f32::NAN) - l).abs() as f64);
@@ -117,15 +99,7 @@ fn main() {
     }
 
     // Depth of field: stack node spacing and pyramid handoff.
-    let mut depth = Plane::new(w, h, 0.0);
-    for yy in 0..h {
-        for x in 0..w {
-            let u = (x as f32 + 0.5) / w as f32;
-            let v = (yy as f32 + 0.5) / h as f32;
-            let t = (0.7 * v + 0.3 * u + 0.08 * (6.0 * u).sin() * (4.0 * v).cos()).clamp(0.0, 1.0);
-            depth.data[yy * w + x] = 0.5 + 3.5 * t;
-        }
-    }
+    let depth = common::depth_ramp(w, h, 0.5, 4.0);
     let curves = [
         ("mild (≤ 2.6 px)", DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
         ("strong (≤ 9.4 px)", DofCurve::ThinLens { k: 8.0, focus_depth: 0.7, c0: 0.0 }),
@@ -140,7 +114,7 @@ fn main() {
             diagnostics: Diagnostics::not_fitted("truth"),
         })
         .collect();
-    let frames: Vec<Rgb> = truths.iter().map(|t| q8(&synth::add_dof(&img, &depth, t))).collect();
+    let frames: Vec<Rgb> = truths.iter().map(|t| common::quantize8(&synth::add_dof(&img, &depth, t))).collect();
     println!(
         "\n### Depth of field (accurate): stack node spacing and pyramid handoff\n\n| node spacing px | pyramid from px | RMSE mild px | RMSE strong px | time ms (strong) |\n|---|---|---|---|---|"
     );
@@ -156,7 +130,7 @@ fn main() {
         let mut cells = vec![];
         let mut ms_strong = 0.0;
         for (t, fr) in truths.iter().zip(&frames) {
-            let inp = FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..base(fr) };
+            let inp = FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..FitInputs::new(fr) };
             let (ms, out) = timed(&pool, || fit(&inp, &opts).expect("fit"));
             ms_strong = ms;
             let d = &out.model.depth_of_field;
@@ -180,7 +154,7 @@ fn main() {
     let fits: Vec<(&str, FitInputs, FitOptions)> = vec![
         (
             "noise, accurate",
-            FitInputs { denoised: Some(&img), ..base(&noisy) },
+            FitInputs { denoised: Some(&img), ..FitInputs::new(&noisy) },
             FitOptions {
                 effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
                 ..Default::default()
@@ -188,7 +162,7 @@ fn main() {
         ),
         (
             "motion blur, accurate",
-            FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..base(&blurred[2]) },
+            FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..FitInputs::new(&blurred[2]) },
             FitOptions {
                 effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
                 ..Default::default()
@@ -196,7 +170,7 @@ fn main() {
         ),
         (
             "depth of field, accurate",
-            FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..base(&frames[1]) },
+            FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..FitInputs::new(&frames[1]) },
             FitOptions {
                 effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
                 ..Default::default()
@@ -204,7 +178,7 @@ fn main() {
         ),
         (
             "noise, fast",
-            base(&noisy),
+            FitInputs::new(&noisy),
             FitOptions {
                 tier: Some(Tier::Fast),
                 effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
@@ -213,7 +187,7 @@ fn main() {
         ),
         (
             "motion blur, fast",
-            FitInputs { flow: Some(&flow), ..base(&blurred[2]) },
+            FitInputs { flow: Some(&flow), ..FitInputs::new(&blurred[2]) },
             FitOptions {
                 tier: Some(Tier::Fast),
                 effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
@@ -222,7 +196,7 @@ fn main() {
         ),
         (
             "depth of field, fast",
-            FitInputs { depth: Some(&depth), ..base(&frames[1]) },
+            FitInputs { depth: Some(&depth), ..FitInputs::new(&frames[1]) },
             FitOptions {
                 tier: Some(Tier::Fast),
                 effects: Effects { noise: false, motion_blur: false, depth_of_field: true },

@@ -1,29 +1,15 @@
 //! Per-effect fit times (from each fit's own `fit_time_s`, single thread) at
 //! 1280×960, for profiling the fast tier between `cargo bench` runs.
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use blind_augment::fit::{fit, FitInputs, FitOptions, Tier};
-use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::image::{Flow, Plane};
 use blind_augment::model::DepthUnits;
 
 fn main() {
-    let p = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/astronaut.png");
-    let photo = blind_augment::io::load_rgb(&p).expect("photo").0;
     let (w, h) = (1280usize, 960usize);
-    let mut img = Rgb::new(w, h, [0.0; 3]);
-    let m = |i: usize, n: usize| {
-        let q = i % (2 * n);
-        if q < n {
-            q
-        } else {
-            2 * n - 1 - q
-        }
-    };
-    for c in 0..3 {
-        for y in 0..h {
-            for x in 0..w {
-                img.channels[c][y * w + x] = photo.channels[c][m(y, 512) * 512 + m(x, 512)];
-            }
-        }
-    }
+    let img = common::mirror_tile(&common::photo("astronaut.png"), w, h);
     let depth = Plane::new(w, h, 2.0);
     let flow = Flow::uniform(w, h, 6.0, 2.0);
     let inp = FitInputs {

@@ -13,18 +13,6 @@ use blind_augment::synth::{self, add_motion_blur, noise_field};
 use common::*;
 use proptest::prelude::*;
 
-fn bare(image: &Rgb) -> FitInputs<'_> {
-    FitInputs {
-        image,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
-        depth: None,
-        depth_units: DepthUnits::MetricM,
-        flow: None,
-    }
-}
-
 fn all_refs<'a>(image: &'a Rgb, clean: &'a Rgb, depth: &'a Plane, flow: &'a Flow) -> FitInputs<'a> {
     FitInputs {
         image,
@@ -43,7 +31,7 @@ fn exposure_at_zero_and_one() {
     let flow = flow_field(512, 512, 6.0);
     for (lambda, present) in [(0.0f32, false), (1.0, true)] {
         let blurred = quantize8(&add_motion_blur(&img, &flow, lambda));
-        let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..bare(&blurred) };
+        let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..FitInputs::new(&blurred) };
         let opts = FitOptions {
             effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
             ..Default::default()
@@ -60,7 +48,7 @@ fn exposure_at_zero_and_one() {
 #[test]
 fn zero_noise_is_absent_not_invented() {
     let img = photo("chelsea.png");
-    let inp = FitInputs { denoised: Some(&img), ..bare(&img) };
+    let inp = FitInputs { denoised: Some(&img), ..FitInputs::new(&img) };
     let noise = fit(&inp, &FitOptions::default()).expect("valid").model.noise;
     assert!(!noise.present, "{:?}", noise.diagnostics);
     for l in &noise.levels {
@@ -77,7 +65,7 @@ fn zero_noise_is_absent_not_invented() {
 fn strong_noise_std_0_2() {
     let clean = photo("astronaut.png");
     let noisy = add_sensor_noise(&clean, [0.04; 3], [0.0; 3], 4);
-    let mut inp = FitInputs { denoised: Some(&clean), ..bare(&noisy) };
+    let mut inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
     inp.denoised = Some(&clean);
     let out = fit(
         &inp,
@@ -115,7 +103,7 @@ fn saturated_and_black_regions_are_excluded() {
     let (a, b) = ([1e-4f32; 3], [0.0f32; 3]);
     // Clip like a sensor (and an 8-bit file) would.
     let noisy = quantize8(&add_sensor_noise(&clean, a, b, 2));
-    let inp = FitInputs { denoised: Some(&clean), ..bare(&noisy) };
+    let inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
     let noise = fit(
         &inp,
         &FitOptions {
@@ -151,7 +139,7 @@ fn flat_textureless_frame() {
     assert!(out.noise.present);
     // Fast tier on the same frame: also no invented blur.
     let fast = fit(
-        &FitInputs { depth: Some(&depth), flow: Some(&flow), ..bare(&noisy) },
+        &FitInputs { depth: Some(&depth), flow: Some(&flow), ..FitInputs::new(&noisy) },
         &FitOptions { tier: Some(Tier::Fast), ..Default::default() },
     )
     .expect("valid")
@@ -183,15 +171,15 @@ fn non_finite_pixels_are_named() {
     let clean = Rgb::new(16, 16, [0.5; 3]);
     let mut bad = clean.clone();
     bad.channels[2][5 * 16 + 3] = f32::NAN;
-    let err = fit(&FitInputs { denoised: Some(&bad), ..bare(&clean) }, &FitOptions::default()).unwrap_err();
+    let err = fit(&FitInputs { denoised: Some(&bad), ..FitInputs::new(&clean) }, &FitOptions::default()).unwrap_err();
     assert!(matches!(err, FitError::NonFinite { input: "denoised", x: 3, y: 5, channel: 2, .. }), "{err}");
     assert!(err.to_string().contains("denoised") && err.to_string().contains("x=3, y=5"));
     bad.channels[2][5 * 16 + 3] = f32::INFINITY;
-    let err = fit(&bare(&bad), &FitOptions::default()).unwrap_err();
+    let err = fit(&FitInputs::new(&bad), &FitOptions::default()).unwrap_err();
     assert!(matches!(err, FitError::NonFinite { input: "image", .. }));
     let mut flow = Flow::uniform(16, 16, 1.0, 0.0);
     flow.dy[7] = f32::NAN;
-    let err = fit(&FitInputs { flow: Some(&flow), ..bare(&clean) }, &FitOptions::default()).unwrap_err();
+    let err = fit(&FitInputs { flow: Some(&flow), ..FitInputs::new(&clean) }, &FitOptions::default()).unwrap_err();
     assert!(matches!(err, FitError::NonFinite { input: "flow", .. }), "{err}");
 }
 
@@ -199,15 +187,15 @@ fn non_finite_pixels_are_named() {
 fn mismatched_sizes_and_missing_references_are_named() {
     let a = Rgb::new(16, 16, [0.5; 3]);
     let b = Rgb::new(16, 15, [0.5; 3]);
-    let err = fit(&FitInputs { motion_deblurred: Some(&b), ..bare(&a) }, &FitOptions::default()).unwrap_err();
+    let err = fit(&FitInputs { motion_deblurred: Some(&b), ..FitInputs::new(&a) }, &FitOptions::default()).unwrap_err();
     assert_eq!(err, FitError::SizeMismatch { input: "motion-deblurred", want_w: 16, want_h: 16, got_w: 16, got_h: 15 });
     let depth = Plane::new(15, 16, 1.0);
-    let err = fit(&FitInputs { depth: Some(&depth), ..bare(&a) }, &FitOptions::default()).unwrap_err();
+    let err = fit(&FitInputs { depth: Some(&depth), ..FitInputs::new(&a) }, &FitOptions::default()).unwrap_err();
     assert!(matches!(err, FitError::SizeMismatch { input: "depth", .. }));
-    let err = fit(&bare(&a), &FitOptions { tier: Some(Tier::Accurate), ..Default::default() }).unwrap_err();
+    let err = fit(&FitInputs::new(&a), &FitOptions { tier: Some(Tier::Accurate), ..Default::default() }).unwrap_err();
     assert!(matches!(err, FitError::MissingReference { input: "denoised", .. }), "{err}");
     let empty = Rgb::new(0, 0, [0.0; 3]);
-    assert!(matches!(fit(&bare(&empty), &FitOptions::default()), Err(FitError::Empty { .. })));
+    assert!(matches!(fit(&FitInputs::new(&empty), &FitOptions::default()), Err(FitError::Empty { .. })));
 }
 
 /// Forcing the accurate tier only requires the references of the effects asked for.
@@ -216,7 +204,7 @@ fn accurate_tier_needs_only_the_requested_references() {
     let img = photo("chelsea.png");
     let flow = Flow::uniform(img.width, img.height, 4.0, 1.0);
     let blurred = quantize8(&add_motion_blur(&img, &flow, 0.5));
-    let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..bare(&blurred) };
+    let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..FitInputs::new(&blurred) };
     let opts = FitOptions {
         tier: Some(Tier::Accurate),
         effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
@@ -230,9 +218,11 @@ fn accurate_tier_needs_only_the_requested_references() {
 fn depth_with_only_invalid_values_is_not_identifiable() {
     let img = photo("chelsea.png");
     let depth = Plane::new(img.width, img.height, f32::NAN);
-    let out =
-        fit(&FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..bare(&img) }, &FitOptions::default())
-            .expect("invalid depth pixels are skipped, not fatal");
+    let out = fit(
+        &FitInputs { defocus_deblurred: Some(&img), depth: Some(&depth), ..FitInputs::new(&img) },
+        &FitOptions::default(),
+    )
+    .expect("invalid depth pixels are skipped, not fatal");
     assert_eq!(out.model.depth_of_field.diagnostics.status, Status::NotIdentifiable);
 }
 

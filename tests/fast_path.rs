@@ -32,15 +32,7 @@ fn fast_noise_within_stated_tolerance() {
     let (a, b) = ([2e-5f32, 1.2e-5, 4e-5], [8e-4f32, 5e-4, 1.2e-3]);
     let seed: u64 = std::env::var("SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(9);
     let noisy = add_sensor_noise(&clean, a, b, seed);
-    let inp = FitInputs {
-        image: &noisy,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
-        depth: None,
-        depth_units: DepthUnits::MetricM,
-        flow: None,
-    };
+    let inp = FitInputs::new(&noisy);
     let noise = fit(&inp, &opts(true, false, false)).expect("valid").model.noise;
     assert!(noise.present);
     assert_eq!(noise.diagnostics.method, "fast");
@@ -70,15 +62,7 @@ fn fast_exposure_within_stated_tolerance() {
     let flow = flow_field(img.width, img.height, 8.0);
     for lambda in [0.0f32, 0.1, 0.5, 1.0] {
         let blurred = quantize8(&add_motion_blur(&img, &flow, lambda));
-        let inp = FitInputs {
-            image: &blurred,
-            denoised: None,
-            motion_deblurred: None,
-            defocus_deblurred: None,
-            depth: None,
-            depth_units: DepthUnits::MetricM,
-            flow: Some(&flow),
-        };
+        let inp = FitInputs { flow: Some(&flow), ..FitInputs::new(&blurred) };
         let mb = fit(&inp, &opts(false, true, false)).expect("valid").model.motion_blur;
         let got = mb.exposure.expect("identifiable with 8 px flow");
         println!("fast λ {lambda} → {got:.3} ± {:?}", mb.diagnostics.stderr);
@@ -105,15 +89,7 @@ fn fast_dof_within_stated_tolerance() {
             diagnostics: Diagnostics::not_fitted("truth"),
         };
         let blurred = quantize8(&add_dof(&img, &depth, &truth));
-        let inp = FitInputs {
-            image: &blurred,
-            denoised: None,
-            motion_deblurred: None,
-            defocus_deblurred: None,
-            depth: Some(&depth),
-            depth_units: DepthUnits::MetricM,
-            flow: None,
-        };
+        let inp = FitInputs { depth: Some(&depth), ..FitInputs::new(&blurred) };
         let got = fit(&inp, &opts(false, false, true)).expect("valid").model.depth_of_field;
         let [lo, hi] = got.depth_range;
         let rmse = ((0..=100)

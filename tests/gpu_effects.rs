@@ -10,8 +10,9 @@ mod common;
 
 use blind_augment::gpu::{GpuContext, GpuOptions};
 use blind_augment::image::{Flow, Rgb};
-use blind_augment::render::MotionBlurPass;
-use blind_augment::synth::add_motion_blur;
+use blind_augment::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve};
+use blind_augment::render::{DofPass, MotionBlurPass};
+use blind_augment::synth::{add_defocus, add_motion_blur, dof_sigma_map};
 use common::*;
 use std::path::PathBuf;
 
@@ -119,6 +120,45 @@ fn motion_blur_pass_matches_cpu_reference() {
     let flow = flow_field(img.width, img.height, 5.0);
     let out = pass.run(img.width, img.height, &planar(&img), &interleaved(&flow), 0.0).expect("dispatch");
     assert_eq!(out, planar(&img));
+    let messages = ctx.take_messages();
+    assert!(messages.is_empty(), "validation messages: {messages:#?}");
+}
+
+#[test]
+fn dof_pass_matches_cpu_reference() {
+    let Some(ctx) = context("dof") else { return };
+    let pass = DofPass::new(&ctx).expect("pipelines");
+    for (photo_name, k) in [("astronaut.png", 2.0f32), ("chelsea.png", 3.0)] {
+        let img = photo(photo_name);
+        let (w, h) = (img.width, img.height);
+        let depth = depth_ramp(w, h, 0.5, 4.0);
+        let dof = DepthOfField {
+            present: true,
+            units: DepthUnits::MetricM,
+            curve: Some(DofCurve::ThinLens { k, focus_depth: 1.2, c0: 0.1 }),
+            depth_range: [0.5, 4.0],
+            diagnostics: Diagnostics::not_fitted("test"),
+        };
+        let sigma = dof_sigma_map(&depth, &dof);
+        let expected = add_defocus(&img, &sigma);
+        let out = pass.run(w, h, &planar(&img), &sigma.data).expect("dispatch");
+        let actual = from_planar(w, h, &out);
+        let name = format!("dof_{}_k{k}", photo_name.trim_end_matches(".png"));
+        let (mae, p99) = compare(&name, &actual, &expected);
+        let moved = (0..3)
+            .flat_map(|c| actual.channels[c].iter().zip(&img.channels[c]))
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum::<f64>()
+            / (3 * w * h) as f64;
+        eprintln!("{name}: MAE {mae:.2e}, p99 {p99:.2e} (mean change from input {moved:.3})");
+        assert!(moved > 1e-3, "{name}: output equals input");
+        assert!(mae <= 1.0 / 255.0 && p99 <= 4.0 / 255.0, "{name}: MAE {mae}, p99 {p99}");
+    }
+    // σ = 0 everywhere: the exact input; NaN σ is treated as 0, as on the CPU.
+    let img = photo("chelsea.png");
+    let mut sigma = vec![0.0f32; img.len()];
+    sigma[7] = f32::NAN;
+    assert_eq!(pass.run(img.width, img.height, &planar(&img), &sigma).expect("dispatch"), planar(&img));
     let messages = ctx.take_messages();
     assert!(messages.is_empty(), "validation messages: {messages:#?}");
 }

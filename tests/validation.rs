@@ -15,25 +15,13 @@ use blind_augment::model::*;
 use blind_augment::synth::{self, add_dof, add_motion_blur, noise_field};
 use common::*;
 
-fn inputs<'a>(image: &'a Rgb) -> FitInputs<'a> {
-    FitInputs {
-        image,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
-        depth: None,
-        depth_units: DepthUnits::MetricM,
-        flow: None,
-    }
-}
-
 fn only(noise: bool, mb: bool, dof: bool) -> FitOptions {
     FitOptions { effects: Effects { noise, motion_blur: mb, depth_of_field: dof }, ..Default::default() }
 }
 
 fn fit_lambda(sharp: &Rgb, flow: &Flow, lambda: f32) -> MotionBlur {
     let blurred = quantize8(&add_motion_blur(sharp, flow, lambda));
-    let inp = FitInputs { motion_deblurred: Some(sharp), flow: Some(flow), ..inputs(&blurred) };
+    let inp = FitInputs { motion_deblurred: Some(sharp), flow: Some(flow), ..FitInputs::new(&blurred) };
     fit(&inp, &only(false, true, false)).expect("valid inputs").model.motion_blur
 }
 
@@ -102,7 +90,12 @@ fn fit_dof_with(
     opts: &FitOptions,
 ) -> DepthOfField {
     let blurred = quantize8(&add_dof(sharp, depth, truth));
-    let inp = FitInputs { defocus_deblurred: Some(sharp), depth: Some(depth), depth_units: units, ..inputs(&blurred) };
+    let inp = FitInputs {
+        defocus_deblurred: Some(sharp),
+        depth: Some(depth),
+        depth_units: units,
+        ..FitInputs::new(&blurred)
+    };
     fit(&inp, opts).expect("valid inputs").model.depth_of_field
 }
 
@@ -195,7 +188,7 @@ fn noise_accurate_median_relative_error_within_1_5_percent() {
     for name in ["astronaut.png", "chelsea.png"] {
         let clean = photo(name);
         let noisy = add_sensor_noise(&clean, A, B, 5);
-        let inp = FitInputs { denoised: Some(&clean), ..inputs(&noisy) };
+        let inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
         let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
         assert!(noise.present);
         let errs = noise_errors(&noise, |c, y| ((A[c] + B[c] * y) as f64).sqrt());
@@ -224,7 +217,7 @@ fn noise_accurate_picks_linear_std_when_std_is_linear() {
             noisy.channels[c][i] += s * synth::gaussian((i % 512) as u32, (i / 512) as u32, c as u32 + 20, 8);
         }
     }
-    let inp = FitInputs { denoised: Some(&clean), ..inputs(&noisy) };
+    let inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
     let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
     assert_eq!(noise.form, NoiseForm::LinearStd);
     let errs = noise_errors(&noise, |c, y| (s0[c] + s1[c] * y) as f64);
@@ -240,7 +233,7 @@ fn noise_accurate_picks_linear_std_when_std_is_linear() {
 fn noise_lowpass_residual_is_measured() {
     let clean = photo("astronaut.png");
     let noisy = add_sensor_noise(&clean, A, B, 6);
-    let inp = FitInputs { denoised: Some(&clean), ..inputs(&noisy) };
+    let inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
     let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
     let unit = synth::unit_band_std();
     let share = unit[NOISE_LEVELS].powi(2) / unit.iter().map(|u| u * u).sum::<f32>();

@@ -58,6 +58,22 @@ pub struct FitInputs<'a> {
     pub flow: Option<&'a Flow>,
 }
 
+impl<'a> FitInputs<'a> {
+    /// The frame alone: no references, no depth, no flow (metric depth units if one
+    /// is added later). Add the rest with struct-update syntax.
+    pub fn new(image: &'a Rgb) -> Self {
+        Self {
+            image,
+            denoised: None,
+            motion_deblurred: None,
+            defocus_deblurred: None,
+            depth: None,
+            depth_units: DepthUnits::MetricM,
+            flow: None,
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct FitOptions {
     /// `None`: accurate where the effect's reference image is given, fast otherwise.

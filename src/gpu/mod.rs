@@ -281,6 +281,14 @@ impl GpuContext {
         )
     }
 
+    /// Record a copy of the first `size` bytes of `src` into `dst`.
+    pub fn record_copy(&self, cmd: vk::CommandBuffer, src: &Buffer<'_>, dst: &Buffer<'_>, size: u64) {
+        let region = vk::BufferCopy::default().size(size.min(src.size).min(dst.size));
+        // SAFETY: `cmd` is recording; both buffers are live for the submission
+        // (callers wait on it before dropping them) and the region is in bounds.
+        unsafe { self.device.cmd_copy_buffer(cmd, src.buffer, dst.buffer, &[region]) };
+    }
+
     /// Copy a device buffer back to the host.
     pub fn download(&self, src: &Buffer<'_>) -> Result<Vec<u8>, GpuError> {
         let readback = Buffer::new(

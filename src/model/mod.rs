@@ -5,6 +5,7 @@
 //! Every effect carries `present` (the renderer skips absent effects) and
 //! `diagnostics` (how sure the estimator is, how it got there).
 
+pub mod kernels;
 mod validate;
 
 use serde::{Deserialize, Serialize};
@@ -17,6 +18,9 @@ pub const NOISE_LEVELS: usize = 4;
 /// Largest DoF blur std the estimators search and the model may express, in
 /// reference pixels (the paper searches [0, 10]).
 pub const MAX_DOF_SIGMA_PX: f32 = 10.0;
+/// Depth of field is defined by a stack of discrete-Gaussian blurs with nodes this
+/// far apart in σ (px), blended with variance-matched weights between nodes.
+pub const DOF_NODE_SPACING_PX: f32 = 0.25;
 /// Motion blur is defined as the exposure-window line integral sampled by the
 /// trapezoid rule with nodes at most this far apart (px) ...
 pub const MB_MAX_SAMPLE_SPACING_PX: f32 = 0.1;

@@ -2,6 +2,8 @@
 //! and held to it by a lavapipe test (tests/gpu_effects.rs). Depends on `gpu` and
 //! `model` only: inputs are plain planar slices, not `image` types.
 
+pub mod dof;
 pub mod motion_blur;
 
+pub use dof::DofPass;
 pub use motion_blur::MotionBlurPass;

@@ -13,7 +13,7 @@ use crate::image::{blur_separable, discrete_gaussian_kernel, Plane, Rgb};
 use crate::model::{DepthOfField, MAX_DOF_SIGMA_PX};
 use rayon::prelude::*;
 
-pub const DOF_NODE_SPACING_PX: f32 = 0.25;
+pub use crate::model::DOF_NODE_SPACING_PX;
 
 /// Walk the stack of `plane` with nodes `k·spacing` up to `max_sigma`, calling
 /// `visit(k, σ_k, σ_{k+1}, S_k, S_{k+1})` for each interval in order.

@@ -27,6 +27,27 @@ pub fn crop(img: &Rgb, x0: usize, y0: usize, w: usize, h: usize) -> Rgb {
     out
 }
 
+/// `src` mirror-tiled to `w × h` (real texture at any frame size, e.g. 1280×960).
+pub fn mirror_tile(src: &Rgb, w: usize, h: usize) -> Rgb {
+    let m = |i: usize, n: usize| {
+        let p = i % (2 * n);
+        if p < n {
+            p
+        } else {
+            2 * n - 1 - p
+        }
+    };
+    let mut out = Rgb::new(w, h, [0.0; 3]);
+    for c in 0..3 {
+        for y in 0..h {
+            for x in 0..w {
+                out.channels[c][y * w + x] = src.channels[c][m(y, src.height) * src.width + m(x, src.width)];
+            }
+        }
+    }
+    out
+}
+
 /// 8-bit quantisation, as a PNG round trip does.
 pub fn quantize8(img: &Rgb) -> Rgb {
     img.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0)
