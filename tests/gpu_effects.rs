@@ -90,6 +90,20 @@ fn compare(name: &str, actual: &Rgb, expected: &Rgb) -> (f64, f64) {
     (mae, p99)
 }
 
+/// Hold `actual` (GPU) to `expected` (CPU twin) at the stated tolerance, and make
+/// sure the comparison is not vacuous: the effect really changed `input`.
+fn assert_twin(name: &str, actual: &Rgb, expected: &Rgb, input: &Rgb) {
+    let (mae, p99) = compare(name, actual, expected);
+    let moved = (0..3)
+        .flat_map(|c| actual.channels[c].iter().zip(&input.channels[c]))
+        .map(|(a, b)| (a - b).abs() as f64)
+        .sum::<f64>()
+        / (3 * input.len()) as f64;
+    eprintln!("{name}: MAE {mae:.2e}, p99 {p99:.2e} (mean change from input {moved:.3})");
+    assert!(moved > 1e-3, "{name}: output equals input (mean change {moved})");
+    assert!(mae <= 1.0 / 255.0 && p99 <= 4.0 / 255.0, "{name}: MAE {mae}, p99 {p99}");
+}
+
 #[test]
 fn motion_blur_pass_matches_cpu_reference() {
     let Some(ctx) = context("motion_blur") else { return };
@@ -104,16 +118,7 @@ fn motion_blur_pass_matches_cpu_reference() {
         let out = pass.run(w, h, &planar(&img), &interleaved(&flow), lambda).expect("dispatch");
         let actual = from_planar(w, h, &out);
         let name = format!("motion_blur_{}_{scale}_{lambda}", photo_name.trim_end_matches(".png"));
-        let (mae, p99) = compare(&name, &actual, &expected);
-        // The comparison is not vacuous: the effect really changed the image.
-        let moved = (0..3)
-            .flat_map(|c| actual.channels[c].iter().zip(&img.channels[c]))
-            .map(|(a, b)| (a - b).abs() as f64)
-            .sum::<f64>()
-            / (3 * w * h) as f64;
-        assert!(moved > 1e-3, "{name}: output equals input (mean change {moved})");
-        eprintln!("{name}: MAE {:.2e}, p99 {:.2e}", mae, p99);
-        assert!(mae <= 1.0 / 255.0 && p99 <= 4.0 / 255.0, "{name}: MAE {mae}, p99 {p99}");
+        assert_twin(&name, &actual, &expected, &img);
     }
     // λ = 0 is the identity on the GPU too.
     let img = photo("chelsea.png");
@@ -144,15 +149,7 @@ fn dof_pass_matches_cpu_reference() {
         let out = pass.run(w, h, &planar(&img), &sigma.data).expect("dispatch");
         let actual = from_planar(w, h, &out);
         let name = format!("dof_{}_k{k}", photo_name.trim_end_matches(".png"));
-        let (mae, p99) = compare(&name, &actual, &expected);
-        let moved = (0..3)
-            .flat_map(|c| actual.channels[c].iter().zip(&img.channels[c]))
-            .map(|(a, b)| (a - b).abs() as f64)
-            .sum::<f64>()
-            / (3 * w * h) as f64;
-        eprintln!("{name}: MAE {mae:.2e}, p99 {p99:.2e} (mean change from input {moved:.3})");
-        assert!(moved > 1e-3, "{name}: output equals input");
-        assert!(mae <= 1.0 / 255.0 && p99 <= 4.0 / 255.0, "{name}: MAE {mae}, p99 {p99}");
+        assert_twin(&name, &actual, &expected, &img);
     }
     // σ = 0 everywhere: the exact input; NaN σ is treated as 0, as on the CPU.
     let img = photo("chelsea.png");
