@@ -9,10 +9,13 @@
 mod common;
 
 use blind_augment::gpu::{GpuContext, GpuOptions};
+use blind_augment::image::laplacian_pyramid;
 use blind_augment::image::{Flow, Rgb};
-use blind_augment::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve};
-use blind_augment::render::{DofPass, MotionBlurPass};
-use blind_augment::synth::{add_defocus, add_motion_blur, dof_sigma_map};
+use blind_augment::model::{
+    DepthOfField, DepthUnits, Diagnostics, DofCurve, Noise, NoiseForm, NoiseLevel, NOISE_LEVELS,
+};
+use blind_augment::render::{DofPass, GrainPass, GrainTable, MotionBlurPass};
+use blind_augment::synth::{add_defocus, add_motion_blur, dof_sigma_map, noise_field, unit_band_std, SynthesisTable};
 use common::*;
 use std::path::PathBuf;
 
@@ -156,6 +159,70 @@ fn dof_pass_matches_cpu_reference() {
     let mut sigma = vec![0.0f32; img.len()];
     sigma[7] = f32::NAN;
     assert_eq!(pass.run(img.width, img.height, &planar(&img), &sigma).expect("dispatch"), planar(&img));
+    let messages = ctx.take_messages();
+    assert!(messages.is_empty(), "validation messages: {messages:#?}");
+}
+
+fn sensor_noise() -> Noise {
+    // Poisson–Gaussian white noise, std √(a + bY), as a camera model.
+    let unit = unit_band_std();
+    let level = |l: usize| NoiseLevel {
+        slope: [8e-4 * unit[l] * unit[l], 5e-4 * unit[l] * unit[l], 1.2e-3 * unit[l] * unit[l]],
+        intercept: [2e-5 * unit[l] * unit[l]; 3],
+    };
+    Noise {
+        present: true,
+        form: NoiseForm::AffineVariance,
+        levels: (0..NOISE_LEVELS).map(level).collect(),
+        lowpass: Some(level(NOISE_LEVELS)),
+        luminance_range: [0.05, 0.95],
+        diagnostics: Diagnostics::not_fitted("test"),
+    }
+}
+
+fn grain_table(noise: &Noise) -> GrainTable {
+    let t = SynthesisTable::new(noise);
+    GrainTable { luma_range: t.luma_range(), nodes: t.nodes() as u32, weights: t.weights_flat() }
+}
+
+/// Grain is random but seeded: with the same counter-based RNG the GPU field equals
+/// the CPU twin up to the last bits of the GPU's log/cos (bound 1e-4, 0.5% of a
+/// typical grain std; far inside the 1/255). Statistically, on flat greys
+/// across the luminance range each pyramid level's std is within 5% of the model
+/// (the render-core issue's criterion; 256² gives ≈2.2% standard error at level 3).
+#[test]
+fn grain_pass_matches_cpu_reference() {
+    let Some(ctx) = context("grain") else { return };
+    let pass = GrainPass::new(&ctx).expect("pipelines");
+    let noise = sensor_noise();
+    let table = grain_table(&noise);
+    for name in ["astronaut.png", "chelsea.png"] {
+        let img = photo(name);
+        let (w, h) = (img.width, img.height);
+        let luma = img.luma();
+        let expected = noise_field(&luma, &noise, 42);
+        let actual = from_planar(w, h, &pass.run(w, h, &luma.data, &table, 42).expect("dispatch"));
+        let max = (0..3)
+            .flat_map(|c| actual.channels[c].iter().zip(&expected.channels[c]))
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        eprintln!("grain {name}: max |GPU − CPU| {max:.2e}");
+        assert!(max <= 1e-4, "grain {name}: max difference {max}");
+        let (mae, p99) = compare(&format!("grain_{name}"), &actual, &expected);
+        assert!(mae <= 1.0 / 255.0 && p99 <= 4.0 / 255.0);
+    }
+    for y in [0.1f32, 0.5, 0.9] {
+        let n = 256;
+        let field = from_planar(n, n, &pass.run(n, n, &vec![y; n * n], &table, 7).expect("dispatch"));
+        for c in 0..3 {
+            let pyr = laplacian_pyramid(&field.plane(c), NOISE_LEVELS);
+            for (l, band) in pyr.bands.iter().enumerate() {
+                let s = (band.data.iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / band.data.len() as f64).sqrt();
+                let want = noise.levels[l].std(noise.form, c, y) as f64;
+                assert!((s / want - 1.0).abs() < 0.05, "Y {y} channel {c} level {l}: std {s} vs model {want}");
+            }
+        }
+    }
     let messages = ctx.take_messages();
     assert!(messages.is_empty(), "validation messages: {messages:#?}");
 }

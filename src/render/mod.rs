@@ -3,7 +3,9 @@
 //! `model` only: inputs are plain planar slices, not `image` types.
 
 pub mod dof;
+pub mod grain;
 pub mod motion_blur;
 
 pub use dof::DofPass;
+pub use grain::{GrainPass, GrainTable};
 pub use motion_blur::MotionBlurPass;

@@ -180,6 +180,21 @@ impl SynthesisTable {
         Self { luma_lo: lo, luma_hi: hi, weights }
     }
 
+    /// Luma range covered by the nodes.
+    pub fn luma_range(&self) -> [f32; 2] {
+        [self.luma_lo, self.luma_hi]
+    }
+
+    /// Number of luma nodes.
+    pub fn nodes(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// The weights flattened as [node][channel][band] (5 bands), e.g. for a GPU buffer.
+    pub fn weights_flat(&self) -> Vec<f32> {
+        self.weights.iter().flat_map(|n| n.iter().flat_map(|c| c.iter().copied())).collect()
+    }
+
     /// Weight of `band` for channel `c` at luma `y` (clamped to the range).
     #[inline]
     pub fn weight(&self, c: usize, band: usize, y: f32) -> f32 {
