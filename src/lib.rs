@@ -15,3 +15,4 @@ pub mod model;
 pub mod plots;
 pub mod render;
 pub mod synth;
+pub mod worker;

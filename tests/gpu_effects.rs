@@ -8,7 +8,6 @@
 
 mod common;
 
-use blind_augment::gpu::{GpuContext, GpuOptions};
 use blind_augment::image::laplacian_pyramid;
 use blind_augment::image::{Flow, Rgb};
 use blind_augment::model::{
@@ -18,33 +17,6 @@ use blind_augment::render::{DofPass, GrainPass, GrainTable, MotionBlurPass};
 use blind_augment::synth::{add_defocus, add_motion_blur, dof_sigma_map, noise_field, unit_band_std, SynthesisTable};
 use common::*;
 use std::path::PathBuf;
-
-fn context(test: &str) -> Option<GpuContext> {
-    let opts = GpuOptions { validation: true, prefer_device: std::env::var("BLIND_AUGMENT_DEVICE").ok() };
-    match GpuContext::new(&opts) {
-        Ok(ctx) => {
-            eprintln!(
-                "{test}: running on {} (validation layer {})",
-                ctx.device_name(),
-                if ctx.validation_enabled() { "on" } else { "not installed" }
-            );
-            if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") {
-                assert!(
-                    ctx.validation_enabled(),
-                    "{test}: REQUIRE_GPU=1 expects the validation layer (vulkan-validationlayers)"
-                );
-            }
-            Some(ctx)
-        }
-        Err(e) if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") => {
-            panic!("{test}: REQUIRE_GPU=1 but no Vulkan device: {e}")
-        }
-        Err(e) => {
-            eprintln!("{test}: SKIPPED, no Vulkan device ({e}); set REQUIRE_GPU=1 to make this a failure");
-            None
-        }
-    }
-}
 
 fn planar(img: &Rgb) -> Vec<f32> {
     img.channels.iter().flatten().copied().collect()
@@ -109,7 +81,7 @@ fn assert_twin(name: &str, actual: &Rgb, expected: &Rgb, input: &Rgb) {
 
 #[test]
 fn motion_blur_pass_matches_cpu_reference() {
-    let Some(ctx) = context("motion_blur") else { return };
+    let Some(ctx) = gpu_context("motion_blur") else { return };
     let pass = MotionBlurPass::new(&ctx).expect("pipeline");
     for (photo_name, scale, lambda) in
         [("astronaut.png", 8.0f32, 0.5f32), ("astronaut.png", 1.5, 0.9), ("chelsea.png", 6.0, 1.0)]
@@ -134,7 +106,7 @@ fn motion_blur_pass_matches_cpu_reference() {
 
 #[test]
 fn dof_pass_matches_cpu_reference() {
-    let Some(ctx) = context("dof") else { return };
+    let Some(ctx) = gpu_context("dof") else { return };
     let pass = DofPass::new(&ctx).expect("pipelines");
     for (photo_name, k) in [("astronaut.png", 2.0f32), ("chelsea.png", 3.0)] {
         let img = photo(photo_name);
@@ -192,7 +164,7 @@ fn grain_table(noise: &Noise) -> GrainTable {
 /// (the render-core issue's criterion; 256² gives ≈2.2% standard error at level 3).
 #[test]
 fn grain_pass_matches_cpu_reference() {
-    let Some(ctx) = context("grain") else { return };
+    let Some(ctx) = gpu_context("grain") else { return };
     let pass = GrainPass::new(&ctx).expect("pipelines");
     let noise = sensor_noise();
     let table = grain_table(&noise);
@@ -229,7 +201,7 @@ fn grain_pass_matches_cpu_reference() {
 
 #[test]
 fn bad_input_never_reaches_the_gpu() {
-    let Some(ctx) = context("bad_input") else { return };
+    let Some(ctx) = gpu_context("bad_input") else { return };
     let pass = MotionBlurPass::new(&ctx).expect("pipeline");
     let rgb = vec![0.5f32; 3 * 16];
     let mut flow = vec![1.0f32; 2 * 16];
@@ -246,7 +218,7 @@ fn bad_input_never_reaches_the_gpu() {
 /// the layer reports, it does not stop the call.)
 #[test]
 fn validation_messages_are_captured() {
-    let Some(ctx) = context("validation_capture") else { return };
+    let Some(ctx) = gpu_context("validation_capture") else { return };
     if !ctx.validation_enabled() {
         eprintln!("validation_capture: SKIPPED, validation layer not installed");
         return;

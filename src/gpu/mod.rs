@@ -9,8 +9,10 @@
 //! 05137, VUID-vkDestroyInstance-instance-00629).
 #![allow(unsafe_code)]
 
+mod frames;
 mod pipeline;
 
+pub use frames::{FrameRing, FrameSlot};
 pub use pipeline::ComputePipeline;
 
 use ash::vk;
@@ -60,8 +62,8 @@ pub struct GpuContext {
     physical: vk::PhysicalDevice,
     memory: vk::PhysicalDeviceMemoryProperties,
     pub(crate) device: ash::Device,
-    queue: vk::Queue,
-    command_pool: vk::CommandPool,
+    pub(crate) queue: vk::Queue,
+    pub(crate) command_pool: vk::CommandPool,
     device_name: String,
 }
 

@@ -1,5 +1,6 @@
-//! Compute pipelines over storage buffers with push constants: one descriptor set,
-//! bindings 0..n, all storage buffers (the layout every effect pass uses).
+//! Compute pipelines with push constants and bindings 0..n of storage (or uniform)
+//! buffers, with one or more descriptor sets (one per frame in flight, so a set is
+//! never updated while a submitted frame still reads it).
 #![allow(unsafe_code)]
 
 use super::{vkr, Buffer, GpuContext, GpuError};
@@ -12,15 +13,27 @@ pub struct ComputePipeline<'a> {
     layout: vk::PipelineLayout,
     pipeline: vk::Pipeline,
     pool: vk::DescriptorPool,
-    set: vk::DescriptorSet,
-    bindings: u32,
+    sets: Vec<vk::DescriptorSet>,
+    types: Vec<vk::DescriptorType>,
     push_size: u32,
 }
 
 impl<'a> ComputePipeline<'a> {
     /// `spirv`: SPIR-V bytes (entry point `main`); `bindings` storage buffers;
-    /// `push_size` bytes of push constants.
+    /// `push_size` bytes of push constants; one descriptor set.
     pub fn new(ctx: &'a GpuContext, spirv: &[u8], bindings: u32, push_size: u32, name: &str) -> Result<Self, GpuError> {
+        Self::with_layout(ctx, spirv, &vec![vk::DescriptorType::STORAGE_BUFFER; bindings as usize], push_size, 1, name)
+    }
+
+    /// As `new`, with the descriptor type of each binding and `sets` descriptor sets.
+    pub fn with_layout(
+        ctx: &'a GpuContext,
+        spirv: &[u8],
+        types: &[vk::DescriptorType],
+        push_size: u32,
+        sets: u32,
+        name: &str,
+    ) -> Result<Self, GpuError> {
         let words = ash::util::read_spv(&mut std::io::Cursor::new(spirv))
             .map_err(|e| GpuError::Input { input: "spirv", problem: e.to_string() })?;
         let d = &ctx.device;
@@ -31,15 +44,17 @@ impl<'a> ComputePipeline<'a> {
             layout: vk::PipelineLayout::null(),
             pipeline: vk::Pipeline::null(),
             pool: vk::DescriptorPool::null(),
-            set: vk::DescriptorSet::null(),
-            bindings,
+            sets: vec![],
+            types: types.to_vec(),
             push_size,
         };
-        let binding_info: Vec<_> = (0..bindings)
-            .map(|b| {
+        let binding_info: Vec<_> = types
+            .iter()
+            .enumerate()
+            .map(|(b, &ty)| {
                 vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .binding(b as u32)
+                    .descriptor_type(ty)
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
@@ -69,27 +84,40 @@ impl<'a> ComputePipeline<'a> {
         unsafe { d.destroy_shader_module(module, None) };
         p.pipeline = created.map_err(|(_, r)| GpuError::Vk { call: "vkCreateComputePipelines", result: r })?[0];
         ctx.set_name(p.pipeline, name);
-        let sizes =
-            [vk::DescriptorPoolSize::default().ty(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(bindings)];
+        let count = sets.max(1);
+        let sizes: Vec<_> =
+            types.iter().map(|&ty| vk::DescriptorPoolSize::default().ty(ty).descriptor_count(count)).collect();
         p.pool = unsafe {
-            d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
+            d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(count).pool_sizes(&sizes), None)
         }
         .map_err(vkr("vkCreateDescriptorPool"))?;
-        p.set = unsafe {
+        let layouts = vec![p.set_layout; count as usize];
+        p.sets = unsafe {
             d.allocate_descriptor_sets(
-                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&set_layouts),
+                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&layouts),
             )
         }
-        .map_err(vkr("vkAllocateDescriptorSets"))?[0];
+        .map_err(vkr("vkAllocateDescriptorSets"))?;
         Ok(p)
     }
 
-    /// Point bindings 0..n at `buffers` (whole ranges).
+    /// Point bindings 0..n of set 0 at `buffers` (whole ranges).
     pub fn bind(&self, buffers: &[&Buffer<'_>]) -> Result<(), GpuError> {
-        if buffers.len() != self.bindings as usize {
+        self.bind_set(0, buffers)
+    }
+
+    /// Point bindings 0..n of descriptor set `set` at `buffers` (whole ranges). The
+    /// set must not be in use by a pending submission.
+    pub fn bind_set(&self, set: usize, buffers: &[&Buffer<'_>]) -> Result<(), GpuError> {
+        if buffers.len() != self.types.len() || set >= self.sets.len() {
             return Err(GpuError::Input {
                 input: "buffers",
-                problem: format!("pipeline has {} bindings, got {} buffers", self.bindings, buffers.len()),
+                problem: format!(
+                    "pipeline has {} bindings and {} sets, got {} buffers for set {set}",
+                    self.types.len(),
+                    self.sets.len(),
+                    buffers.len()
+                ),
             });
         }
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
@@ -101,9 +129,9 @@ impl<'a> ComputePipeline<'a> {
             .enumerate()
             .map(|(i, info)| {
                 vk::WriteDescriptorSet::default()
-                    .dst_set(self.set)
+                    .dst_set(self.sets[set])
                     .dst_binding(i as u32)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_type(self.types[i])
                     .buffer_info(info)
             })
             .collect();
@@ -112,16 +140,22 @@ impl<'a> ComputePipeline<'a> {
         Ok(())
     }
 
-    /// Record a dispatch of `groups` workgroups with `push` constants, followed by a
-    /// compute→transfer/compute barrier so results can be copied or read next.
+    /// Record a dispatch of `groups` workgroups with `push` constants using set 0,
+    /// followed by a compute→transfer/compute barrier so results can be read next.
     pub fn record(&self, cmd: vk::CommandBuffer, push: &[u8], groups: [u32; 3]) {
+        self.record_set(cmd, 0, push, groups)
+    }
+
+    /// As `record`, with descriptor set `set` (clamped to the sets allocated).
+    pub fn record_set(&self, cmd: vk::CommandBuffer, set: usize, push: &[u8], groups: [u32; 3]) {
         let d = &self.ctx.device;
+        let set = self.sets[set.min(self.sets.len() - 1)];
         // SAFETY: `cmd` is recording; pipeline, layout and set are live; `push` is
         // exactly the declared push-constant size (checked by the pass structs'
         // static size assertions).
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
-            d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[self.set], &[]);
+            d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[set], &[]);
             if self.push_size > 0 {
                 d.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
             }

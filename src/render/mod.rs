@@ -5,7 +5,12 @@
 pub mod dof;
 pub mod grain;
 pub mod motion_blur;
+pub mod params;
 
 pub use dof::DofPass;
 pub use grain::{GrainPass, GrainTable};
 pub use motion_blur::MotionBlurPass;
+pub use params::EffectParams;
+
+/// SPIR-V of the uniform-block probe used by the hot-swap test.
+pub const PARAMS_PROBE_SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/params_probe.spv"));

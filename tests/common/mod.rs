@@ -107,3 +107,28 @@ pub fn median(mut v: Vec<f64>) -> f64 {
         v[v.len() / 2]
     }
 }
+
+/// A Vulkan context for a GPU test (validation layer on when installed), or `None`
+/// with a message when there is no device — unless REQUIRE_GPU=1 (set by .ci/run),
+/// where a missing device, or a missing validation layer, fails the test.
+pub fn gpu_context(test: &str) -> Option<blind_augment::gpu::GpuContext> {
+    let opts =
+        blind_augment::gpu::GpuOptions { validation: true, prefer_device: std::env::var("BLIND_AUGMENT_DEVICE").ok() };
+    let required = std::env::var("REQUIRE_GPU").as_deref() == Ok("1");
+    match blind_augment::gpu::GpuContext::new(&opts) {
+        Ok(ctx) => {
+            let layer = if ctx.validation_enabled() { "on" } else { "not installed" };
+            eprintln!("{test}: running on {} (validation layer {layer})", ctx.device_name());
+            assert!(
+                !required || ctx.validation_enabled(),
+                "{test}: REQUIRE_GPU=1 expects the validation layer (vulkan-validationlayers)"
+            );
+            Some(ctx)
+        }
+        Err(e) if required => panic!("{test}: REQUIRE_GPU=1 but no Vulkan device: {e}"),
+        Err(e) => {
+            eprintln!("{test}: SKIPPED, no Vulkan device ({e}); set REQUIRE_GPU=1 to make this a failure");
+            None
+        }
+    }
+}
