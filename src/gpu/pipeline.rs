@@ -71,7 +71,10 @@ impl<'a> ComputePipeline<'a> {
         let layout_info = vk::PipelineLayoutCreateInfo::default()
             .set_layouts(&set_layouts)
             .push_constant_ranges(if push_size > 0 { &ranges } else { &[] });
+        // SAFETY: valid device; `layout_info` and the set layout it names are alive.
         p.layout = unsafe { d.create_pipeline_layout(&layout_info, None) }.map_err(vkr("vkCreatePipelineLayout"))?;
+        // SAFETY: `words` is SPIR-V validated by naga at build time and read with
+        // `read_spv` (aligned, correct magic); destroyed right after pipeline creation.
         let module = unsafe { d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None) }
             .map_err(vkr("vkCreateShaderModule"))?;
         let stage = vk::PipelineShaderStageCreateInfo::default()
@@ -79,6 +82,7 @@ impl<'a> ComputePipeline<'a> {
             .module(module)
             .name(c"main");
         let info = vk::ComputePipelineCreateInfo::default().stage(stage).layout(p.layout);
+        // SAFETY: the stage, module and layout are alive for the call.
         let created = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &[info], None) };
         // SAFETY: the module is only needed during pipeline creation.
         unsafe { d.destroy_shader_module(module, None) };
@@ -87,11 +91,13 @@ impl<'a> ComputePipeline<'a> {
         let count = sets.max(1);
         let sizes: Vec<_> =
             types.iter().map(|&ty| vk::DescriptorPoolSize::default().ty(ty).descriptor_count(count)).collect();
+        // SAFETY: valid device; pool sizes cover every binding of every set.
         p.pool = unsafe {
             d.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(count).pool_sizes(&sizes), None)
         }
         .map_err(vkr("vkCreateDescriptorPool"))?;
         let layouts = vec![p.set_layout; count as usize];
+        // SAFETY: the pool was sized for `count` sets of this layout.
         p.sets = unsafe {
             d.allocate_descriptor_sets(
                 &vk::DescriptorSetAllocateInfo::default().descriptor_pool(p.pool).set_layouts(&layouts),
