@@ -199,6 +199,27 @@ fn grain_pass_matches_cpu_reference() {
     assert!(messages.is_empty(), "validation messages: {messages:#?}");
 }
 
+/// Timestamp queries measure dispatches (not transfers) when timing is on.
+#[test]
+fn gpu_timing_measures_dispatches() {
+    let Some(ctx) = gpu_context("timing") else { return };
+    if !ctx.has_timestamps() {
+        eprintln!("timing: SKIPPED, no timestamp support on {}", ctx.device_name());
+        return;
+    }
+    let pass = MotionBlurPass::new(&ctx).expect("pipeline");
+    let img = photo("chelsea.png");
+    let flow = flow_field(img.width, img.height, 8.0);
+    ctx.set_timing(true);
+    pass.run(img.width, img.height, &planar(&img), &interleaved(&flow), 1.0).expect("dispatch");
+    let ms = ctx.gpu_time_ms();
+    ctx.set_timing(false);
+    assert!(ms > 0.0 && ms.is_finite(), "GPU time {ms} ms");
+    pass.run(img.width, img.height, &planar(&img), &interleaved(&flow), 1.0).expect("dispatch");
+    assert_eq!(ctx.gpu_time_ms(), 0.0, "timing off: nothing accumulated");
+    assert!(ctx.take_messages().is_empty());
+}
+
 #[test]
 fn bad_input_never_reaches_the_gpu() {
     let Some(ctx) = gpu_context("bad_input") else { return };

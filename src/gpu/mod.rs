@@ -65,6 +65,11 @@ pub struct GpuContext {
     pub(crate) queue: vk::Queue,
     pub(crate) command_pool: vk::CommandPool,
     device_name: String,
+    timestamp_period_ns: Option<f32>,
+    /// When set, `dispatch_and_wait` brackets its commands with timestamps and adds
+    /// the GPU time to `gpu_time_ms` (benchmarks; off by default).
+    timing: std::cell::Cell<bool>,
+    gpu_time_ms: std::cell::Cell<f64>,
 }
 
 unsafe extern "system" fn on_message(
@@ -165,6 +170,9 @@ impl GpuContext {
                     queue: parts.queue,
                     command_pool: parts.command_pool,
                     device_name: parts.name,
+                    timestamp_period_ns: parts.timestamp_period_ns,
+                    timing: std::cell::Cell::new(false),
+                    gpu_time_ms: std::cell::Cell::new(0.0),
                 })
             }
             Err(e) => {
@@ -250,6 +258,63 @@ impl GpuContext {
         result
     }
 
+    /// Whether the device supports timestamp queries on the compute queue.
+    pub fn has_timestamps(&self) -> bool {
+        self.timestamp_period_ns.is_some()
+    }
+
+    /// Start (or stop) accumulating GPU time of `dispatch_and_wait`; resets the total.
+    pub fn set_timing(&self, on: bool) {
+        self.timing.set(on && self.has_timestamps());
+        self.gpu_time_ms.set(0.0);
+    }
+
+    /// GPU time (ms) of the dispatches since `set_timing(true)`.
+    pub fn gpu_time_ms(&self) -> f64 {
+        self.gpu_time_ms.get()
+    }
+
+    /// `submit_and_wait` for compute work: when timing is on, the commands are
+    /// bracketed by timestamps (top and bottom of pipe) and their GPU time added to
+    /// `gpu_time_ms`. Transfers use plain `submit_and_wait` and are not counted.
+    pub fn dispatch_and_wait(&self, f: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
+        let Some(period_ns) = self.timestamp_period_ns.filter(|_| self.timing.get()) else {
+            return self.submit_and_wait(f);
+        };
+        let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2);
+        // SAFETY: valid device; the pool is destroyed below after the fenced wait.
+        let pool = unsafe { self.device.create_query_pool(&info, None) }.map_err(vkr("vkCreateQueryPool"))?;
+        let result = self.submit_and_wait(|cmd| {
+            // SAFETY: `cmd` is recording; queries 0 and 1 of a live pool, reset first.
+            unsafe {
+                self.device.cmd_reset_query_pool(cmd, pool, 0, 2);
+                self.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, pool, 0);
+            }
+            f(cmd);
+            // SAFETY: as above.
+            unsafe { self.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, pool, 1) };
+        });
+        let mut ticks = [0u64; 2];
+        let read = result.and_then(|_| {
+            // SAFETY: the submission completed (fenced); both queries were written.
+            unsafe {
+                self.device.get_query_pool_results(
+                    pool,
+                    0,
+                    &mut ticks,
+                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                )
+            }
+            .map_err(vkr("vkGetQueryPoolResults"))
+        });
+        // SAFETY: no pending use of the pool remains.
+        unsafe { self.device.destroy_query_pool(pool, None) };
+        read?;
+        let ms = ticks[1].saturating_sub(ticks[0]) as f64 * period_ns as f64 * 1e-6;
+        self.gpu_time_ms.set(self.gpu_time_ms.get() + ms);
+        Ok(())
+    }
+
     /// A device-local storage buffer holding `data`, uploaded through a staging buffer.
     pub fn upload(&self, data: &[u8], name: &str) -> Result<Buffer<'_>, GpuError> {
         let size = data.len().max(4) as u64;
@@ -312,6 +377,7 @@ impl GpuContext {
 
 /// What `create_device` hands back to `GpuContext::new`.
 struct DeviceParts {
+    timestamp_period_ns: Option<f32>,
     physical: vk::PhysicalDevice,
     memory: vk::PhysicalDeviceMemoryProperties,
     device: ash::Device,
@@ -367,7 +433,18 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
     };
     // SAFETY: valid physical device.
     let memory = unsafe { instance.get_physical_device_memory_properties(physical) };
-    Ok(DeviceParts { physical, memory, device, queue, command_pool, name })
+    // Timestamps need a non-zero period and valid bits on the queue family.
+    // SAFETY: valid physical device.
+    let (props, families) = unsafe {
+        (
+            instance.get_physical_device_properties(physical),
+            instance.get_physical_device_queue_family_properties(physical),
+        )
+    };
+    let valid_bits = families.get(family as usize).map_or(0, |f| f.timestamp_valid_bits);
+    let timestamp_period_ns =
+        (valid_bits > 0 && props.limits.timestamp_period > 0.0).then_some(props.limits.timestamp_period);
+    Ok(DeviceParts { timestamp_period_ns, physical, memory, device, queue, command_pool, name })
 }
 
 impl Drop for GpuContext {

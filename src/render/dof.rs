@@ -97,7 +97,7 @@ impl<'a> DofPass<'a> {
             let px = BlurParams { width: w, height: h, radius, axis: 0 };
             let py = BlurParams { width: w, height: h, radius, axis: 1 };
             let pb = BlendParams { width: w, height: h, s0, s1 };
-            self.ctx.submit_and_wait(|cmd| {
+            self.ctx.dispatch_and_wait(|cmd| {
                 self.blur_x.record(cmd, bytemuck::bytes_of(&px), groups);
                 self.blur_y.record(cmd, bytemuck::bytes_of(&py), groups);
                 self.blend.record(cmd, bytemuck::bytes_of(&pb), groups);

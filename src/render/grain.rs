@@ -103,7 +103,7 @@ impl<'a> GrainPass<'a> {
         g: [u32; 3],
     ) -> Result<(), GpuError> {
         p.bind(bufs)?;
-        self.ctx.submit_and_wait(|cmd| p.record(cmd, push, g))
+        self.ctx.dispatch_and_wait(|cmd| p.record(cmd, push, g))
     }
 
     /// Separable reduce of a `channels`-plane buffer of `w × h`.

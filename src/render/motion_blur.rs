@@ -76,7 +76,7 @@ impl<'a> MotionBlurPass<'a> {
         let dst = self.ctx.storage_buffer((rgb.len() * 4) as u64, "motion_blur dst")?;
         self.pipeline.bind(&[&src, &flow, &dst])?;
         let groups = [(width as u32).div_ceil(WORKGROUP), (height as u32).div_ceil(WORKGROUP), 1];
-        self.ctx.submit_and_wait(|cmd| self.pipeline.record(cmd, bytemuck::bytes_of(&params), groups))?;
+        self.ctx.dispatch_and_wait(|cmd| self.pipeline.record(cmd, bytemuck::bytes_of(&params), groups))?;
         let bytes = self.ctx.download(&dst)?;
         Ok(bytemuck::cast_slice(&bytes[..rgb.len() * 4]).to_vec())
     }

@@ -1,5 +1,6 @@
 //! Project automation (`cargo xtask <command>`), so CI and developers need nothing
-//! but cargo: `bench` runs every benchmark and keeps the raw output for
+//! but cargo: `bench` runs every benchmark (fit speed, speed/accuracy trade, GPU
+//! passes) and keeps the raw output for
 //! BENCHMARKS.md; `ci` runs the same checks as `.ci/run` minus the installs.
 
 use anyhow::{bail, Context, Result};
@@ -33,6 +34,8 @@ fn bench() -> Result<()> {
     std::fs::write(dir.join("quality.md"), quality).context("writing target/bench/quality.md")?;
     let fit = cargo(&["bench", "--bench", "fit"])?;
     std::fs::write(dir.join("fit.txt"), fit).context("writing target/bench/fit.txt")?;
+    let gpu = cargo(&["bench", "--bench", "gpu"])?;
+    std::fs::write(dir.join("gpu.md"), gpu).context("writing target/bench/gpu.md")?;
     eprintln!("raw results in {}; copy the figures into BENCHMARKS.md", dir.display());
     Ok(())
 }
