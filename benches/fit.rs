@@ -47,17 +47,7 @@ fn case(w: usize, h: usize) -> Case {
         depth_range: [0.5, 4.0],
         diagnostics: Diagnostics::not_fitted("truth"),
     };
-    let unit = synth::unit_band_std();
-    truth.noise = Noise {
-        present: true,
-        form: NoiseForm::AffineVariance,
-        levels: (0..NOISE_LEVELS)
-            .map(|l| NoiseLevel { slope: [8e-4 * unit[l] * unit[l]; 3], intercept: [2e-5 * unit[l] * unit[l]; 3] })
-            .collect(),
-        lowpass: None,
-        luminance_range: [0.0, 1.0],
-        diagnostics: Diagnostics::not_fitted("truth"),
-    };
+    truth.noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
     truth.motion_blur =
         MotionBlur { present: true, exposure: Some(0.5), diagnostics: Diagnostics::not_fitted("truth") };
     let q = |i: &Rgb| i.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);

@@ -54,17 +54,7 @@ fn main() {
     let mb = MotionBlurPass::new(&ctx).expect("pipeline");
     let dof = DofPass::new(&ctx).expect("pipelines");
     let grain = GrainPass::new(&ctx).expect("pipelines");
-    let unit = synth::unit_band_std();
-    let noise = Noise {
-        present: true,
-        form: NoiseForm::AffineVariance,
-        levels: (0..NOISE_LEVELS)
-            .map(|l| NoiseLevel { slope: [8e-4 * unit[l] * unit[l]; 3], intercept: [2e-5 * unit[l] * unit[l]; 3] })
-            .collect(),
-        lowpass: None,
-        luminance_range: [0.02, 0.98],
-        diagnostics: Diagnostics::not_fitted("bench"),
-    };
+    let noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.02, 0.98]);
     let t = SynthesisTable::new(&noise);
     let table = GrainTable { luma_range: t.luma_range(), nodes: t.nodes() as u32, weights: t.weights_flat() };
     let dof_model = DepthOfField {

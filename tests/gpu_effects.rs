@@ -10,11 +10,11 @@ mod common;
 
 use blind_augment::image::laplacian_pyramid;
 use blind_augment::image::{Flow, Rgb};
-use blind_augment::model::{
-    DepthOfField, DepthUnits, Diagnostics, DofCurve, Noise, NoiseForm, NoiseLevel, NOISE_LEVELS,
-};
+use blind_augment::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, Noise, NOISE_LEVELS};
 use blind_augment::render::{DofPass, GrainPass, GrainTable, MotionBlurPass};
-use blind_augment::synth::{add_defocus, add_motion_blur, dof_sigma_map, noise_field, unit_band_std, SynthesisTable};
+use blind_augment::synth::{
+    add_defocus, add_motion_blur, dof_sigma_map, noise_field, white_sensor_noise, SynthesisTable,
+};
 use common::*;
 use std::path::PathBuf;
 
@@ -136,20 +136,7 @@ fn dof_pass_matches_cpu_reference() {
 }
 
 fn sensor_noise() -> Noise {
-    // Poisson–Gaussian white noise, std √(a + bY), as a camera model.
-    let unit = unit_band_std();
-    let level = |l: usize| NoiseLevel {
-        slope: [8e-4 * unit[l] * unit[l], 5e-4 * unit[l] * unit[l], 1.2e-3 * unit[l] * unit[l]],
-        intercept: [2e-5 * unit[l] * unit[l]; 3],
-    };
-    Noise {
-        present: true,
-        form: NoiseForm::AffineVariance,
-        levels: (0..NOISE_LEVELS).map(level).collect(),
-        lowpass: Some(level(NOISE_LEVELS)),
-        luminance_range: [0.05, 0.95],
-        diagnostics: Diagnostics::not_fitted("test"),
-    }
+    white_sensor_noise([2e-5; 3], [8e-4, 5e-4, 1.2e-3], [0.05, 0.95])
 }
 
 fn grain_table(noise: &Noise) -> GrainTable {

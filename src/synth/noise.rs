@@ -233,6 +233,26 @@ pub fn noise_field(luma: &Plane, noise: &Noise, seed: u64) -> Rgb {
     Rgb::from_planes([next(), next(), next()])
 }
 
+/// The camera-model noise entry of white Poisson–Gaussian sensor noise with
+/// std_c(Y) = √(a_c + b_c·Y): band l of white noise carries the fraction c_l of its
+/// std (`unit_band_std`), so level l's affine variance is (a + bY)·c_l², low-pass
+/// included. Used as ground truth by the demo, tests and benchmarks.
+pub fn white_sensor_noise(a: [f32; 3], b: [f32; 3], luminance_range: [f32; 2]) -> Noise {
+    let unit = unit_band_std();
+    let level = |l: usize| crate::model::NoiseLevel {
+        slope: std::array::from_fn(|c| b[c] * unit[l] * unit[l]),
+        intercept: std::array::from_fn(|c| a[c] * unit[l] * unit[l]),
+    };
+    Noise {
+        present: true,
+        form: crate::model::NoiseForm::AffineVariance,
+        levels: (0..NOISE_LEVELS).map(level).collect(),
+        lowpass: Some(level(NOISE_LEVELS)),
+        luminance_range,
+        diagnostics: crate::model::Diagnostics::not_fitted("white Poisson–Gaussian sensor noise"),
+    }
+}
+
 /// addNoise(I, σ): `clean` plus synthesised noise; unclipped (an 8-bit writer clips).
 pub fn add_noise(clean: &Rgb, noise: &Noise, seed: u64) -> Rgb {
     if !noise.present {

@@ -53,32 +53,13 @@ fn head_motion_flow(w: usize, h: usize) -> Flow {
     f
 }
 
-/// White Poisson–Gaussian noise std_c(Y) = √(a_c + b_c·Y) as a camera-model noise
-/// entry: band l of white noise carries the fraction c_l of the std, so the affine
-/// variance of level l is (a + bY)·c_l².
-fn sensor_noise_model(a: [f32; 3], b: [f32; 3]) -> Noise {
-    let unit = synth::unit_band_std();
-    let level = |l: usize| NoiseLevel {
-        slope: std::array::from_fn(|c| b[c] * unit[l] * unit[l]),
-        intercept: std::array::from_fn(|c| a[c] * unit[l] * unit[l]),
-    };
-    Noise {
-        present: true,
-        form: NoiseForm::AffineVariance,
-        levels: (0..NOISE_LEVELS).map(level).collect(),
-        lowpass: Some(level(NOISE_LEVELS)),
-        luminance_range: [0.0, 1.0],
-        diagnostics: Diagnostics::not_fitted("ground truth"),
-    }
-}
-
 fn truth_model(w: usize, h: usize, disparity: &Plane) -> CameraModel {
     let valid: Vec<f32> = disparity.data.iter().cloned().filter(|v| v.is_finite()).collect();
     let lo = valid.iter().cloned().fold(f32::INFINITY, f32::min);
     let hi = valid.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
     let mut m = CameraModel::empty(w as u32, h as u32);
     m.reference.frame_interval_s = Some(1.0 / 30.0);
-    m.noise = sensor_noise_model([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3]);
+    m.noise = synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
     m.motion_blur =
         MotionBlur { present: true, exposure: Some(0.4), diagnostics: Diagnostics::not_fitted("ground truth") };
     m.depth_of_field = DepthOfField {
