@@ -6,6 +6,7 @@ layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Src { float src[]; };
 layout(std430, set = 0, binding = 1) buffer Dst { float dst[]; };
+// Every stack interval's kernel, concatenated (uploaded once per pass object).
 layout(std430, set = 0, binding = 2) readonly buffer Kernel { float weights[]; };
 
 layout(push_constant) uniform Params {
@@ -13,6 +14,7 @@ layout(push_constant) uniform Params {
     uint height;
     uint radius;
     uint axis; // 0: along x (rows), 1: along y (columns)
+    uint kernel_offset; // this interval's taps start here in `weights`
 } p;
 
 void main() {
@@ -33,7 +35,7 @@ void main() {
             } else {
                 yi = clamp(int(y) + k - r, 0, int(p.height) - 1);
             }
-            acc += weights[k] * src[c * plane + uint(yi) * p.width + uint(xi)];
+            acc += weights[p.kernel_offset + uint(k)] * src[c * plane + uint(yi) * p.width + uint(xi)];
         }
         dst[c * plane + y * p.width + x] = acc;
     }

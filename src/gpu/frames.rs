@@ -32,13 +32,7 @@ impl<'a> FrameRing<'a> {
                 vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
                 &format!("frame {i} uniforms"),
             )?;
-            let alloc = vk::CommandBufferAllocateInfo::default()
-                .command_pool(ctx.command_pool)
-                .level(vk::CommandBufferLevel::PRIMARY)
-                .command_buffer_count(1);
-            // SAFETY: valid pool of this device; used from this thread only.
-            let cmd =
-                unsafe { ctx.device.allocate_command_buffers(&alloc) }.map_err(vkr("allocate command buffer"))?[0];
+            let cmd = ctx.allocate_command_buffer()?;
             // Created signalled, so the first `begin` of each slot does not wait.
             let info = vk::FenceCreateInfo::default().flags(vk::FenceCreateFlags::SIGNALED);
             // SAFETY: valid device.

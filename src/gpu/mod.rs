@@ -23,8 +23,8 @@ use std::sync::{Arc, Mutex};
 pub enum GpuError {
     #[error("Vulkan loader not available: {0}")]
     Loader(String),
-    #[error("no Vulkan device with a compute queue{0}")]
-    NoDevice(String),
+    #[error("no Vulkan device with a compute queue")]
+    NoDevice,
     #[error("Vulkan call {call} failed: {result}")]
     Vk { call: &'static str, result: vk::Result },
     #[error("no memory type for {0}")]
@@ -222,15 +222,20 @@ impl GpuContext {
             .find(|&i| bits & (1 << i) != 0 && self.memory.memory_types[i as usize].property_flags.contains(props))
     }
 
-    /// Record with `f` into a fresh command buffer, submit, wait (fence).
-    pub fn submit_and_wait(&self, f: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
+    /// One primary command buffer from the context's pool (freed by the caller).
+    pub(crate) fn allocate_command_buffer(&self) -> Result<vk::CommandBuffer, GpuError> {
         let alloc = vk::CommandBufferAllocateInfo::default()
             .command_pool(self.command_pool)
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(1);
         // SAFETY: the pool belongs to this device and is only used from this thread
         // (GpuContext is not Sync).
-        let cmd = unsafe { self.device.allocate_command_buffers(&alloc) }.map_err(vkr("allocate command buffer"))?[0];
+        Ok(unsafe { self.device.allocate_command_buffers(&alloc) }.map_err(vkr("allocate command buffer"))?[0])
+    }
+
+    /// Record with `f` into a fresh command buffer, submit, wait (fence).
+    pub fn submit_and_wait(&self, f: impl FnOnce(vk::CommandBuffer)) -> Result<(), GpuError> {
+        let cmd = self.allocate_command_buffer()?;
         let result = (|| {
             let begin = vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
             // SAFETY: freshly allocated primary command buffer.
@@ -411,7 +416,7 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
         candidates.push((rank, pd, qf as u32, name));
     }
     candidates.sort_by_key(|c| c.0);
-    let (_, physical, family, name) = candidates.into_iter().next().ok_or(GpuError::NoDevice(String::new()))?;
+    let (_, physical, family, name) = candidates.into_iter().next().ok_or(GpuError::NoDevice)?;
     let priorities = [1.0f32];
     let queue_info = vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities);
     let info = vk::DeviceCreateInfo::default().queue_create_infos(std::slice::from_ref(&queue_info));

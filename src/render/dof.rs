@@ -4,7 +4,7 @@
 //! around its σ with variance-matched weights. One submission per stack interval
 //! (blur x, blur y, blend), because each needs its own bindings.
 
-use crate::gpu::{ComputePipeline, GpuContext, GpuError};
+use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError};
 use crate::model::{kernels::discrete_gaussian_kernel, DOF_NODE_SPACING_PX, MAX_DOF_SIGMA_PX};
 use bytemuck::{Pod, Zeroable};
 
@@ -20,6 +20,7 @@ pub struct BlurParams {
     pub height: u32,
     pub radius: u32,
     pub axis: u32,
+    pub kernel_offset: u32,
 }
 
 /// Push constants of `dof_blend.comp`.
@@ -32,7 +33,7 @@ pub struct BlendParams {
     pub s1: f32,
 }
 
-const _: () = assert!(std::mem::size_of::<BlurParams>() == 16);
+const _: () = assert!(std::mem::size_of::<BlurParams>() == 20);
 const _: () = assert!(std::mem::size_of::<BlendParams>() == 16);
 const _: () = assert!(std::mem::offset_of!(BlendParams, s0) == 8);
 
@@ -41,15 +42,33 @@ pub struct DofPass<'a> {
     blur_x: ComputePipeline<'a>,
     blur_y: ComputePipeline<'a>,
     blend: ComputePipeline<'a>,
+    /// The discrete-Gaussian kernel of every stack interval up to MAX_DOF_SIGMA_PX,
+    /// concatenated; they depend only on the interval, so they are built once here
+    /// rather than on every run.
+    kernels: Buffer<'a>,
+    /// (offset, radius) of interval k's taps in `kernels`.
+    kernel_spans: Vec<(u32, u32)>,
 }
 
 impl<'a> DofPass<'a> {
     pub fn new(ctx: &'a GpuContext) -> Result<Self, GpuError> {
+        let intervals = (MAX_DOF_SIGMA_PX / DOF_NODE_SPACING_PX).ceil() as usize;
+        let mut taps = Vec::new();
+        let mut kernel_spans = Vec::with_capacity(intervals);
+        for k in 0..intervals {
+            // The same f32 arithmetic as synth::for_each_cascade_interval.
+            let (s0, s1) = (k as f32 * DOF_NODE_SPACING_PX, (k + 1) as f32 * DOF_NODE_SPACING_PX);
+            let kernel = discrete_gaussian_kernel(s1 * s1 - s0 * s0);
+            kernel_spans.push((taps.len() as u32, (kernel.len() / 2) as u32));
+            taps.extend_from_slice(&kernel);
+        }
         Ok(Self {
             ctx,
-            blur_x: ComputePipeline::new(ctx, BLUR_SPIRV, 3, 16, "dof_blur_x")?,
-            blur_y: ComputePipeline::new(ctx, BLUR_SPIRV, 3, 16, "dof_blur_y")?,
+            blur_x: ComputePipeline::new(ctx, BLUR_SPIRV, 3, 20, "dof_blur_x")?,
+            blur_y: ComputePipeline::new(ctx, BLUR_SPIRV, 3, 20, "dof_blur_y")?,
             blend: ComputePipeline::new(ctx, BLEND_SPIRV, 4, 16, "dof_blend")?,
+            kernels: ctx.upload(bytemuck::cast_slice(&taps), "dof kernels")?,
+            kernel_spans,
         })
     }
 
@@ -87,15 +106,13 @@ impl<'a> DofPass<'a> {
         let intervals = (max_sigma / DOF_NODE_SPACING_PX).ceil().max(1.0) as usize;
         for k in 0..intervals {
             let (s0, s1) = (k as f32 * DOF_NODE_SPACING_PX, (k + 1) as f32 * DOF_NODE_SPACING_PX);
-            let kernel = discrete_gaussian_kernel(s1 * s1 - s0 * s0);
-            let radius = (kernel.len() / 2) as u32;
-            let kbuf = self.ctx.upload(bytemuck::cast_slice(&kernel), "dof kernel")?;
-            self.blur_x.bind(&[&prev, &tmp, &kbuf])?;
-            self.blur_y.bind(&[&tmp, &next, &kbuf])?;
+            let (kernel_offset, radius) = self.kernel_spans[k];
+            self.blur_x.bind(&[&prev, &tmp, &self.kernels])?;
+            self.blur_y.bind(&[&tmp, &next, &self.kernels])?;
             self.blend.bind(&[&prev, &next, &sigma_buf, &out])?;
             let (w, h) = (width as u32, height as u32);
-            let px = BlurParams { width: w, height: h, radius, axis: 0 };
-            let py = BlurParams { width: w, height: h, radius, axis: 1 };
+            let px = BlurParams { width: w, height: h, radius, axis: 0, kernel_offset };
+            let py = BlurParams { width: w, height: h, radius, axis: 1, kernel_offset };
             let pb = BlendParams { width: w, height: h, s0, s1 };
             self.ctx.dispatch_and_wait(|cmd| {
                 self.blur_x.record(cmd, bytemuck::bytes_of(&px), groups);

@@ -1,7 +1,7 @@
-//! Project automation (`cargo xtask <command>`), so CI and developers need nothing
+//! Project automation in Rust (`cargo xtask <command>`), so developers need nothing
 //! but cargo: `bench` runs every benchmark (fit speed, speed/accuracy trade, GPU
-//! passes) and keeps the raw output for
-//! BENCHMARKS.md; `ci` runs the same checks as `.ci/run` minus the installs.
+//! passes) and keeps the raw output for BENCHMARKS.md. CI is `.ci/run` alone, the
+//! one definition of the checks.
 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -40,18 +40,9 @@ fn bench() -> Result<()> {
     Ok(())
 }
 
-fn ci() -> Result<()> {
-    cargo(&["fmt", "--all", "--", "--check"])?;
-    cargo(&["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"])?;
-    cargo(&["test", "--workspace"])?;
-    cargo(&["check", "--target", "aarch64-linux-android", "--lib"])?;
-    Ok(())
-}
-
 fn main() -> Result<()> {
     match std::env::args().nth(1).as_deref() {
         Some("bench") => bench(),
-        Some("ci") => ci(),
-        other => bail!("usage: cargo xtask <bench|ci> (got {other:?})"),
+        other => bail!("usage: cargo xtask bench (got {other:?})"),
     }
 }
