@@ -19,7 +19,7 @@ pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::DofPlotData;
 pub use motion_blur::MbPlotData;
-pub use noise::NoisePlotData;
+pub use noise::{effective_stride as effective_noise_stride, NoisePlotData};
 
 use crate::image::{Flow, Plane, Rgb};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, MotionBlur, Noise, SCHEMA};

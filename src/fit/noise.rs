@@ -42,7 +42,7 @@ pub const DEFAULT_STRIDE_PX: usize = 16;
 /// keeps ≥ ~1000 level-0 samples (√(pixels/1000), at least 4). At 512² and above
 /// that is `max_stride`; a 451×300 frame gets 11 (its error at 16 px: 1.3%, at
 /// 11 px: see tests/validation.rs).
-fn effective_stride(pixels: usize, max_stride: usize) -> usize {
+pub fn effective_stride(pixels: usize, max_stride: usize) -> usize {
     (((pixels as f64 / 1000.0).sqrt()) as usize).clamp(4.min(max_stride), max_stride.max(1))
 }
 const BLIND_FLAT_FRACTION: f64 = 0.2;
