@@ -14,5 +14,6 @@ pub mod io;
 pub mod model;
 pub mod plots;
 pub mod render;
+pub mod scene;
 pub mod synth;
 pub mod worker;

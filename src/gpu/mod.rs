@@ -10,10 +10,16 @@
 #![allow(unsafe_code)]
 
 mod frames;
+mod graphics;
+mod image;
 mod pipeline;
+mod query;
 
 pub use frames::{FrameRing, FrameSlot};
-pub use pipeline::ComputePipeline;
+pub use graphics::{GraphicsDesc, GraphicsPipeline, MultiviewTarget, VertexAttribute, EYES};
+pub use image::{texel_bytes, Image, Texture};
+pub use pipeline::{ComputePipeline, Resource};
+pub use query::{QueryPool, Statistics};
 
 use ash::vk;
 use std::ffi::{c_void, CStr};
@@ -23,7 +29,7 @@ use std::sync::{Arc, Mutex};
 pub enum GpuError {
     #[error("Vulkan loader not available: {0}")]
     Loader(String),
-    #[error("no Vulkan device with a compute queue")]
+    #[error("no Vulkan device with a graphics+compute queue")]
     NoDevice,
     #[error("Vulkan call {call} failed: {result}")]
     Vk { call: &'static str, result: vk::Result },
@@ -66,6 +72,7 @@ pub struct GpuContext {
     pub(crate) command_pool: vk::CommandPool,
     device_name: String,
     timestamp_period_ns: Option<f32>,
+    statistics: bool,
     /// When set, `dispatch_and_wait` brackets its commands with timestamps and adds
     /// the GPU time to `gpu_time_ms` (benchmarks; off by default).
     timing: std::cell::Cell<bool>,
@@ -171,6 +178,7 @@ impl GpuContext {
                     command_pool: parts.command_pool,
                     device_name: parts.name,
                     timestamp_period_ns: parts.timestamp_period_ns,
+                    statistics: parts.statistics,
                     timing: std::cell::Cell::new(false),
                     gpu_time_ms: std::cell::Cell::new(0.0),
                 })
@@ -217,7 +225,7 @@ impl GpuContext {
         let _ = unsafe { dd.set_debug_utils_object_name(&info) };
     }
 
-    fn memory_type(&self, bits: u32, props: vk::MemoryPropertyFlags) -> Option<u32> {
+    pub(crate) fn memory_type(&self, bits: u32, props: vk::MemoryPropertyFlags) -> Option<u32> {
         (0..self.memory.memory_type_count)
             .find(|&i| bits & (1 << i) != 0 && self.memory.memory_types[i as usize].property_flags.contains(props))
     }
@@ -261,6 +269,16 @@ impl GpuContext {
         // SAFETY: execution finished (or never started).
         unsafe { self.device.free_command_buffers(self.command_pool, &[cmd]) };
         result
+    }
+
+    /// Whether pipeline-statistics queries were enabled (device feature).
+    pub fn has_pipeline_statistics(&self) -> bool {
+        self.statistics
+    }
+
+    /// Nanoseconds per timestamp tick, when timestamps are supported.
+    pub fn timestamp_period_ns(&self) -> Option<f32> {
+        self.timestamp_period_ns
     }
 
     /// Whether the device supports timestamp queries on the compute queue.
@@ -322,6 +340,11 @@ impl GpuContext {
 
     /// A device-local storage buffer holding `data`, uploaded through a staging buffer.
     pub fn upload(&self, data: &[u8], name: &str) -> Result<Buffer<'_>, GpuError> {
+        self.upload_as(data, vk::BufferUsageFlags::empty(), name)
+    }
+
+    /// As `upload`, with extra usage (vertex, index buffers).
+    pub fn upload_as(&self, data: &[u8], usage: vk::BufferUsageFlags, name: &str) -> Result<Buffer<'_>, GpuError> {
         let size = data.len().max(4) as u64;
         let staging = Buffer::new(
             self,
@@ -331,7 +354,13 @@ impl GpuContext {
             &format!("{name} (staging)"),
         )?;
         staging.write(data)?;
-        let buffer = self.storage_buffer(size, name)?;
+        let buffer = Buffer::new(
+            self,
+            size,
+            usage | vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
+            vk::MemoryPropertyFlags::DEVICE_LOCAL,
+            name,
+        )?;
         self.submit_and_wait(|cmd| {
             let region = vk::BufferCopy::default().size(size);
             // SAFETY: both buffers are live, large enough, and not in use elsewhere.
@@ -383,6 +412,7 @@ impl GpuContext {
 /// What `create_device` hands back to `GpuContext::new`.
 struct DeviceParts {
     timestamp_period_ns: Option<f32>,
+    statistics: bool,
     physical: vk::PhysicalDevice,
     memory: vk::PhysicalDeviceMemoryProperties,
     device: ash::Device,
@@ -404,7 +434,9 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
         let name = props.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
         // SAFETY: as above.
         let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
-        let Some(qf) = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)) else {
+        let Some(qf) =
+            families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE | vk::QueueFlags::GRAPHICS))
+        else {
             continue;
         };
         let rank = match (&opts.prefer_device, props.device_type) {
@@ -419,7 +451,20 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
     let (_, physical, family, name) = candidates.into_iter().next().ok_or(GpuError::NoDevice)?;
     let priorities = [1.0f32];
     let queue_info = vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities);
-    let info = vk::DeviceCreateInfo::default().queue_create_infos(std::slice::from_ref(&queue_info));
+    // Pipeline-statistics queries (fragment/compute invocation counts for the
+    // coverage benchmark) are an optional feature: enabled where supported.
+    // SAFETY: `physical` belongs to `instance`.
+    let supported = unsafe { instance.get_physical_device_features(physical) };
+    let statistics = supported.pipeline_statistics_query == vk::TRUE;
+    let features = vk::PhysicalDeviceFeatures::default().pipeline_statistics_query(statistics);
+    // Multiview (Vulkan 1.1 core; the stereo target is one render pass over two
+    // layers). Required: every Vulkan 1.1 device supports it (spec, Feature
+    // Requirements: multiview is mandatory in 1.1).
+    let mut multiview = vk::PhysicalDeviceMultiviewFeatures::default().multiview(true);
+    let info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(std::slice::from_ref(&queue_info))
+        .enabled_features(&features)
+        .push_next(&mut multiview);
     // SAFETY: `physical` belongs to `instance`; create info valid for the call.
     let device = unsafe { instance.create_device(physical, &info, None) }.map_err(vkr("vkCreateDevice"))?;
     // SAFETY: family/index 0 were requested at device creation.
@@ -449,7 +494,7 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
     let valid_bits = families.get(family as usize).map_or(0, |f| f.timestamp_valid_bits);
     let timestamp_period_ns =
         (valid_bits > 0 && props.limits.timestamp_period > 0.0).then_some(props.limits.timestamp_period);
-    Ok(DeviceParts { timestamp_period_ns, physical, memory, device, queue, command_pool, name })
+    Ok(DeviceParts { timestamp_period_ns, statistics, physical, memory, device, queue, command_pool, name })
 }
 
 impl Drop for GpuContext {

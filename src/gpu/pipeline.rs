@@ -3,8 +3,16 @@
 //! never updated while a submitted frame still reads it).
 #![allow(unsafe_code)]
 
-use super::{vkr, Buffer, GpuContext, GpuError};
+use super::{vkr, Buffer, GpuContext, GpuError, Image};
 use ash::vk;
+
+/// One descriptor: a whole buffer (storage or uniform) or a storage image (all
+/// layers, in its kept layout).
+#[derive(Clone, Copy)]
+pub enum Resource<'r, 'c> {
+    Buffer(&'r Buffer<'c>),
+    Image(&'r Image<'c>),
+}
 
 /// A compute pipeline and its descriptor set; destroyed on drop, before its context.
 pub struct ComputePipeline<'a> {
@@ -115,33 +123,65 @@ impl<'a> ComputePipeline<'a> {
     /// Point bindings 0..n of descriptor set `set` at `buffers` (whole ranges). The
     /// set must not be in use by a pending submission.
     pub fn bind_set(&self, set: usize, buffers: &[&Buffer<'_>]) -> Result<(), GpuError> {
-        if buffers.len() != self.types.len() || set >= self.sets.len() {
+        let res: Vec<Resource<'_, '_>> = buffers.iter().map(|b| Resource::Buffer(b)).collect();
+        self.bind_resources(set, &res)
+    }
+
+    /// Point bindings 0..n of descriptor set `set` at buffers and storage images.
+    /// The set must not be in use by a pending submission.
+    pub fn bind_resources(&self, set: usize, res: &[Resource<'_, '_>]) -> Result<(), GpuError> {
+        if res.len() != self.types.len() || set >= self.sets.len() {
             return Err(GpuError::Input {
-                input: "buffers",
+                input: "bindings",
                 problem: format!(
-                    "pipeline has {} bindings and {} sets, got {} buffers for set {set}",
+                    "pipeline has {} bindings and {} sets, got {} resources for set {set}",
                     self.types.len(),
                     self.sets.len(),
-                    buffers.len()
+                    res.len()
                 ),
             });
         }
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+        for (i, r) in res.iter().enumerate() {
+            let is_image = matches!(r, Resource::Image(_));
+            if is_image != (self.types[i] == vk::DescriptorType::STORAGE_IMAGE) {
+                return Err(GpuError::Input {
+                    input: "bindings",
+                    problem: format!("binding {i} is {:?}, got the other kind of resource", self.types[i]),
+                });
+            }
+        }
+        let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = res
             .iter()
-            .map(|b| [vk::DescriptorBufferInfo::default().buffer(b.buffer).offset(0).range(vk::WHOLE_SIZE)])
-            .collect();
-        let writes: Vec<_> = infos
-            .iter()
-            .enumerate()
-            .map(|(i, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(self.sets[set])
-                    .dst_binding(i as u32)
-                    .descriptor_type(self.types[i])
-                    .buffer_info(info)
+            .map(|r| match r {
+                Resource::Buffer(b) => [vk::DescriptorBufferInfo::default().buffer(b.buffer).range(vk::WHOLE_SIZE)],
+                Resource::Image(_) => [vk::DescriptorBufferInfo::default()],
             })
             .collect();
-        // SAFETY: the set is not in use by any pending submission (all waited on).
+        let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = res
+            .iter()
+            .map(|r| match r {
+                Resource::Image(img) => {
+                    [vk::DescriptorImageInfo::default().image_view(img.view).image_layout(img.layout)]
+                }
+                Resource::Buffer(_) => [vk::DescriptorImageInfo::default()],
+            })
+            .collect();
+        let writes: Vec<_> = res
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let w = vk::WriteDescriptorSet::default()
+                    .dst_set(self.sets[set])
+                    .dst_binding(i as u32)
+                    .descriptor_type(self.types[i]);
+                match r {
+                    Resource::Buffer(_) => w.buffer_info(&buffer_infos[i]),
+                    Resource::Image(_) => w.image_info(&image_infos[i]),
+                }
+            })
+            .collect();
+        // SAFETY: the set is not in use by any pending submission (all waited on);
+        // every write's info array outlives the call.
         unsafe { self.ctx.device.update_descriptor_sets(&writes, &[]) };
         Ok(())
     }

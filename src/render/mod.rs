@@ -3,11 +3,13 @@
 //! `model` only: inputs are plain planar slices, not `image` types.
 
 pub mod dof;
+pub mod gbuffer;
 pub mod grain;
 pub mod motion_blur;
 pub mod params;
 
 pub use dof::DofPass;
+pub use gbuffer::{Eye, GBufferFrame, GBufferPass};
 pub use grain::{GrainPass, GrainTable};
 pub use motion_blur::MotionBlurPass;
 pub use params::EffectParams;

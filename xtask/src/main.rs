@@ -1,7 +1,10 @@
 //! Project automation in Rust (`cargo xtask <command>`), so developers need nothing
 //! but cargo: `bench` runs every benchmark (fit speed, speed/accuracy trade, GPU
-//! passes) and keeps the raw output for BENCHMARKS.md. CI is `.ci/run` alone, the
+//! passes) and keeps the raw output for BENCHMARKS.md; `assets` regenerates the
+//! bundled glTF object. CI is `.ci/run` alone, the
 //! one definition of the checks.
+
+mod assets;
 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -43,6 +46,7 @@ fn bench() -> Result<()> {
 fn main() -> Result<()> {
     match std::env::args().nth(1).as_deref() {
         Some("bench") => bench(),
-        other => bail!("usage: cargo xtask bench (got {other:?})"),
+        Some("assets") => assets::generate(&root()),
+        other => bail!("usage: cargo xtask bench | assets (got {other:?})"),
     }
 }

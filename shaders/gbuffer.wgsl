@@ -1,0 +1,91 @@
+// Multiview G-buffer pass for glTF content (src/render/gbuffer.rs). One draw covers
+// both eyes: `view_index` (VK_KHR_multiview) selects the eye's matrices.
+// Outputs (two rgba16f layers per eye):
+//   0: premultiplied colour, sRGB-encoded (the camera model is fitted on encoded
+//      frames, so the effects and the composite run in that space), alpha;
+//   1: screen motion (px per render frame, +x right, +y down) from the previous
+//      frame's camera and object transforms, linear view depth in metres, and 1
+//      where a surface was drawn.
+// WGSL, not GLSL: naga's GLSL front end has no gl_ViewIndex.
+
+struct Frame {
+    clip_from_world: array<mat4x4<f32>, 2>,
+    prev_clip_from_world: array<mat4x4<f32>, 2>,
+    view_from_world: array<mat4x4<f32>, 2>,
+    // xyz: direction towards the light (world, unit); w: ambient share.
+    light: vec4<f32>,
+    // x, y: eye-buffer size in pixels.
+    size: vec4<f32>,
+}
+
+struct Draw {
+    world_from_object: mat4x4<f32>,
+    prev_world_from_object: mat4x4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(1) @binding(0) var base_colour: texture_2d<f32>;
+@group(1) @binding(1) var base_sampler: sampler;
+var<push_constant> draw: Draw;
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal_world: vec3<f32>,
+    @location(1) uv: vec2<f32>,
+    @location(2) cur_clip: vec4<f32>,
+    @location(3) prev_clip: vec4<f32>,
+    @location(4) depth_m: f32,
+}
+
+@vertex
+fn vs_main(
+    @builtin(view_index) view: i32,
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+) -> VsOut {
+    let world = draw.world_from_object * vec4<f32>(position, 1.0);
+    let prev_world = draw.prev_world_from_object * vec4<f32>(position, 1.0);
+    var out: VsOut;
+    out.cur_clip = frame.clip_from_world[view] * world;
+    out.prev_clip = frame.prev_clip_from_world[view] * prev_world;
+    out.clip = out.cur_clip;
+    // Normals: the upper 3×3 (uniform scale assumed; renormalised per fragment).
+    let m = draw.world_from_object;
+    out.normal_world = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz) * normal;
+    out.uv = uv;
+    out.depth_m = -(frame.view_from_world[view] * world).z;
+    return out;
+}
+
+struct FsOut {
+    @location(0) colour: vec4<f32>,
+    @location(1) motion: vec4<f32>,
+}
+
+fn srgb_encode(c: vec3<f32>) -> vec3<f32> {
+    let x = clamp(c, vec3<f32>(0.0), vec3<f32>(1.0));
+    let lo = x * 12.92;
+    let hi = 1.055 * pow(x, vec3<f32>(1.0 / 2.4)) - 0.055;
+    return select(hi, lo, x <= vec3<f32>(0.0031308));
+}
+
+@fragment
+fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> FsOut {
+    let texel = textureSample(base_colour, base_sampler, in.uv);
+    var n = normalize(in.normal_world);
+    if (!front) {
+        n = -n;
+    }
+    let ambient = frame.light.w;
+    let lit = texel.rgb * (ambient + (1.0 - ambient) * max(dot(n, frame.light.xyz), 0.0));
+    let alpha = clamp(texel.a, 0.0, 1.0);
+    var out: FsOut;
+    out.colour = vec4<f32>(srgb_encode(lit) * alpha, alpha);
+    // NDC → pixels: x_px = (ndc.x + 1) / 2 · width (Vulkan NDC +y is down, as rows).
+    let cur = in.cur_clip.xy / in.cur_clip.w;
+    let prev = in.prev_clip.xy / max(in.prev_clip.w, 1e-6);
+    let motion_px = (cur - prev) * 0.5 * frame.size.xy;
+    out.motion = vec4<f32>(motion_px, in.depth_m, 1.0);
+    return out;
+}

@@ -1,0 +1,113 @@
+//! The multiview G-buffer pass on lavapipe against CPU projections of the bundled
+//! glTF object: both eyes drawn in one pass with the right parallax, linear depth,
+//! and motion vectors from head motion and object motion.
+
+mod common;
+
+use blind_augment::gpu::FrameRing;
+use blind_augment::render::gbuffer::{clip_from_view, FAR_M, NEAR_M};
+use blind_augment::render::{Eye, GBufferFrame, GBufferPass};
+use blind_augment::scene::Scene;
+use glam::{Mat4, Vec3};
+
+const TOY: &[u8] = include_bytes!("../assets/toy.glb");
+const W: u32 = 160;
+const H: u32 = 120;
+const F: f32 = 150.0;
+
+fn eye(x_m: f32, z_m: f32) -> Eye {
+    Eye {
+        focal_px: F,
+        centre_px: [W as f32 / 2.0, H as f32 / 2.0],
+        view_from_world: Mat4::from_translation(Vec3::new(x_m, 0.0, z_m)).inverse(),
+    }
+}
+
+fn half_to_f32(bytes: &[u8]) -> Vec<f32> {
+    bytes.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect()
+}
+
+/// Pixel where world point `p` lands for eye `e` (CPU projection, same matrix code path
+/// as the uniforms, but evaluated here on the CPU).
+fn project(e: &Eye, p: Vec3) -> (f32, f32) {
+    let c = clip_from_view(e.focal_px, e.centre_px, W, H, NEAR_M, FAR_M) * e.view_from_world * p.extend(1.0);
+    ((c.x / c.w + 1.0) * 0.5 * W as f32, (c.y / c.w + 1.0) * 0.5 * H as f32)
+}
+
+#[test]
+fn gbuffer_stereo_depth_and_motion() {
+    let Some(ctx) = common::gpu_context("gbuffer_stereo_depth_and_motion") else { return };
+    let scene = Scene::from_glb(TOY, "toy.glb").expect("bundled asset parses");
+    assert_eq!(scene.meshes.len(), 2);
+    assert!(scene.duration_s > 3.9, "animation loop {}", scene.duration_s);
+    let pass = GBufferPass::new(&ctx, &scene, W, H, 2).expect("pass");
+    let mut ring = FrameRing::new(&ctx, 2, 256).expect("ring");
+    // Eyes 6.4 cm apart, 1 m from the toy; the head moved 1 cm left→right since the
+    // previous render frame, and the scene is frozen (t = 0 both times) except that
+    // the toy's root moved 2 cm up: motion = head parallax + object motion.
+    let (ipd, z) = (0.064f32, 1.0f32);
+    let eyes = [eye(-ipd / 2.0, z), eye(ipd / 2.0, z)];
+    let prev_eyes = [eye(-ipd / 2.0 - 0.01, z), eye(ipd / 2.0 - 0.01, z)];
+    let now = scene.world_from_nodes(0.0, Mat4::IDENTITY);
+    let prev = scene.world_from_nodes(0.0, Mat4::from_translation(Vec3::new(0.0, -0.02, 0.0)));
+    let frame = GBufferFrame {
+        eyes,
+        prev_eyes,
+        world_from_nodes: now.clone(),
+        prev_world_from_nodes: prev.clone(),
+        light_dir: Vec3::new(0.3, 1.0, 0.5),
+        ambient: 0.3,
+    };
+    let (slot, cmd) = ring.begin().expect("begin");
+    pass.record(cmd, slot, &frame).expect("record");
+    ring.submit(slot).expect("submit");
+    ring.wait_all().expect("wait");
+    let colour = half_to_f32(&pass.colour().download().expect("colour"));
+    let motion = half_to_f32(&pass.motion().download().expect("motion"));
+    let n = (W * H) as usize;
+    // The cube's front-face centre (object +z face at 0.12 m) in each eye.
+    let cube_node = scene.meshes[0].node;
+    let front_now = now[cube_node].transform_point3(Vec3::new(0.0, 0.0, 0.12));
+    let front_prev = prev[cube_node].transform_point3(Vec3::new(0.0, 0.0, 0.12));
+    for (layer, e) in eyes.iter().enumerate() {
+        let (px, py) = project(e, front_now);
+        let (qx, qy) = project(&prev_eyes[layer], front_prev);
+        let i = layer * n + py as usize * W as usize + px as usize;
+        let m = &motion[4 * i..4 * i + 4];
+        let c = &colour[4 * i..4 * i + 4];
+        // Tolerance: f16 storage (≈ 1e-3 relative) and up to half a pixel between the
+        // projected point and the centre of the pixel sampled.
+        assert!((m[3] - 1.0).abs() < 1e-3 && (c[3] - 1.0).abs() < 1e-3, "eye {layer}: no surface at ({px}, {py})");
+        assert!((m[2] - (z - 0.12)).abs() < 0.005, "eye {layer}: depth {} m, expected {}", m[2], z - 0.12);
+        let expected = (px - qx, py - qy);
+        assert!(
+            (m[0] - expected.0).abs() < 0.05 && (m[1] - expected.1).abs() < 0.05,
+            "eye {layer}: motion ({}, {}) px, expected {expected:?}",
+            m[0],
+            m[1]
+        );
+        // Head moved right → the object moves left on screen; it rose → up (−y).
+        assert!(m[0] < -1.0 && m[1] < -2.0, "eye {layer}: motion signs ({}, {})", m[0], m[1]);
+        // Empty corners: cleared to zero coverage.
+        assert_eq!(motion[4 * (layer * n) + 3], 0.0);
+    }
+    // Stereo parallax: the left eye sees the object further right, by f·ipd/Z.
+    let (lx, _) = project(&eyes[0], front_now);
+    let (rx, _) = project(&eyes[1], front_now);
+    assert!((lx - rx - F * ipd / (z - 0.12)).abs() < 1e-3);
+    let centroid = |layer: usize| {
+        let (mut s, mut k) = (0.0f64, 0.0f64);
+        for i in 0..n {
+            let a = colour[4 * (layer * n + i) + 3] as f64;
+            s += a * (i % W as usize) as f64;
+            k += a;
+        }
+        s / k
+    };
+    let shift = centroid(0) - centroid(1);
+    // Coverage centroids differ by the parallax of the whole toy (between the
+    // parallax of its nearest and farthest points).
+    assert!(shift > F as f64 * ipd as f64 / 1.2 && shift < F as f64 * ipd as f64 / 0.8, "parallax {shift} px");
+    let msgs = ctx.take_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
