@@ -39,6 +39,7 @@ pub fn texel_bytes(format: vk::Format) -> Result<u32, GpuError> {
 impl<'a> Image<'a> {
     /// A device-local `width × height × layers` image of `format`, usable as
     /// `usage` (plus transfer source/destination), transitioned to `layout`.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &'a GpuContext,
         width: u32,
@@ -168,28 +169,22 @@ impl<'a> Image<'a> {
             "image staging",
         )?;
         staging.write(data)?;
-        let target = if self.layout == vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL {
-            vk::ImageLayout::TRANSFER_DST_OPTIMAL
-        } else {
-            self.layout
-        };
+        // Uploads replace everything: from UNDEFINED (contents discarded) to
+        // TRANSFER_DST_OPTIMAL for the copy, then back to the kept layout.
+        let target = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
         self.ctx.submit_and_wait(|cmd| {
-            if target != self.layout {
-                self.record_transition(cmd, vk::ImageLayout::UNDEFINED, target);
-            }
+            self.record_transition(cmd, vk::ImageLayout::UNDEFINED, target);
             let region = vk::BufferImageCopy::default().image_subresource(self.layers()).image_extent(vk::Extent3D {
                 width: self.width,
                 height: self.height,
                 depth: 1,
             });
             // SAFETY: the staging buffer holds exactly the image's bytes; the image is
-            // in a layout valid for transfer writes (GENERAL or TRANSFER_DST).
+            // in TRANSFER_DST_OPTIMAL.
             unsafe {
                 self.ctx.device.cmd_copy_buffer_to_image(cmd, staging.buffer, self.image, target, &[region]);
             }
-            if target != self.layout {
-                self.record_transition(cmd, target, self.layout);
-            }
+            self.record_transition(cmd, target, self.layout);
         })
     }
 

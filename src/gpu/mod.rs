@@ -409,6 +409,27 @@ impl GpuContext {
     }
 }
 
+/// Record a full memory barrier (all commands, all memory): used once at the start
+/// of a frame's effect chain, where it orders the previous frame's reads before
+/// this frame's writes of the same images and buffers.
+pub fn record_full_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::MEMORY_WRITE | vk::AccessFlags::MEMORY_READ)
+        .dst_access_mask(vk::AccessFlags::MEMORY_WRITE | vk::AccessFlags::MEMORY_READ);
+    // SAFETY: `cmd` is recording outside a render pass.
+    unsafe {
+        ctx.device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        )
+    };
+}
+
 /// What `create_device` hands back to `GpuContext::new`.
 struct DeviceParts {
     timestamp_period_ns: Option<f32>,

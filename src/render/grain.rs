@@ -235,3 +235,252 @@ impl<'a> GrainPass<'a> {
         Ok(bytemuck::cast_slice(&bytes[..3 * n * 4]).to_vec())
     }
 }
+
+/// Which grain pipeline a recorded step uses.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Step {
+    Reduce,
+    Expand,
+    Combine,
+    Init,
+    Scale,
+}
+
+/// The grain synthesis recorded into a frame's command buffer (no submissions, no
+/// host round trips): the same pipelines and arithmetic as `GrainPass::run`, on
+/// buffers allocated once for the largest field (`max_w × max_h`) with every
+/// descriptor set bound once at creation; per-frame sizes go in push constants.
+/// Input: `luma` (`w × h`, filled by the caller's pass); output: `field` (planar RGB).
+pub struct GrainRecorder<'a> {
+    reduce: ComputePipeline<'a>,
+    expand: ComputePipeline<'a>,
+    combine: ComputePipeline<'a>,
+    init: ComputePipeline<'a>,
+    scale: ComputePipeline<'a>,
+    pub luma: Buffer<'a>,
+    /// Synthesis weights ([node][channel][band]); written by the caller (a copy
+    /// from the frame's host-visible table) before `record`.
+    pub table: Buffer<'a>,
+    buffers: Vec<Buffer<'a>>,
+    max: (usize, usize),
+}
+
+/// Buffer roles in `GrainRecorder::buffers`, per level.
+const fn slot(kind: usize, level: usize) -> usize {
+    kind * (NOISE_LEVELS + 1) + level
+}
+const LUMA: usize = 0; // luma pyramid (level 0 = the input `luma`, stored apart)
+const GAUSS: usize = 1; // noise Gaussian pyramid (level 0 = white noise)
+const BAND: usize = 2;
+const RTMP_L: usize = 3;
+const RTMP_N: usize = 4;
+const ETMP: usize = 5;
+const UP: usize = 6;
+const CTMP: usize = 7;
+const CUP: usize = 8;
+const CUR: usize = 9;
+const KINDS: usize = 10;
+
+impl<'a> GrainRecorder<'a> {
+    pub fn new(ctx: &'a GpuContext, max_w: usize, max_h: usize, table_nodes: u32) -> Result<Self, GpuError> {
+        let (max_w, max_h) = (max_w.max(1), max_h.max(1));
+        let sizes = level_sizes(max_w, max_h);
+        let mut buffers = Vec::new();
+        for kind in 0..KINDS {
+            for l in 0..=NOISE_LEVELS {
+                let (w, h) = sizes[l];
+                let (_, h_next) = sizes[(l + 1).min(NOISE_LEVELS)];
+                let (w_next, _) = sizes[(l + 1).min(NOISE_LEVELS)];
+                let floats = match kind {
+                    LUMA => w * h,
+                    RTMP_L => w_next * h,
+                    RTMP_N => 3 * w_next * h,
+                    ETMP | CTMP => 3 * w * h_next.max(h),
+                    _ => 3 * w * h,
+                };
+                buffers.push(ctx.storage_buffer((floats * 4) as u64, &format!("grain buffer {kind}/{l}"))?);
+            }
+        }
+        let sets = |n: u32| n;
+        let sb = vk_storage;
+        let me = Self {
+            reduce: ComputePipeline::with_layout(
+                ctx,
+                REDUCE,
+                &sb(2),
+                24,
+                sets(4 * NOISE_LEVELS as u32),
+                "grain reduce",
+            )?,
+            expand: ComputePipeline::with_layout(
+                ctx,
+                EXPAND,
+                &sb(2),
+                24,
+                sets(4 * NOISE_LEVELS as u32),
+                "grain expand",
+            )?,
+            combine: ComputePipeline::with_layout(
+                ctx,
+                COMBINE,
+                &sb(3),
+                8,
+                sets(2 * NOISE_LEVELS as u32),
+                "grain combine",
+            )?,
+            init: ComputePipeline::with_layout(ctx, INIT, &sb(1), 16, 1, "grain init")?,
+            scale: ComputePipeline::with_layout(ctx, SCALE, &sb(3), 24, sets(NOISE_LEVELS as u32 + 1), "grain scale")?,
+            luma: ctx.storage_buffer((max_w * max_h * 4) as u64, "grain luma")?,
+            table: ctx.storage_buffer((table_nodes.max(2) as usize * 3 * BANDS * 4) as u64, "grain table")?,
+            buffers,
+            max: (max_w, max_h),
+        };
+        // Bind every step's set once (same walk as `record`, binding instead of
+        // recording).
+        let mut err = Ok(());
+        me.walk(max_w, max_h, |step, set, bufs, _, _| {
+            if err.is_ok() {
+                err = me.pipeline(step).bind_set(set, bufs);
+            }
+        });
+        err?;
+        Ok(me)
+    }
+
+    fn pipeline(&self, step: Step) -> &ComputePipeline<'a> {
+        match step {
+            Step::Reduce => &self.reduce,
+            Step::Expand => &self.expand,
+            Step::Combine => &self.combine,
+            Step::Init => &self.init,
+            Step::Scale => &self.scale,
+        }
+    }
+
+    fn buf(&self, kind: usize, level: usize) -> &Buffer<'a> {
+        if kind == LUMA && level == 0 {
+            &self.luma
+        } else {
+            &self.buffers[slot(kind, level)]
+        }
+    }
+
+    /// The output field (planar RGB, `w × h` of the last `record`).
+    pub fn field(&self) -> &Buffer<'a> {
+        self.buf(CUR, 0)
+    }
+
+    /// Every step in order: (pipeline, set index, buffers, push, groups), the
+    /// dispatch sequence of `GrainPass::run` (luma pyramid, white noise, its
+    /// Laplacian pyramid, band scaling, collapse into `CUR[0]`).
+    fn walk(&self, w: usize, h: usize, mut emit: impl FnMut(Step, usize, &[&Buffer<'_>], Vec<u8>, [u32; 3])) {
+        let sizes = level_sizes(w, h);
+        let mut next = [0usize; 5];
+        let mut go = |step: Step, bufs: &[&Buffer<'_>], push: Vec<u8>, g: [u32; 3]| {
+            let k = step as usize;
+            emit(step, next[k], bufs, push, g);
+            next[k] += 1;
+        };
+        let pyr = |in_w: usize, in_h: usize, out_w: usize, out_h: usize, channels: u32, axis: u32| {
+            bytemuck::bytes_of(&PyrParams {
+                in_w: in_w as u32,
+                in_h: in_h as u32,
+                out_w: out_w as u32,
+                out_h: out_h as u32,
+                channels,
+                axis,
+            })
+            .to_vec()
+        };
+        for l in 0..NOISE_LEVELS {
+            let ((w0, h0), (w1, h1)) = (sizes[l], sizes[l + 1]);
+            go(Step::Reduce, &[self.buf(LUMA, l), self.buf(RTMP_L, l)], pyr(w0, h0, w1, h0, 1, 0), groups(w1, h0));
+            go(Step::Reduce, &[self.buf(RTMP_L, l), self.buf(LUMA, l + 1)], pyr(w1, h0, w1, h1, 1, 1), groups(w1, h1));
+        }
+        let init = InitParams { width: w as u32, height: h as u32, seed_lo: 0, seed_hi: 0 };
+        go(Step::Init, &[self.buf(GAUSS, 0)], bytemuck::bytes_of(&init).to_vec(), groups(w, h));
+        for l in 0..NOISE_LEVELS {
+            let ((w0, h0), (w1, h1)) = (sizes[l], sizes[l + 1]);
+            go(Step::Reduce, &[self.buf(GAUSS, l), self.buf(RTMP_N, l)], pyr(w0, h0, w1, h0, 3, 0), groups(w1, h0));
+            go(Step::Reduce, &[self.buf(RTMP_N, l), self.buf(GAUSS, l + 1)], pyr(w1, h0, w1, h1, 3, 1), groups(w1, h1));
+            go(Step::Expand, &[self.buf(GAUSS, l + 1), self.buf(ETMP, l)], pyr(w1, h1, w0, h1, 3, 0), groups(w0, h1));
+            go(Step::Expand, &[self.buf(ETMP, l), self.buf(UP, l)], pyr(w0, h1, w0, h0, 3, 1), groups(w0, h0));
+            let cp = CombineParams { count: (3 * w0 * h0) as u32, subtract: 1 };
+            go(
+                Step::Combine,
+                &[self.buf(GAUSS, l), self.buf(UP, l), self.buf(BAND, l)],
+                bytemuck::bytes_of(&cp).to_vec(),
+                [(3 * w0 * h0).div_ceil(64) as u32, 1, 1],
+            );
+        }
+        for l in 0..=NOISE_LEVELS {
+            let (lw, lh) = sizes[l];
+            let band = if l < NOISE_LEVELS { self.buf(BAND, l) } else { self.buf(GAUSS, NOISE_LEVELS) };
+            // lo/hi/nodes are patched per frame in `record` (push bytes 12..24).
+            let sp = ScaleParams { width: lw as u32, height: lh as u32, level: l as u32, nodes: 0, lo: 0.0, hi: 0.0 };
+            go(Step::Scale, &[band, self.buf(LUMA, l), &self.table], bytemuck::bytes_of(&sp).to_vec(), groups(lw, lh));
+        }
+        for l in (0..NOISE_LEVELS).rev() {
+            let ((w0, h0), (w1, h1)) = (sizes[l], sizes[l + 1]);
+            let src = if l + 1 == NOISE_LEVELS { self.buf(GAUSS, NOISE_LEVELS) } else { self.buf(CUR, l + 1) };
+            go(Step::Expand, &[src, self.buf(CTMP, l)], pyr(w1, h1, w0, h1, 3, 0), groups(w0, h1));
+            go(Step::Expand, &[self.buf(CTMP, l), self.buf(CUP, l)], pyr(w0, h1, w0, h0, 3, 1), groups(w0, h0));
+            let cp = CombineParams { count: (3 * w0 * h0) as u32, subtract: 0 };
+            go(
+                Step::Combine,
+                &[self.buf(CUP, l), self.buf(BAND, l), self.buf(CUR, l)],
+                bytemuck::bytes_of(&cp).to_vec(),
+                [(3 * w0 * h0).div_ceil(64) as u32, 1, 1],
+            );
+        }
+    }
+
+    /// Record the synthesis of a `w × h` field (≤ the creation maximum) with the
+    /// table's `nodes` over luma range `[lo, hi]` and a per-frame `seed`.
+    pub fn record(
+        &self,
+        cmd: ash::vk::CommandBuffer,
+        w: usize,
+        h: usize,
+        nodes: u32,
+        luma_range: [f32; 2],
+        seed: u64,
+    ) -> Result<(), GpuError> {
+        if w == 0 || h == 0 || w > self.max.0 || h > self.max.1 || nodes < 2 {
+            return Err(GpuError::Input {
+                input: "grain field",
+                problem: format!("{w}×{h} with {nodes} nodes (max {}×{}, ≥ 2 nodes)", self.max.0, self.max.1),
+            });
+        }
+        self.walk(w, h, |step, set, _, mut push, g| {
+            match step {
+                Step::Init => {
+                    push[8..12].copy_from_slice(&(seed as u32).to_le_bytes());
+                    push[12..16].copy_from_slice(&((seed >> 32) as u32).to_le_bytes());
+                }
+                Step::Scale => {
+                    push[12..16].copy_from_slice(&nodes.to_le_bytes());
+                    push[16..20].copy_from_slice(&luma_range[0].to_le_bytes());
+                    push[20..24].copy_from_slice(&luma_range[1].to_le_bytes());
+                }
+                _ => {}
+            }
+            self.pipeline(step).record_set(cmd, set, &push, g);
+        });
+        Ok(())
+    }
+}
+
+fn vk_storage(n: usize) -> Vec<ash::vk::DescriptorType> {
+    vec![ash::vk::DescriptorType::STORAGE_BUFFER; n]
+}
+
+/// Pyramid level sizes, finest first (`image::reduce` halves rounding up).
+fn level_sizes(w: usize, h: usize) -> Vec<(usize, usize)> {
+    let mut sizes = vec![(w, h)];
+    for _ in 0..NOISE_LEVELS {
+        let &(a, b) = sizes.last().unwrap_or(&(w, h));
+        sizes.push((a.div_ceil(2), b.div_ceil(2)));
+    }
+    sizes
+}

@@ -5,14 +5,18 @@
 pub mod dof;
 pub mod gbuffer;
 pub mod grain;
+pub mod layer;
 pub mod motion_blur;
 pub mod params;
+pub mod stereo;
 
 pub use dof::DofPass;
 pub use gbuffer::{Eye, GBufferFrame, GBufferPass};
-pub use grain::{GrainPass, GrainTable};
+pub use grain::{GrainPass, GrainRecorder, GrainTable};
+pub use layer::{FrameEffects, LayerEffects, LayerSettings};
 pub use motion_blur::MotionBlurPass;
 pub use params::EffectParams;
+pub use stereo::{FrameInput, StereoRenderer};
 
 /// SPIR-V of the uniform-block probe used by the hot-swap test.
 pub const PARAMS_PROBE_SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/params_probe.spv"));

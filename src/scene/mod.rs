@@ -248,7 +248,7 @@ impl Scene {
                 }
                 if times_s.is_empty()
                     || values.len() != times_s.len()
-                    || times_s.windows(2).any(|w| !(w[1] >= w[0]))
+                    || times_s.windows(2).any(|w| w[1] < w[0])
                     || times_s.iter().chain(values.iter().flatten()).any(|v| !v.is_finite())
                 {
                     return Err(invalid(

@@ -3,6 +3,7 @@
 //! before noise, so noise is never blurred). Written for clarity first.
 
 mod dof;
+pub mod layer;
 mod motion_blur;
 mod noise;
 mod rng;

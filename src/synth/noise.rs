@@ -186,6 +186,11 @@ impl SynthesisTable {
     }
 
     /// Number of luma nodes.
+    /// Luma nodes of every table (fixed), for sizing GPU buffers up front.
+    pub fn node_count() -> usize {
+        TABLE_NODES
+    }
+
     pub fn nodes(&self) -> usize {
         self.weights.len()
     }

@@ -1,0 +1,49 @@
+#version 450
+// Composite over the passthrough image (desktop: the background frame), per eye:
+// out = bg·(1 − α) + C + α·n, with C, α the (blurred) premultiplied virtual layer
+// and n the grain field at the virtual content's luma, faded by the blurred alpha
+// so the grain stops where the object does. Encoded (sRGB) space throughout: the
+// camera model was fitted on encoded frames. Twin: synth::layer::composite.
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray raw_colour;
+layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray dof_colour;
+layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray mb_colour;
+layout(rgba8, set = 0, binding = 3) uniform readonly image2DArray background;
+layout(std430, set = 0, binding = 4) readonly buffer Noise { float noise[]; };
+layout(rgba8, set = 0, binding = 5) uniform writeonly image2DArray out_image;
+
+layout(push_constant) uniform Push {
+    ivec4 rect[2];       // where the chain's output is valid; elsewhere raw colour
+    ivec2 size;
+    int use_fx;
+    int use_noise;
+    int noise_width;     // packed grain field (see layer_luma.comp)
+    int noise_height;
+    int row1;
+    int pad;
+} p;
+
+void main() {
+    ivec2 xy = ivec2(gl_GlobalInvocationID.xy);
+    int layer = int(gl_GlobalInvocationID.z);
+    if (xy.x >= p.size.x || xy.y >= p.size.y) {
+        return;
+    }
+    ivec4 r = p.rect[layer];
+    bool inside = xy.x >= r.x && xy.y >= r.y && xy.x < r.x + r.z && xy.y < r.y + r.w;
+    ivec3 at = ivec3(xy, layer);
+    // The chain's last output inside the rectangles (1: DoF, 2: MB), else raw.
+    vec4 c = (p.use_fx == 2 && inside) ? imageLoad(mb_colour, at)
+             : ((p.use_fx == 1 && inside) ? imageLoad(dof_colour, at) : imageLoad(raw_colour, at));
+    vec4 bg = imageLoad(background, ivec3(xy, layer));
+    float a = clamp(c.a, 0.0, 1.0);
+    vec3 rgb = bg.rgb * (1.0 - a) + c.rgb;
+    if (p.use_noise != 0 && inside && a > 0.0) {
+        int row = (xy.y - r.y) + (layer == 0 ? 0 : p.row1);
+        int i = row * p.noise_width + (xy.x - r.x);
+        int plane = p.noise_width * p.noise_height;
+        rgb += a * vec3(noise[i], noise[plane + i], noise[2 * plane + i]);
+    }
+    imageStore(out_image, ivec3(xy, layer), vec4(clamp(rgb, 0.0, 1.0), 1.0));
+}

@@ -1,0 +1,102 @@
+#version 450
+// Depth of field on the virtual layer, horizontal pass (src/render/layer.rs; CPU
+// twin synth::layer::defocus_layer). Scatter-as-gather: every covered source pixel
+// spreads its premultiplied colour with a Gaussian of its OWN blur σ(Z) — a gather
+// with the receiving pixel's σ (the paper's addDoF) cannot spread a silhouette into
+// the transparent pixels around it, which is what blurs the alpha edge. Kernel taps
+// are the Gaussian integrated over each tap's span (exact mass, a delta at σ = 0).
+// Separable: this pass also writes the coverage-weighted mean σ of what it gathered,
+// which the vertical pass spreads with (exact for constant σ).
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(std140, set = 0, binding = 0) uniform Effect {
+    uvec4 head;          // generation, flags, exposure (bits), frame_interval (bits)
+    uvec4 dof;           // form, units, range lo (bits), range hi (bits)
+    vec4 dof_coeffs;
+} e;
+layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray colour_in;
+layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray motion_in;
+layout(rgba16f, set = 0, binding = 3) uniform writeonly image2DArray colour_out;
+layout(r32f, set = 0, binding = 4) uniform writeonly image2DArray sigma_out;
+
+layout(push_constant) uniform Push {
+    ivec4 rect[2];       // per eye: x, y, width, height
+    ivec2 size;
+    int radius;
+    int step;
+    float ppr_ratio;     // eye-buffer pixels per camera pixel
+    float exposure_ratio;
+    uint frame;
+    uint samples;
+} p;
+
+// erf, Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5e-7); the CPU twin uses the same.
+float erf_as(float x) {
+    float s = sign(x);
+    float a = abs(x);
+    float t = 1.0 / (1.0 + 0.3275911 * a);
+    float y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * exp(-a * a);
+    return s * y;
+}
+
+// Mass of N(0, σ²) over [d − h, d + h].
+float tap(float d, float h, float sigma) {
+    if (sigma < 1e-4) {
+        return (abs(d) < h) ? 1.0 : 0.0;
+    }
+    float k = 0.70710678 / sigma;
+    return 0.5 * (erf_as((d + h) * k) - erf_as((d - h) * k));
+}
+
+// δ(Z) of model::DofCurve::sigma_px with the depth clamp of DepthOfField::sigma_px,
+// in camera pixels, then in eye pixels. Metric depth only (the renderer's depth).
+float sigma_eye(float z) {
+    // Absent, or relative-inverse units (no metric scale for virtual depths).
+    if ((e.head.y & 4u) == 0u || e.dof.y != 0u) {
+        return 0.0;
+    }
+    float lo = uintBitsToFloat(e.dof.z);
+    float hi = uintBitsToFloat(e.dof.w);
+    z = clamp(z, lo, hi);
+    float d = 0.0;
+    if (e.dof.x == 1u) {
+        d = (e.dof_coeffs.x * z + e.dof_coeffs.y) * z + e.dof_coeffs.z;
+    } else if (e.dof.x == 2u) {
+        d = e.dof_coeffs.x * abs(1.0 / z - e.dof_coeffs.y) + e.dof_coeffs.z;
+    } else if (e.dof.x == 3u) {
+        d = e.dof_coeffs.x;
+    }
+    return clamp(d, 0.0, 10.0) * p.ppr_ratio;
+}
+
+void main() {
+    int layer = int(gl_GlobalInvocationID.z);
+    ivec4 r = p.rect[layer];
+    ivec2 xy = r.xy + ivec2(gl_GlobalInvocationID.xy);
+    if (gl_GlobalInvocationID.x >= uint(r.z) || gl_GlobalInvocationID.y >= uint(r.w)) {
+        return;
+    }
+    vec4 acc = vec4(0.0);
+    float s_acc = 0.0;
+    float w_acc = 0.0;
+    float h = 0.5 * float(p.step);
+    for (int d = -p.radius; d <= p.radius; d += p.step) {
+        int x = xy.x + d;
+        if (x < r.x || x >= r.x + r.z) {
+            continue;
+        }
+        vec4 m = imageLoad(motion_in, ivec3(x, xy.y, layer));
+        if (m.w <= 0.0) {
+            continue;
+        }
+        float sigma = sigma_eye(m.z);
+        float k = tap(float(-d), h, sigma);
+        vec4 c = imageLoad(colour_in, ivec3(x, xy.y, layer));
+        acc += k * c;
+        float wk = k * c.a;
+        s_acc += wk * sigma;
+        w_acc += wk;
+    }
+    imageStore(colour_out, ivec3(xy, layer), acc);
+    imageStore(sigma_out, ivec3(xy, layer), vec4(w_acc > 1e-6 ? s_acc / w_acc : 0.0));
+}

@@ -1,0 +1,59 @@
+#version 450
+// Depth of field on the virtual layer, vertical pass (twin: synth::layer::defocus_layer):
+// spreads the horizontal pass's result with the coverage-weighted σ it carried.
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray colour_in;
+layout(r32f, set = 0, binding = 1) uniform readonly image2DArray sigma_in;
+layout(rgba16f, set = 0, binding = 2) uniform writeonly image2DArray colour_out;
+
+layout(push_constant) uniform Push {
+    ivec4 rect[2];
+    ivec2 size;
+    int radius;
+    int step;
+    float ppr_ratio;
+    float exposure_ratio;
+    uint frame;
+    uint samples;
+} p;
+
+float erf_as(float x) {
+    float s = sign(x);
+    float a = abs(x);
+    float t = 1.0 / (1.0 + 0.3275911 * a);
+    float y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * exp(-a * a);
+    return s * y;
+}
+
+float tap(float d, float h, float sigma) {
+    if (sigma < 1e-4) {
+        return (abs(d) < h) ? 1.0 : 0.0;
+    }
+    float k = 0.70710678 / sigma;
+    return 0.5 * (erf_as((d + h) * k) - erf_as((d - h) * k));
+}
+
+void main() {
+    int layer = int(gl_GlobalInvocationID.z);
+    ivec4 r = p.rect[layer];
+    ivec2 xy = r.xy + ivec2(gl_GlobalInvocationID.xy);
+    if (gl_GlobalInvocationID.x >= uint(r.z) || gl_GlobalInvocationID.y >= uint(r.w)) {
+        return;
+    }
+    vec4 acc = vec4(0.0);
+    float h = 0.5 * float(p.step);
+    for (int d = -p.radius; d <= p.radius; d += p.step) {
+        int y = xy.y + d;
+        if (y < r.y || y >= r.y + r.w) {
+            continue;
+        }
+        vec4 c = imageLoad(colour_in, ivec3(xy.x, y, layer));
+        if (c == vec4(0.0)) {
+            continue;
+        }
+        float sigma = imageLoad(sigma_in, ivec3(xy.x, y, layer)).x;
+        acc += tap(float(-d), h, sigma) * c;
+    }
+    imageStore(colour_out, ivec3(xy, layer), acc);
+}

@@ -1,0 +1,393 @@
+//! The production effect chain on the virtual layer, recorded into one frame's
+//! command buffer after the G-buffer pass: DoF (separable scatter, `layer_dof_h/v`)
+//! → MB (McGuire 2012 tile-max / neighbour-max reconstruction, `layer_mb_*`) →
+//! grain (the paper's Laplacian synthesis at the content's luma, `GrainRecorder`)
+//! → composite over the background with the blurred alpha (`composite.comp`).
+//! CPU twins: `synth::layer`.
+//!
+//! Work is bounded by per-eye screen rectangles (the projected bounds of the virtual
+//! content, dilated by the blur reach): every dispatch covers the rectangles only,
+//! so effect cost follows the content's screen area, not the eye buffer. Effects
+//! absent in the camera model are not dispatched at all.
+
+use super::grain::GrainRecorder;
+use super::params::{EffectParams, FLAG_DEPTH_OF_FIELD, FLAG_MOTION_BLUR, FLAG_NOISE};
+use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, Resource, EYES};
+use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
+use crate::synth::layer::{tile_rect, Rect};
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+
+const DOF_H: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_h.spv"));
+const DOF_V: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_v.spv"));
+const MB_TILES: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_tiles.spv"));
+const MB_NEIGHBOUR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_neighbour.spv"));
+const MB_GATHER: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_gather.spv"));
+const LUMA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_luma.spv"));
+const COMPOSITE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/composite.spv"));
+
+/// Largest DoF gather radius in eye pixels (σ ≤ radius / 3 is spread fully).
+pub const MAX_DOF_RADIUS_PX: i32 = 48;
+
+/// Push constants shared by the DoF and MB passes (`Push` in their shaders).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct LayerPush {
+    pub rect: [[i32; 4]; 2],
+    pub size: [i32; 2],
+    pub radius: i32,
+    pub step: i32,
+    pub ppr_ratio: f32,
+    pub exposure_ratio: f32,
+    pub frame: u32,
+    pub samples: u32,
+}
+const _: () = assert!(std::mem::size_of::<LayerPush>() == 64);
+const _: () = assert!(std::mem::offset_of!(LayerPush, size) == 32);
+const _: () = assert!(std::mem::offset_of!(LayerPush, ppr_ratio) == 48);
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct LumaPush {
+    rect: [[i32; 4]; 2],
+    width: i32,
+    row1: i32,
+    /// [source: 0 raw colour, 1 DoF output, 2 MB output; unused]
+    pad: [i32; 2],
+}
+const _: () = assert!(std::mem::size_of::<LumaPush>() == 48);
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct CompositePush {
+    rect: [[i32; 4]; 2],
+    size: [i32; 2],
+    use_fx: i32,
+    use_noise: i32,
+    noise_width: i32,
+    noise_height: i32,
+    row1: i32,
+    pad: i32,
+}
+const _: () = assert!(std::mem::size_of::<CompositePush>() == 64);
+
+/// Quality settings: the speed/accuracy knobs measured in BENCHMARKS.md.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerSettings {
+    /// DoF tap spacing in px: 1 = every pixel, 2 = every other (¼ of the taps in 2-D).
+    pub dof_step_px: i32,
+    /// MB taps per pixel (McGuire's S).
+    pub mb_samples: u32,
+    /// MB tile size K (px): also the longest half-streak reconstructed.
+    pub mb_tile_px: i32,
+    /// Display frame interval: motion vectors are per render frame.
+    pub render_interval_s: f32,
+    /// Synthesise grain (the paper's pyramid; off = no noise even if present).
+    pub grain: bool,
+}
+
+impl Default for LayerSettings {
+    fn default() -> Self {
+        Self { dof_step_px: 1, mb_samples: 12, mb_tile_px: 16, render_interval_s: 1.0 / 45.0, grain: true }
+    }
+}
+
+/// What one frame's effect chain does, derived from a model snapshot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameEffects {
+    pub dof: bool,
+    pub motion_blur: bool,
+    pub noise: bool,
+    /// Eye-buffer / camera `pixels_per_radian`.
+    pub ppr_ratio: f32,
+    /// Exposure time over the render frame interval (λ · camera interval / render
+    /// interval): motion per render frame × this = the streak.
+    pub exposure_ratio: f32,
+    pub dof_radius_px: i32,
+    pub rects: [Rect; 2],
+    pub frame: u32,
+}
+
+impl FrameEffects {
+    /// Effects of `model` for eye buffers with `eye_pixels_per_radian`. The ratio
+    /// falls back to 1 when the model does not know its camera's (desktop: the
+    /// background is the eye's view). Rects start empty (see `dilate_rects`).
+    pub fn from_model(model: &CameraModel, eye_pixels_per_radian: Option<f32>, settings: &LayerSettings) -> Self {
+        let ppr_ratio = match (eye_pixels_per_radian, model.reference.pixels_per_radian) {
+            (Some(e), Some(c)) if e.is_finite() && c.is_finite() && e > 0.0 && c > 0.0 => e / c,
+            _ => 1.0,
+        };
+        let dof_model = &model.depth_of_field;
+        let dof = dof_model.present && dof_model.curve.is_some() && dof_model.units == DepthUnits::MetricM;
+        if dof_model.present && dof_model.units != DepthUnits::MetricM {
+            log::warn!("DoF model is in relative inverse depth: no metric scale for virtual depths, DoF skipped");
+        }
+        let step = settings.dof_step_px.clamp(1, 4);
+        let dof_radius_px = if dof {
+            let [lo, hi] = dof_model.depth_range;
+            let sigma_max = (0..=64)
+                .map(|i| dof_model.sigma_px(lo + (hi - lo) * i as f32 / 64.0))
+                .fold(0.0f32, f32::max)
+                .min(MAX_DOF_SIGMA_PX)
+                * ppr_ratio;
+            let r = ((3.0 * sigma_max).ceil() as i32).clamp(step, MAX_DOF_RADIUS_PX);
+            (r + step - 1) / step * step
+        } else {
+            0
+        };
+        let lambda = model.motion_blur.exposure_or_zero();
+        let exposure_ratio = match model.reference.frame_interval_s {
+            Some(t) if t > 0.0 && settings.render_interval_s > 0.0 => lambda * t / settings.render_interval_s,
+            _ => 0.0,
+        };
+        if lambda > 0.0 && exposure_ratio == 0.0 {
+            log::warn!("motion blur present but the camera frame interval is unknown: MB skipped");
+        }
+        Self {
+            dof: dof && dof_radius_px > 0,
+            motion_blur: exposure_ratio > 0.0 && exposure_ratio.is_finite(),
+            noise: model.noise.present && settings.grain,
+            ppr_ratio,
+            exposure_ratio: if exposure_ratio.is_finite() { exposure_ratio } else { 0.0 },
+            dof_radius_px,
+            rects: [Rect::default(); 2],
+            frame: 0,
+        }
+    }
+
+    /// How far effects reach beyond the content's bounds (px).
+    pub fn margin_px(&self, settings: &LayerSettings) -> i32 {
+        let mut m = 1;
+        if self.dof {
+            m += self.dof_radius_px;
+        }
+        if self.motion_blur {
+            m += settings.mb_tile_px;
+        }
+        m
+    }
+}
+
+pub struct LayerEffects<'a> {
+    ctx: &'a GpuContext,
+    width: u32,
+    height: u32,
+    settings: LayerSettings,
+    dof_h: ComputePipeline<'a>,
+    dof_v: ComputePipeline<'a>,
+    mb_tiles: ComputePipeline<'a>,
+    mb_neighbour: ComputePipeline<'a>,
+    mb_gather: ComputePipeline<'a>,
+    luma: ComputePipeline<'a>,
+    composite: ComputePipeline<'a>,
+    grain: GrainRecorder<'a>,
+    /// The frame's parameters, copied from the slot's uniform buffer at the start
+    /// of the chain (one fixed binding for every pass; queue order + barrier keep
+    /// the previous frame's reads before the copy).
+    params: Buffer<'a>,
+    pub dof_tmp: Image<'a>,
+    sigma_tmp: Image<'a>,
+    pub dof_out: Image<'a>,
+    tiles: Image<'a>,
+    neighbour: Image<'a>,
+    pub mb_out: Image<'a>,
+}
+
+fn storage_image<'c>(
+    ctx: &'c GpuContext,
+    w: u32,
+    h: u32,
+    format: vk::Format,
+    name: &str,
+) -> Result<Image<'c>, GpuError> {
+    Image::new(ctx, w, h, EYES, format, vk::ImageUsageFlags::STORAGE, vk::ImageLayout::GENERAL, name)
+}
+
+fn groups(w: i32, h: i32) -> [u32; 3] {
+    [(w.max(0) as u32).div_ceil(8), (h.max(0) as u32).div_ceil(8), EYES]
+}
+
+impl<'a> LayerEffects<'a> {
+    /// Build the chain for G-buffer images `colour`/`motion`, compositing over
+    /// `background` (RGBA8, 2 layers) into `output` (RGBA8 storage, 2 layers).
+    /// `grain_nodes`: size of the synthesis tables that will be used.
+    pub fn new(
+        ctx: &'a GpuContext,
+        colour: &Image<'a>,
+        motion: &Image<'a>,
+        background: &Image<'a>,
+        output: &Image<'a>,
+        settings: LayerSettings,
+        grain_nodes: u32,
+    ) -> Result<Self, GpuError> {
+        let (w, h) = (colour.width, colour.height);
+        for (name, img) in [("motion", motion), ("background", background), ("output", output)] {
+            if img.width != w || img.height != h || img.layers != EYES {
+                return Err(GpuError::Input {
+                    input: "layer images",
+                    problem: format!("{name} is {}×{}×{}, colour is {w}×{h}×{EYES}", img.width, img.height, img.layers),
+                });
+            }
+        }
+        if settings.mb_tile_px < 4 || settings.mb_samples == 0 || !(1..=4).contains(&settings.dof_step_px) {
+            return Err(GpuError::Input {
+                input: "layer settings",
+                problem: format!("{settings:?}: tile ≥ 4 px, ≥ 1 MB sample, DoF step 1–4"),
+            });
+        }
+        let f16 = vk::Format::R16G16B16A16_SFLOAT;
+        let (tw, th) = (w.div_ceil(settings.mb_tile_px as u32), h.div_ceil(settings.mb_tile_px as u32));
+        let st = vk::DescriptorType::STORAGE_IMAGE;
+        let sb = vk::DescriptorType::STORAGE_BUFFER;
+        let ub = vk::DescriptorType::UNIFORM_BUFFER;
+        let push = std::mem::size_of::<LayerPush>() as u32;
+        let me = Self {
+            ctx,
+            width: w,
+            height: h,
+            settings,
+            dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[ub, st, st, st, st], push, 1, "layer dof h")?,
+            dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st], push, 1, "layer dof v")?,
+            mb_tiles: ComputePipeline::with_layout(ctx, MB_TILES, &[st, st], push, 1, "layer mb tiles")?,
+            mb_neighbour: ComputePipeline::with_layout(ctx, MB_NEIGHBOUR, &[st, st], push, 1, "layer mb neighbour")?,
+            mb_gather: ComputePipeline::with_layout(ctx, MB_GATHER, &[st, st, st, st, st], push, 1, "layer mb gather")?,
+            luma: ComputePipeline::with_layout(ctx, LUMA, &[st, st, st, sb], 48, 1, "layer luma")?,
+            composite: ComputePipeline::with_layout(ctx, COMPOSITE, &[st, st, st, st, sb, st], 64, 1, "composite")?,
+            // Both eyes' rectangles stacked: at most the full eye, twice as tall.
+            grain: GrainRecorder::new(ctx, w as usize, 2 * h as usize, grain_nodes)?,
+            params: crate::gpu::Buffer::new(
+                ctx,
+                std::mem::size_of::<EffectParams>() as u64,
+                vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
+                vk::MemoryPropertyFlags::DEVICE_LOCAL,
+                "layer effect params",
+            )?,
+            dof_tmp: storage_image(ctx, w, h, f16, "dof horizontal")?,
+            sigma_tmp: storage_image(ctx, w, h, vk::Format::R32_SFLOAT, "dof sigma")?,
+            dof_out: storage_image(ctx, w, h, f16, "dof out")?,
+            tiles: storage_image(ctx, tw, th, f16, "mb tile max")?,
+            neighbour: storage_image(ctx, tw, th, f16, "mb neighbour max")?,
+            mb_out: storage_image(ctx, w, h, f16, "mb out")?,
+        };
+        use Resource::{Buffer as B, Image as I};
+        me.dof_h.bind_resources(0, &[B(&me.params), I(colour), I(motion), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
+        me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out)])?;
+        me.mb_tiles.bind_resources(0, &[I(motion), I(&me.tiles)])?;
+        me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;
+        me.mb_gather.bind_resources(0, &[I(colour), I(&me.dof_out), I(motion), I(&me.neighbour), I(&me.mb_out)])?;
+        me.luma.bind_resources(0, &[I(colour), I(&me.dof_out), I(&me.mb_out), B(&me.grain.luma)])?;
+        me.composite.bind_resources(
+            0,
+            &[I(colour), I(&me.dof_out), I(&me.mb_out), I(background), B(me.grain.field()), I(output)],
+        )?;
+        Ok(me)
+    }
+
+    /// The last recorded grain field (planar RGB, eyes stacked as in `layer_luma`).
+    pub fn grain_field(&self) -> &Buffer<'a> {
+        self.grain.field()
+    }
+
+    pub fn settings(&self) -> &LayerSettings {
+        &self.settings
+    }
+
+    /// Record the chain. `params`: the frame slot's uniform (EffectParams of the
+    /// snapshot in use); `grain_table`: host-visible synthesis weights for the
+    /// same snapshot (`nodes` × 3 × 5 floats) with its luma range.
+    pub fn record(
+        &self,
+        cmd: vk::CommandBuffer,
+        params: &Buffer<'_>,
+        fx: &FrameEffects,
+        grain_table: Option<(&Buffer<'_>, u32, [f32; 2])>,
+    ) -> Result<(), GpuError> {
+        let full = Rect::full(self.width as usize, self.height as usize);
+        let clip = |r: Rect| {
+            let x0 = r.x.clamp(0, full.w);
+            let y0 = r.y.clamp(0, full.h);
+            let x1 = (r.x + r.w).clamp(0, full.w);
+            let y1 = (r.y + r.h).clamp(0, full.h);
+            Rect { x: x0, y: y0, w: x1 - x0, h: y1 - y0 }
+        };
+        let rects = [clip(fx.rects[0]), clip(fx.rects[1])];
+        let any = rects.iter().any(|r| r.area() > 0);
+        let to4 = |r: Rect| [r.x, r.y, r.w, r.h];
+        // Previous commands (last frame's effect reads, the G-buffer pass) complete
+        // before this frame's copies and writes: one barrier at the chain's start.
+        crate::gpu::record_full_barrier(self.ctx, cmd);
+        self.ctx.record_copy(cmd, params, &self.params, std::mem::size_of::<EffectParams>() as u64);
+        let noise_table = match (fx.noise && any, grain_table) {
+            (true, Some((table, nodes, range))) => {
+                self.ctx.record_copy(cmd, table, &self.grain.table, self.grain.table.size);
+                Some((nodes, range))
+            }
+            _ => None,
+        };
+        crate::gpu::record_full_barrier(self.ctx, cmd);
+        let mut push = LayerPush {
+            rect: [to4(rects[0]), to4(rects[1])],
+            size: [self.width as i32, self.height as i32],
+            radius: fx.dof_radius_px,
+            step: self.settings.dof_step_px,
+            ppr_ratio: fx.ppr_ratio,
+            exposure_ratio: fx.exposure_ratio,
+            frame: fx.frame,
+            samples: self.settings.mb_samples,
+        };
+        let gw = rects[0].w.max(rects[1].w);
+        let gh = rects[0].h.max(rects[1].h);
+        let mut source = 0; // 0: G-buffer colour, 1: DoF output, 2: MB output
+        if any && fx.dof {
+            self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            source = 1;
+        }
+        if any && fx.motion_blur {
+            let k = self.settings.mb_tile_px;
+            let trs = rects.map(|r| tile_rect(r, k, self.width as usize, self.height as usize));
+            let mut tp = push;
+            tp.rect = [to4(trs[0]), to4(trs[1])];
+            tp.radius = k;
+            let (tgw, tgh) = (trs[0].w.max(trs[1].w), trs[0].h.max(trs[1].h));
+            self.mb_tiles.record(cmd, bytemuck::bytes_of(&tp), groups(tgw, tgh));
+            tp.size = [(self.width as i32 + k - 1) / k, (self.height as i32 + k - 1) / k];
+            self.mb_neighbour.record(cmd, bytemuck::bytes_of(&tp), groups(tgw, tgh));
+            push.radius = k;
+            push.step = (source == 1) as i32;
+            self.mb_gather.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            source = 2;
+        }
+        let mut cp = CompositePush {
+            rect: [to4(rects[0]), to4(rects[1])],
+            size: [self.width as i32, self.height as i32],
+            use_fx: source,
+            ..Default::default()
+        };
+        if let Some((nodes, range)) = noise_table {
+            let nw = gw.max(1);
+            let nh = (rects[0].h + rects[1].h).max(1);
+            let lp = LumaPush { rect: [to4(rects[0]), to4(rects[1])], width: nw, row1: rects[0].h, pad: [0; 2] };
+            // Luma of the chain's output (0: raw colour, 1: DoF, 2: MB).
+            let lp = LumaPush { pad: [source, 0], ..lp };
+            self.luma.record(
+                cmd,
+                bytemuck::bytes_of(&lp),
+                [(nw as u32).div_ceil(8), (rects[0].h.max(rects[1].h) as u32).div_ceil(8), EYES],
+            );
+            let seed = (fx.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5eed;
+            self.grain.record(cmd, nw as usize, nh as usize, nodes, range, seed)?;
+            cp.use_noise = 1;
+            cp.noise_width = nw;
+            cp.noise_height = nh;
+            cp.row1 = rects[0].h;
+        }
+        self.composite.record(cmd, bytemuck::bytes_of(&cp), groups(self.width as i32, self.height as i32));
+        Ok(())
+    }
+}
+
+/// Per-snapshot flags as `FrameEffects` sees them (for logs and reports).
+pub fn effect_flags(p: &EffectParams) -> (bool, bool, bool) {
+    (p.flags & FLAG_NOISE != 0, p.flags & FLAG_MOTION_BLUR != 0, p.flags & FLAG_DEPTH_OF_FIELD != 0)
+}

@@ -1,0 +1,397 @@
+//! CPU twins of the renderer's production passes on the virtual layer
+//! (`render::layer`): premultiplied colour + alpha with per-pixel motion and depth,
+//! as the G-buffer pass writes it. Each function follows its shader's arithmetic
+//! so the GPU is held to it (tests/gpu_layer.rs); `defocus_layer_exact` is the
+//! unapproximated reference the quality settings are measured against.
+
+use crate::image::LUMA_WEIGHTS;
+use crate::model::{DepthOfField, DepthUnits, MAX_DOF_SIGMA_PX};
+
+/// One eye of the virtual layer: premultiplied RGBA and (motion x, motion y in px
+/// per render frame, depth in m, coverage) per pixel, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layer {
+    pub width: usize,
+    pub height: usize,
+    pub colour: Vec<[f32; 4]>,
+    pub motion: Vec<[f32; 4]>,
+}
+
+/// A pixel rectangle (the screen bounds effect work is limited to).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Rect {
+    pub x: i32,
+    pub y: i32,
+    pub w: i32,
+    pub h: i32,
+}
+
+impl Rect {
+    pub fn full(width: usize, height: usize) -> Self {
+        Rect { x: 0, y: 0, w: width as i32, h: height as i32 }
+    }
+    pub fn contains(&self, x: i32, y: i32) -> bool {
+        x >= self.x && y >= self.y && x < self.x + self.w && y < self.y + self.h
+    }
+    pub fn area(&self) -> usize {
+        (self.w.max(0) as usize) * (self.h.max(0) as usize)
+    }
+}
+
+/// erf, Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5e-7), as in the shaders (the
+/// published constants verbatim, hence more digits than f32 holds).
+#[allow(clippy::excessive_precision)]
+pub fn erf_as(x: f32) -> f32 {
+    let s = if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    };
+    let a = x.abs();
+    let t = 1.0 / (1.0 + 0.3275911 * a);
+    let y = 1.0
+        - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592)
+            * t
+            * (-a * a).exp();
+    s * y
+}
+
+/// Mass of N(0, σ²) over [d − h, d + h] (a delta for σ → 0).
+pub fn tap(d: f32, h: f32, sigma: f32) -> f32 {
+    if sigma < 1e-4 {
+        return if d.abs() < h { 1.0 } else { 0.0 };
+    }
+    let k = std::f32::consts::FRAC_1_SQRT_2 / sigma;
+    0.5 * (erf_as((d + h) * k) - erf_as((d - h) * k))
+}
+
+/// Blur σ in eye pixels at metric depth `z_m`: the model's δ(Z) (camera pixels)
+/// times the eye/camera `pixels_per_radian` ratio. Relative-inverse models have no
+/// metric scale for virtual depths: no DoF (the renderer skips it and says so).
+pub fn sigma_eye_px(dof: &DepthOfField, z_m: f32, ppr_ratio: f32) -> f32 {
+    if !dof.present || dof.units != DepthUnits::MetricM {
+        return 0.0;
+    }
+    dof.sigma_px(z_m).clamp(0.0, MAX_DOF_SIGMA_PX) * ppr_ratio
+}
+
+/// Separable scatter-as-gather defocus of one eye over `rect` (zero outside it):
+/// horizontal pass spreading each covered pixel with its own σ and carrying the
+/// coverage-weighted σ, then a vertical pass with that σ (`layer_dof_h/v.comp`).
+/// `radius` is a multiple of `step` (taps every `step` px, each the Gaussian's mass
+/// over its span). Pixels outside `rect` keep their input.
+pub fn defocus_layer(
+    layer: &Layer,
+    dof: &DepthOfField,
+    ppr_ratio: f32,
+    radius: i32,
+    step: i32,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    let (w, step) = (layer.width as i32, step.max(1));
+    let h = 0.5 * step as f32;
+    let idx = |x: i32, y: i32| (y * w + x) as usize;
+    let mut hc = vec![[0.0f32; 4]; layer.colour.len()];
+    let mut hs = vec![0.0f32; layer.colour.len()];
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let (mut acc, mut s_acc, mut w_acc) = ([0.0f32; 4], 0.0f32, 0.0f32);
+            let mut d = -radius;
+            while d <= radius {
+                let sx = x + d;
+                d += step;
+                if sx < rect.x || sx >= rect.x + rect.w {
+                    continue;
+                }
+                let m = layer.motion[idx(sx, y)];
+                if m[3] <= 0.0 {
+                    continue;
+                }
+                let sigma = sigma_eye_px(dof, m[2], ppr_ratio);
+                let k = tap(-((d - step) as f32), h, sigma);
+                let c = layer.colour[idx(sx, y)];
+                for i in 0..4 {
+                    acc[i] += k * c[i];
+                }
+                let wk = k * c[3];
+                s_acc += wk * sigma;
+                w_acc += wk;
+            }
+            hc[idx(x, y)] = acc;
+            hs[idx(x, y)] = if w_acc > 1e-6 { s_acc / w_acc } else { 0.0 };
+        }
+    }
+    let mut out = layer.colour.clone();
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let mut acc = [0.0f32; 4];
+            let mut d = -radius;
+            while d <= radius {
+                let sy = y + d;
+                d += step;
+                if sy < rect.y || sy >= rect.y + rect.h {
+                    continue;
+                }
+                let c = hc[idx(x, sy)];
+                if c == [0.0; 4] {
+                    continue;
+                }
+                let k = tap(-((d - step) as f32), h, hs[idx(x, sy)]);
+                for i in 0..4 {
+                    acc[i] += k * c[i];
+                }
+            }
+            out[idx(x, y)] = acc;
+        }
+    }
+    out
+}
+
+/// The unapproximated reference: every covered pixel scatters a 2-D Gaussian of its
+/// own σ (pixel-integrated, 4σ reach) over the whole eye. The production pass's
+/// quality settings are measured against this.
+pub fn defocus_layer_exact(layer: &Layer, dof: &DepthOfField, ppr_ratio: f32) -> Vec<[f32; 4]> {
+    let (w, h) = (layer.width as i32, layer.height as i32);
+    let mut out = vec![[0.0f32; 4]; layer.colour.len()];
+    for sy in 0..h {
+        for sx in 0..w {
+            let i = (sy * w + sx) as usize;
+            let m = layer.motion[i];
+            if m[3] <= 0.0 {
+                continue;
+            }
+            let sigma = sigma_eye_px(dof, m[2], ppr_ratio);
+            let r = (4.0 * sigma).ceil() as i32;
+            let c = layer.colour[i];
+            let kx: Vec<f32> = (-r..=r).map(|d| tap(d as f32, 0.5, sigma)).collect();
+            for dy in -r..=r {
+                let y = sy + dy;
+                if y < 0 || y >= h {
+                    continue;
+                }
+                let ky = kx[(dy + r) as usize];
+                for dx in -r..=r {
+                    let x = sx + dx;
+                    if x < 0 || x >= w {
+                        continue;
+                    }
+                    let k = ky * kx[(dx + r) as usize];
+                    let o = &mut out[(y * w + x) as usize];
+                    for ch in 0..4 {
+                        o[ch] += k * c[ch];
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Depth softness of the MB ordering tests and the depth of uncovered pixels.
+pub const MB_SOFT_Z_M: f32 = 0.05;
+pub const MB_EMPTY_Z_M: f32 = 1.0e4;
+
+fn half_streak(m: [f32; 4], exposure_ratio: f32, tile_px: i32) -> [f32; 2] {
+    if m[3] <= 0.0 {
+        return [0.0; 2];
+    }
+    let v = [m[0] * (0.5 * exposure_ratio), m[1] * (0.5 * exposure_ratio)];
+    let len = (v[0] * v[0] + v[1] * v[1]).sqrt();
+    let k = tile_px as f32;
+    if len > k {
+        [v[0] * (k / len), v[1] * (k / len)]
+    } else {
+        v
+    }
+}
+
+/// Integer hash for the per-pixel jitter (lowbias32), as in `layer_mb_gather.comp`.
+pub fn hash32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846ca68b);
+    x ^= x >> 16;
+    x
+}
+
+/// Tiles (of `tile_px`) covering `rect`, as (x0, y0, w, h) in tile units.
+pub fn tile_rect(rect: Rect, tile_px: i32, width: usize, height: usize) -> Rect {
+    if rect.area() == 0 {
+        return Rect::default();
+    }
+    let x0 = rect.x / tile_px;
+    let y0 = rect.y / tile_px;
+    let x1 = ((rect.x + rect.w - 1) / tile_px).min((width as i32 - 1) / tile_px);
+    let y1 = ((rect.y + rect.h - 1) / tile_px).min((height as i32 - 1) / tile_px);
+    Rect { x: x0, y: y0, w: x1 - x0 + 1, h: y1 - y0 + 1 }
+}
+
+/// McGuire et al. 2012 reconstruction over `rect` of one eye (`layer_mb_*.comp`):
+/// TileMax → NeighborMax → `samples` jittered taps along the neighbourhood's
+/// half-streak with depth-ordered cone/cylinder weights. `colour` is the input layer
+/// (after DoF), `motion` the G-buffer's. Pixels outside `rect` keep their input.
+#[allow(clippy::too_many_arguments)]
+pub fn motion_blur_layer(
+    colour: &[[f32; 4]],
+    motion: &[[f32; 4]],
+    width: usize,
+    height: usize,
+    exposure_ratio: f32,
+    tile_px: i32,
+    samples: u32,
+    frame: u32,
+    eye: u32,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    let w = width as i32;
+    let idx = |x: i32, y: i32| (y * w + x) as usize;
+    let tr = tile_rect(rect, tile_px, width, height);
+    let (tw, th) = ((width as i32 + tile_px - 1) / tile_px, (height as i32 + tile_px - 1) / tile_px);
+    let mut tile_max = vec![[0.0f32; 2]; (tw * th) as usize];
+    for ty in tr.y..tr.y + tr.h {
+        for tx in tr.x..tr.x + tr.w {
+            let (mut best, mut best_len) = ([0.0f32; 2], 0.0f32);
+            for j in 0..tile_px {
+                for i in 0..tile_px {
+                    let (x, y) = (tx * tile_px + i, ty * tile_px + j);
+                    if x >= w || y >= height as i32 {
+                        continue;
+                    }
+                    let v = half_streak(motion[idx(x, y)], exposure_ratio, tile_px);
+                    let l = v[0] * v[0] + v[1] * v[1];
+                    if l > best_len {
+                        best_len = l;
+                        best = v;
+                    }
+                }
+            }
+            tile_max[(ty * tw + tx) as usize] = best;
+        }
+    }
+    let mut neighbour = vec![[0.0f32; 2]; (tw * th) as usize];
+    for ty in tr.y..tr.y + tr.h {
+        for tx in tr.x..tr.x + tr.w {
+            let (mut best, mut best_len) = ([0.0f32; 2], 0.0f32);
+            for j in -1..=1 {
+                for i in -1..=1 {
+                    let (x, y) = (tx + i, ty + j);
+                    if !tr.contains(x, y) {
+                        continue;
+                    }
+                    let v = tile_max[(y * tw + x) as usize];
+                    let l = v[0] * v[0] + v[1] * v[1];
+                    if l > best_len {
+                        best_len = l;
+                        best = v;
+                    }
+                }
+            }
+            neighbour[(ty * tw + tx) as usize] = best;
+        }
+    }
+    let closer = |za: f32, zb: f32| (1.0 - (za - zb) / MB_SOFT_Z_M).clamp(0.0, 1.0);
+    let cone = |dist: f32, vlen: f32| (1.0 - dist / vlen).clamp(0.0, 1.0);
+    let smoothstep = |e0: f32, e1: f32, x: f32| {
+        let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    };
+    let cylinder = |dist: f32, vlen: f32| 1.0 - smoothstep(0.95 * vlen, 1.05 * vlen, dist);
+    let mut out = colour.to_vec();
+    let n = samples.max(1);
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let vn = neighbour[((y / tile_px) * tw + x / tile_px) as usize];
+            let cx = colour[idx(x, y)];
+            if (vn[0] * vn[0] + vn[1] * vn[1]).sqrt() < 0.5 {
+                continue;
+            }
+            let mx = motion[idx(x, y)];
+            let zx = if mx[3] > 0.0 { mx[2] } else { MB_EMPTY_Z_M };
+            let hx = half_streak(mx, exposure_ratio, tile_px);
+            let vx = (hx[0] * hx[0] + hx[1] * hx[1]).sqrt().max(0.5);
+            let mut weight = 1.0 / vx;
+            let mut sum = cx.map(|c| c * weight);
+            let h = hash32(
+                (x as u32)
+                    .wrapping_mul(1973)
+                    .wrapping_add((y as u32).wrapping_mul(9277))
+                    .wrapping_add(eye.wrapping_mul(26699))
+                    .wrapping_add(frame.wrapping_mul(7919)),
+            );
+            let j = (h & 0xffff) as f32 / 65536.0 - 0.5;
+            for i in 0..n {
+                let a = (i as f32 + j + 1.0) / (n as f32 + 1.0);
+                // GLSL mix(-1, 1, a) = -1·(1 − a) + 1·a, written out in the same order.
+                let t = -(1.0 - a) + a;
+                let sx = x + (vn[0] * t + 0.5).floor() as i32;
+                let sy = y + (vn[1] * t + 0.5).floor() as i32;
+                if !rect.contains(sx, sy) || (sx == x && sy == y) {
+                    continue;
+                }
+                let my = motion[idx(sx, sy)];
+                let zy = if my[3] > 0.0 { my[2] } else { MB_EMPTY_Z_M };
+                let hy = half_streak(my, exposure_ratio, tile_px);
+                let vy = (hy[0] * hy[0] + hy[1] * hy[1]).sqrt().max(0.5);
+                let dist = (((sx - x) * (sx - x) + (sy - y) * (sy - y)) as f32).sqrt();
+                let f = closer(zy, zx);
+                let b = closer(zx, zy);
+                let wgt = f * cone(dist, vy) + b * cone(dist, vx) + cylinder(dist, vy) * cylinder(dist, vx) * 2.0;
+                weight += wgt;
+                let cy = colour[idx(sx, sy)];
+                for ch in 0..4 {
+                    sum[ch] += wgt * cy[ch];
+                }
+            }
+            out[idx(x, y)] = sum.map(|s| s / weight);
+        }
+    }
+    out
+}
+
+/// Luma (Rec. 601) of the un-premultiplied virtual colour over `rect`, row-major
+/// `rect.w × rect.h` (`layer_luma.comp`); 0 where alpha ≤ 1e-3.
+pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect) -> Vec<f32> {
+    let mut out = Vec::with_capacity(rect.area());
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let c = colour[y as usize * width + x as usize];
+            out.push(if c[3] > 1e-3 { (0..3).map(|i| LUMA_WEIGHTS[i] * c[i] / c[3]).sum() } else { 0.0 });
+        }
+    }
+    out
+}
+
+/// `composite.comp` for one eye: out = bg·(1 − α) + C + α·n (n: planar RGB grain
+/// of `rect`'s size, or none), clamped to [0, 1]; `fx` replaces `raw` inside `rect`.
+pub fn composite(
+    background: &[[f32; 4]],
+    raw: &[[f32; 4]],
+    fx: Option<&[[f32; 4]]>,
+    noise: Option<&[f32]>,
+    width: usize,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    let plane = rect.area();
+    (0..background.len())
+        .map(|i| {
+            let (x, y) = ((i % width) as i32, (i / width) as i32);
+            let inside = rect.contains(x, y);
+            let c = match fx {
+                Some(f) if inside => f[i],
+                _ => raw[i],
+            };
+            let a = c[3].clamp(0.0, 1.0);
+            let mut rgb: [f32; 3] = std::array::from_fn(|k| background[i][k] * (1.0 - a) + c[k]);
+            if let (Some(n), true, true) = (noise, inside, a > 0.0) {
+                let j = ((y - rect.y) * rect.w + (x - rect.x)) as usize;
+                for k in 0..3 {
+                    rgb[k] += a * n[k * plane + j];
+                }
+            }
+            [rgb[0].clamp(0.0, 1.0), rgb[1].clamp(0.0, 1.0), rgb[2].clamp(0.0, 1.0), 1.0]
+        })
+        .collect()
+}
