@@ -153,4 +153,93 @@ fn demo_runs_without_files() {
     let acc = model(&d.join("camera_accurate.json"));
     let (t, a) = (truth.motion_blur.exposure.expect("λ"), acc.motion_blur.exposure.expect("λ"));
     assert!((t - a).abs() < 0.01, "demo λ {a} vs {t}");
+    // The render half needs a Vulkan device: required under REQUIRE_GPU=1 (CI).
+    if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") {
+        for f in ["composite_side_by_side.png", "composite_zoom.png", "render/matched_007.png", "render/naive_000.png"]
+        {
+            assert!(d.join(f).exists(), "{f}: {log}");
+        }
+        let report = std::fs::read_to_string(d.join("report.md")).expect("report");
+        assert!(report.contains("## Render") && !report.contains("Skipped"), "{report}");
+        // The matched composite differs from the naive one (the effects ran) and
+        // the naive one from the bare background (the object was drawn).
+        let load = |f: &str| blind_augment::io::load_rgb(&d.join(f)).expect(f).0;
+        let (naive, matched, bg) =
+            (load("render/naive_004.png"), load("render/matched_004.png"), load("render/background_004.png"));
+        let mad = |a: &blind_augment::image::Rgb, b: &blind_augment::image::Rgb| {
+            let n = b.width * b.height;
+            (0..3)
+                .map(|c| {
+                    (0..n)
+                        .map(|i| (a.channels[c][(i / b.width) * a.width + i % b.width] - b.channels[c][i]).abs())
+                        .sum::<f32>()
+                })
+                .sum::<f32>()
+                / (3 * n) as f32
+        };
+        assert!(mad(&naive, &bg) > 0.002, "object not drawn");
+        assert!(mad(&matched, &naive) > 0.0005, "effects changed nothing");
+    }
+}
+
+/// `render` end to end on the bundled object, and its errors name the input.
+#[test]
+fn render_command_writes_naive_and_matched() {
+    let d = dir("render");
+    let bg = d.join("bg");
+    std::fs::create_dir_all(&bg).expect("dir");
+    let img = blind_augment::io::load_rgb(&data("chelsea.png")).expect("photo").0;
+    for k in 0..2 {
+        blind_augment::io::save_rgb(&bg.join(format!("f{k}.png")), &img, blind_augment::io::BitDepth::Eight)
+            .expect("bg");
+    }
+    let mut m = blind_augment::model::CameraModel::empty(img.width as u32, img.height as u32);
+    m.reference.frame_interval_s = Some(1.0 / 30.0);
+    m.noise = blind_augment::synth::white_sensor_noise([1e-4; 3], [1e-3; 3], [0.0, 1.0]);
+    std::fs::write(d.join("camera.json"), m.to_json().expect("json")).expect("write");
+    let glb = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/toy.glb");
+    let (ok, log) = run(bin()
+        .args(["render", "--scene"])
+        .arg(d.join("missing.glb"))
+        .arg("--background")
+        .arg(&bg)
+        .arg("--camera")
+        .arg(d.join("camera.json"))
+        .arg("--out")
+        .arg(d.join("out")));
+    assert!(!ok && log.contains("missing.glb"), "{log}");
+    if std::env::var("REQUIRE_GPU").as_deref() != Ok("1") {
+        eprintln!("render_command: the rendering half needs REQUIRE_GPU=1 (a Vulkan device)");
+        return;
+    }
+    let (ok, log) = run(bin()
+        .args(["render", "--scene"])
+        .arg(&glb)
+        .arg("--background")
+        .arg(&bg)
+        .arg("--camera")
+        .arg(d.join("camera.json"))
+        .arg("--out")
+        .arg(d.join("out"))
+        .args(["--eye-size", "160x120", "--focal-px", "300"]));
+    assert!(ok, "{log}");
+    for k in 0..2 {
+        for kind in ["naive", "matched"] {
+            let f = d.join("out").join(format!("{kind}_{k:03}.png"));
+            let (img, _) = blind_augment::io::load_rgb(&f).expect("output");
+            // Both eyes side by side with a 4-px gap.
+            assert_eq!((img.width, img.height), (2 * 160 + 4, 120), "{}", f.display());
+        }
+    }
+    let (ok, log) = run(bin()
+        .args(["render", "--scene"])
+        .arg(&glb)
+        .arg("--background")
+        .arg(&bg)
+        .arg("--camera")
+        .arg(d.join("camera.json"))
+        .arg("--out")
+        .arg(d.join("out2"))
+        .args(["--eye-size", "160by120"]));
+    assert!(!ok && log.contains("--eye-size"), "{log}");
 }

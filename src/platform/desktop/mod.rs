@@ -3,6 +3,7 @@
 
 mod demo;
 mod fit_cmd;
+mod render_cmd;
 
 use anyhow::{Context, Result};
 use blind_augment::fit::{Effects, Tier};
@@ -129,6 +130,32 @@ pub struct DemoArgs {
     out: PathBuf,
 }
 
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// glTF 2.0 binary (.glb) with embedded buffers and textures.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Folder of background frames (PNG/JPEG, sorted by name; camera frames).
+    #[arg(long)]
+    background: PathBuf,
+    /// Camera model (JSON) to match.
+    #[arg(long)]
+    camera: PathBuf,
+    /// Output folder: naive_NNN.png and matched_NNN.png (left | right eye).
+    #[arg(long)]
+    out: PathBuf,
+    /// Eye-buffer size per eye, WxH (default: the background's size).
+    #[arg(long)]
+    eye_size: Option<String>,
+    /// The background camera's focal length in its pixels (default: the model's
+    /// pixels_per_radian).
+    #[arg(long)]
+    focal_px: Option<f32>,
+    /// Distance from the eyes to the object (m).
+    #[arg(long, default_value_t = 1.5)]
+    object_depth_m: f32,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Fit a camera model to a frame (or a folder of frames).
@@ -138,6 +165,9 @@ enum Command {
     /// Self-contained demo on an embedded photograph with known distortions:
     /// distorts, fits (accurate and fast tiers), writes plots and a report.
     Demo(DemoArgs),
+    /// Render a glTF object over a background sequence, naive and matched to a
+    /// camera model (stereo, Vulkan).
+    Render(RenderArgs),
 }
 
 pub fn effects(only: &Option<Vec<EffectArg>>) -> Effects {
@@ -204,6 +234,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Fit(a) => fit_cmd::run(a),
         Command::Synth(a) => synth(a),
         Command::Demo(a) => demo::run(a),
+        Command::Render(a) => render_cmd::run(a),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,
