@@ -5,6 +5,8 @@
 //! Every effect carries `present` (the renderer skips absent effects) and
 //! `diagnostics` (how sure the estimator is, how it got there).
 
+pub mod geometry;
+pub use geometry::{tile_rect, GrainTable, Rect};
 pub mod kernels;
 mod validate;
 
@@ -15,6 +17,9 @@ pub const SCHEMA: &str = "blind-augment/camera-model/1";
 /// Band-pass levels of the noise pyramid (the paper's 4; the official code's 3 is
 /// what the paper calls a mistake-prone simplification: see README).
 pub const NOISE_LEVELS: usize = 4;
+
+/// Luma nodes of a grain synthesis table (`synth::SynthesisTable`, `GrainTable`).
+pub const GRAIN_TABLE_NODES: usize = 33;
 /// Largest DoF blur std the estimators search and the model may express, in
 /// reference pixels (the paper searches [0, 10]).
 pub const MAX_DOF_SIGMA_PX: f32 = 10.0;

@@ -16,13 +16,7 @@ const INIT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/grain_init.spv"));
 const SCALE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/grain_scale.spv"));
 const BANDS: usize = NOISE_LEVELS + 1;
 
-/// Synthesis weights per luma node, channel and band ([node][channel][band]).
-#[derive(Clone, Debug)]
-pub struct GrainTable {
-    pub luma_range: [f32; 2],
-    pub nodes: u32,
-    pub weights: Vec<f32>,
-}
+pub use crate::model::GrainTable;
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]

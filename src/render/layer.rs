@@ -12,9 +12,9 @@
 
 use super::grain::GrainRecorder;
 use super::params::{EffectParams, FLAG_DEPTH_OF_FIELD, FLAG_MOTION_BLUR, FLAG_NOISE};
-use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, Resource, EYES};
+use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, QueryPool, Resource, EYES};
+use crate::model::{tile_rect, Rect};
 use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
-use crate::synth::layer::{tile_rect, Rect};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 
@@ -25,6 +25,15 @@ const MB_NEIGHBOUR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_n
 const MB_GATHER: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_gather.spv"));
 const LUMA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_luma.spv"));
 const COMPOSITE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/composite.spv"));
+
+/// Timestamp slots of a profiled frame: frame start, G-buffer done, then each stage.
+pub const STAMP_START: u32 = 0;
+pub const STAMP_GBUFFER: u32 = 1;
+pub const STAMP_DOF: u32 = 2;
+pub const STAMP_MB: u32 = 3;
+pub const STAMP_GRAIN: u32 = 4;
+pub const STAMP_COMPOSITE: u32 = 5;
+pub const STAMPS: u32 = 6;
 
 /// Largest DoF gather radius in eye pixels (σ ≤ radius / 3 is spread fully).
 pub const MAX_DOF_RADIUS_PX: i32 = 48;
@@ -302,6 +311,25 @@ impl<'a> LayerEffects<'a> {
         fx: &FrameEffects,
         grain_table: Option<(&Buffer<'_>, u32, [f32; 2])>,
     ) -> Result<(), GpuError> {
+        self.record_profiled(cmd, params, fx, grain_table, None)
+    }
+
+    /// `record`, writing timestamps into `profile` (when given) after each stage:
+    /// [`STAMP_DOF`], [`STAMP_MB`], [`STAMP_GRAIN`] and [`STAMP_COMPOSITE`]
+    /// (skipped stages repeat the previous stamp, so their time reads as zero).
+    pub fn record_profiled(
+        &self,
+        cmd: vk::CommandBuffer,
+        params: &Buffer<'_>,
+        fx: &FrameEffects,
+        grain_table: Option<(&Buffer<'_>, u32, [f32; 2])>,
+        profile: Option<&QueryPool<'_>>,
+    ) -> Result<(), GpuError> {
+        let stamp = |i: u32| {
+            if let Some(q) = profile {
+                q.record_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, i);
+            }
+        };
         let full = Rect::full(self.width as usize, self.height as usize);
         let clip = |r: Rect| {
             let x0 = r.x.clamp(0, full.w);
@@ -343,6 +371,7 @@ impl<'a> LayerEffects<'a> {
             self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             source = 1;
         }
+        stamp(STAMP_DOF);
         if any && fx.motion_blur {
             let k = self.settings.mb_tile_px;
             let trs = rects.map(|r| tile_rect(r, k, self.width as usize, self.height as usize));
@@ -358,6 +387,7 @@ impl<'a> LayerEffects<'a> {
             self.mb_gather.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             source = 2;
         }
+        stamp(STAMP_MB);
         let mut cp = CompositePush {
             rect: [to4(rects[0]), to4(rects[1])],
             size: [self.width as i32, self.height as i32],
@@ -382,7 +412,9 @@ impl<'a> LayerEffects<'a> {
             cp.noise_height = nh;
             cp.row1 = rects[0].h;
         }
+        stamp(STAMP_GRAIN);
         self.composite.record(cmd, bytemuck::bytes_of(&cp), groups(self.width as i32, self.height as i32));
+        stamp(STAMP_COMPOSITE);
         Ok(())
     }
 }

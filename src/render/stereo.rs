@@ -7,10 +7,9 @@
 use super::gbuffer::{clip_from_view, Eye, GBufferFrame, GBufferPass, FAR_M, NEAR_M};
 use super::layer::{FrameEffects, LayerEffects, LayerSettings};
 use super::params::EffectParams;
-use crate::gpu::{Buffer, FrameRing, GpuContext, GpuError, Image, EYES};
+use crate::gpu::{Buffer, FrameRing, GpuContext, GpuError, Image, QueryPool, Statistics, EYES};
+use crate::model::{Rect, GRAIN_TABLE_NODES};
 use crate::scene::Scene;
-use crate::synth::layer::Rect;
-use crate::synth::SynthesisTable;
 use crate::worker::Snapshot;
 use ash::vk;
 use glam::Vec3;
@@ -35,11 +34,30 @@ pub struct StereoRenderer<'a> {
     pub output: Image<'a>,
     ring: FrameRing<'a>,
     tables: Vec<Buffer<'a>>,
-    table_cache: Option<(u64, SynthesisTable)>,
     settings: LayerSettings,
     eye_pixels_per_radian: Option<f32>,
     frame: u32,
     pub last_effects: Option<FrameEffects>,
+    profile: Option<Profile<'a>>,
+}
+
+/// Per-frame GPU profile (benchmarks): timestamps per stage and pipeline
+/// statistics for the G-buffer pass (query 0) and the effect chain (query 1).
+struct Profile<'a> {
+    stamps: QueryPool<'a>,
+    stats: Option<QueryPool<'a>>,
+}
+
+/// What one profiled frame cost on the GPU.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameProfile {
+    pub gbuffer_ms: f64,
+    pub dof_ms: f64,
+    pub mb_ms: f64,
+    pub grain_ms: f64,
+    pub composite_ms: f64,
+    pub gbuffer_stats: Statistics,
+    pub effects_stats: Statistics,
 }
 
 impl<'a> StereoRenderer<'a> {
@@ -73,7 +91,7 @@ impl<'a> StereoRenderer<'a> {
             vk::ImageLayout::GENERAL,
             "output",
         )?;
-        let nodes = crate::synth::SynthesisTable::node_count() as u32;
+        let nodes = GRAIN_TABLE_NODES as u32;
         let effects =
             LayerEffects::new(ctx, gbuffer.colour(), gbuffer.motion(), &background, &output, settings, nodes)?;
         let ring = FrameRing::new(ctx, FRAMES_IN_FLIGHT, std::mem::size_of::<EffectParams>() as u64)?;
@@ -95,12 +113,44 @@ impl<'a> StereoRenderer<'a> {
             output,
             ring,
             tables,
-            table_cache: None,
             settings,
             eye_pixels_per_radian,
             frame: 0,
             last_effects: None,
+            profile: None,
         })
+    }
+
+    /// Turn per-frame GPU profiling on (timestamps; pipeline statistics where the
+    /// device has them). Each `render` then waits for its frame; read the result
+    /// with `last_profile`.
+    pub fn enable_profiling(&mut self) -> Result<(), GpuError> {
+        let stamps = QueryPool::timestamps(self.ctx, super::layer::STAMPS)?;
+        let stats = if self.ctx.has_pipeline_statistics() { Some(QueryPool::statistics(self.ctx, 2)?) } else { None };
+        self.profile = Some(Profile { stamps, stats });
+        Ok(())
+    }
+
+    /// The profile of the last rendered frame (waits for it).
+    pub fn last_profile(&self) -> Result<Option<FrameProfile>, GpuError> {
+        let Some(p) = &self.profile else { return Ok(None) };
+        self.finish()?;
+        let t = p.stamps.timestamps_ms()?;
+        let stats = match &p.stats {
+            Some(s) => s.statistics_results()?,
+            None => vec![Statistics::default(); 2],
+        };
+        use super::layer::*;
+        let d = |a: u32, b: u32| t[b as usize] - t[a as usize];
+        Ok(Some(FrameProfile {
+            gbuffer_ms: d(STAMP_START, STAMP_GBUFFER),
+            dof_ms: d(STAMP_GBUFFER, STAMP_DOF),
+            mb_ms: d(STAMP_DOF, STAMP_MB),
+            grain_ms: d(STAMP_MB, STAMP_GRAIN),
+            composite_ms: d(STAMP_GRAIN, STAMP_COMPOSITE),
+            gbuffer_stats: stats[0],
+            effects_stats: stats[1],
+        }))
     }
 
     pub fn size(&self) -> (u32, u32) {
@@ -172,27 +222,51 @@ impl<'a> StereoRenderer<'a> {
         let g = input.gbuffer;
         fx.rects =
             self.rects(&g.eyes, &g.prev_eyes, input.corners_now, input.corners_prev, fx.margin_px(&self.settings));
-        // The grain table depends on the noise model only: rebuilt when the
-        // snapshot changes (a ~ms CPU job; the worker could precompute it).
-        if fx.noise && self.table_cache.as_ref().map(|c| c.0) != Some(snapshot.generation) {
-            self.table_cache = Some((snapshot.generation, SynthesisTable::new(&model.noise)));
+        if self.profile.is_some() {
+            // A profiled frame must not overlap the previous one's queries (waited
+            // before `begin`, which unsignals the new slot's fence).
+            self.ring.wait_all()?;
         }
         let (slot, cmd) = self.ring.begin()?;
         // The slot's previous frame is complete (begin waited): its buffers may be rewritten.
         let params = EffectParams::from_model(model, snapshot.generation as u32);
         self.ring.slot(slot).uniform.write(bytemuck::bytes_of(&params))?;
-        let table = match (&self.table_cache, fx.noise) {
-            (Some((_, t)), true) => {
-                let flat = t.weights_flat();
-                self.tables[slot].write(bytemuck::cast_slice(&flat))?;
-                Some((&self.tables[slot], t.nodes() as u32, t.luma_range()))
+        // The snapshot's grain table (computed when it was published).
+        let table = match (&snapshot.grain, fx.noise) {
+            (Some(t), true) if t.nodes as usize == GRAIN_TABLE_NODES => {
+                self.tables[slot].write(bytemuck::cast_slice(&t.weights))?;
+                Some((&self.tables[slot], t.nodes, t.luma_range))
             }
             _ => None,
         };
-        let recorded = self
-            .gbuffer
-            .record(cmd, slot, g)
-            .and_then(|_| self.effects.record(cmd, &self.ring.slot(slot).uniform, &fx, table));
+        if let Some(p) = &self.profile {
+            p.stamps.record_reset(cmd);
+            if let Some(s) = &p.stats {
+                s.record_reset(cmd);
+            }
+            crate::gpu::record_full_barrier(self.ctx, cmd);
+            p.stamps.record_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, super::layer::STAMP_START);
+        }
+        let stats = self.profile.as_ref().and_then(|p| p.stats.as_ref());
+        let stamps = self.profile.as_ref().map(|p| &p.stamps);
+        if let Some(s) = stats {
+            s.record_begin(cmd, 0);
+        }
+        let recorded = self.gbuffer.record(cmd, slot, g);
+        if let Some(s) = stats {
+            s.record_end(cmd, 0);
+        }
+        if let Some(q) = stamps {
+            q.record_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, super::layer::STAMP_GBUFFER);
+        }
+        if let Some(s) = stats {
+            s.record_begin(cmd, 1);
+        }
+        let recorded =
+            recorded.and_then(|_| self.effects.record_profiled(cmd, &self.ring.slot(slot).uniform, &fx, table, stamps));
+        if let Some(s) = stats {
+            s.record_end(cmd, 1);
+        }
         // Submit even after a recording error so the slot's fence is signalled again.
         let submitted = self.ring.submit(slot);
         recorded?;

@@ -5,6 +5,7 @@
 //! unapproximated reference the quality settings are measured against.
 
 use crate::image::LUMA_WEIGHTS;
+pub use crate::model::{tile_rect, Rect};
 use crate::model::{DepthOfField, DepthUnits, MAX_DOF_SIGMA_PX};
 
 /// One eye of the virtual layer: premultiplied RGBA and (motion x, motion y in px
@@ -15,27 +16,6 @@ pub struct Layer {
     pub height: usize,
     pub colour: Vec<[f32; 4]>,
     pub motion: Vec<[f32; 4]>,
-}
-
-/// A pixel rectangle (the screen bounds effect work is limited to).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub struct Rect {
-    pub x: i32,
-    pub y: i32,
-    pub w: i32,
-    pub h: i32,
-}
-
-impl Rect {
-    pub fn full(width: usize, height: usize) -> Self {
-        Rect { x: 0, y: 0, w: width as i32, h: height as i32 }
-    }
-    pub fn contains(&self, x: i32, y: i32) -> bool {
-        x >= self.x && y >= self.y && x < self.x + self.w && y < self.y + self.h
-    }
-    pub fn area(&self) -> usize {
-        (self.w.max(0) as usize) * (self.h.max(0) as usize)
-    }
 }
 
 /// erf, Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5e-7), as in the shaders (the
@@ -215,18 +195,6 @@ pub fn hash32(mut x: u32) -> u32 {
     x = x.wrapping_mul(0x846ca68b);
     x ^= x >> 16;
     x
-}
-
-/// Tiles (of `tile_px`) covering `rect`, as (x0, y0, w, h) in tile units.
-pub fn tile_rect(rect: Rect, tile_px: i32, width: usize, height: usize) -> Rect {
-    if rect.area() == 0 {
-        return Rect::default();
-    }
-    let x0 = rect.x / tile_px;
-    let y0 = rect.y / tile_px;
-    let x1 = ((rect.x + rect.w - 1) / tile_px).min((width as i32 - 1) / tile_px);
-    let y1 = ((rect.y + rect.h - 1) / tile_px).min((height as i32 - 1) / tile_px);
-    Rect { x: x0, y: y0, w: x1 - x0 + 1, h: y1 - y0 + 1 }
 }
 
 /// McGuire et al. 2012 reconstruction over `rect` of one eye (`layer_mb_*.comp`):

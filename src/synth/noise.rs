@@ -157,7 +157,7 @@ pub struct SynthesisTable {
     weights: Vec<[[f32; BANDS]; 3]>,
 }
 
-const TABLE_NODES: usize = 33;
+const TABLE_NODES: usize = crate::model::GRAIN_TABLE_NODES;
 
 impl SynthesisTable {
     pub fn new(noise: &Noise) -> Self {

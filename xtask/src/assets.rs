@@ -16,7 +16,7 @@ struct Bin {
 
 impl Bin {
     fn align(&mut self) {
-        while self.data.len() % 4 != 0 {
+        while !self.data.len().is_multiple_of(4) {
             self.data.push(0);
         }
     }
@@ -89,9 +89,9 @@ fn sphere(r: f32, rings: u32, segments: u32) -> (Vec<f32>, Vec<f32>, Vec<f32>, V
         for j in 0..=segments {
             let ph = 2.0 * std::f32::consts::PI * j as f32 / segments as f32;
             let d = [th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()];
-            for k in 0..3 {
-                p.push(r * d[k]);
-                n.push(d[k]);
+            for dk in d {
+                p.push(r * dk);
+                n.push(dk);
             }
             t.push(j as f32 / segments as f32);
             t.push(i as f32 / rings as f32);
@@ -200,7 +200,7 @@ pub fn generate(root: &Path) -> Result<()> {
         "buffers": [{"byteLength": bin.data.len()}]
     });
     let mut js = serde_json::to_vec(&doc).context("serialising glTF JSON")?;
-    while js.len() % 4 != 0 {
+    while !js.len().is_multiple_of(4) {
         js.push(b' ');
     }
     // GLB container (glTF 2.0 spec §4.4): header, JSON chunk, BIN chunk.

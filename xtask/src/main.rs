@@ -39,6 +39,8 @@ fn bench() -> Result<()> {
     std::fs::write(dir.join("fit.txt"), fit).context("writing target/bench/fit.txt")?;
     let gpu = cargo(&["bench", "--bench", "gpu"])?;
     std::fs::write(dir.join("gpu.md"), gpu).context("writing target/bench/gpu.md")?;
+    let frame = cargo(&["bench", "--bench", "frame"])?;
+    std::fs::write(dir.join("frame.md"), frame).context("writing target/bench/frame.md")?;
     eprintln!("raw results in {}; copy the figures into BENCHMARKS.md", dir.display());
     Ok(())
 }

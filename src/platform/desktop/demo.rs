@@ -354,7 +354,7 @@ fn render_demo(
         let t = k as f32 * interval;
         let (moved, z) = reproject(clean, depth, camera_x_m(t, period), median_z);
         // Camera velocity (m per camera frame) → image flow −f·v/Z (px per frame).
-        let v = (camera_x_m(t + 0.5 * interval, period) - camera_x_m(t - 0.5 * interval, period)) as f32;
+        let v = camera_x_m(t + 0.5 * interval, period) - camera_x_m(t - 0.5 * interval, period);
         let mut flow = Flow::uniform(w, h, 0.0, 0.0);
         for i in 0..w * h {
             flow.dx[i] = -FOCAL_PX * v / z.data[i];

@@ -111,7 +111,7 @@ pub fn render_sequence(
     let mut model = model.clone();
     // The camera's pixels per radian at the centre is its focal length in pixels.
     model.reference.pixels_per_radian.get_or_insert(camera_focal_px);
-    let snapshot = Snapshot { generation: 1, model };
+    let snapshot = Snapshot::new(1, model);
     let mut renderer =
         StereoRenderer::new(&ctx, scene, w, h, settings, Some(eye_focal_px)).context("building the stereo renderer")?;
     let mut stats = RenderStats { device: ctx.device_name().to_string(), ..Default::default() };

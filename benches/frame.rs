@@ -1,0 +1,262 @@
+//! Frame-cost benchmark of the stereo renderer (`cargo bench --bench frame`, run by
+//! `cargo xtask bench`): GPU time per stage from timestamp queries and shader
+//! invocations from pipeline-statistics queries, at the Quest 3 default eye size
+//! (1680×1760) and at 2064×2208, with the virtual content covering 10% and 50% of
+//! the eye; then, per quality setting, the error against the CPU reference next to
+//! the GPU work it costs. Prints Markdown tables for BENCHMARKS.md.
+
+use blind_augment::gpu::{GpuContext, GpuOptions};
+use blind_augment::model::*;
+use blind_augment::render::layer::LayerSettings;
+use blind_augment::render::stereo::FrameProfile;
+use blind_augment::render::{Eye, FrameInput, GBufferFrame, StereoRenderer};
+use blind_augment::scene::Scene;
+use blind_augment::synth::layer::{defocus_layer_exact, motion_blur_layer, Layer, Rect};
+use blind_augment::synth::white_sensor_noise;
+use blind_augment::worker::Snapshot;
+use glam::{Mat4, Vec3};
+
+const TOY: &[u8] = include_bytes!("../assets/toy.glb");
+/// Quest 3 passthrough camera: 1280 px over ≈ 100° → f ≈ 537 px; eye buffer
+/// 1680 px over ≈ 97° → f ≈ 743 px (scaled with the eye width for 2064).
+const CAMERA_FOCAL_PX: f32 = 537.0;
+const OBJECT_DEPTH_M: f32 = 2.0;
+const REPS: usize = 3;
+
+fn model() -> CameraModel {
+    let mut m = CameraModel::empty(1280, 960);
+    m.reference.frame_interval_s = Some(1.0 / 30.0);
+    m.reference.pixels_per_radian = Some(CAMERA_FOCAL_PX);
+    m.noise = white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
+    m.motion_blur = MotionBlur { present: true, exposure: Some(0.4), diagnostics: Diagnostics::not_fitted("bench") };
+    // The demo's camera: focused at 3.14 m; at the object's 2 m, δ = 4.4 camera px.
+    m.depth_of_field = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 23.04, focus_depth: 3.143, c0: 0.2 }),
+        depth_range: [0.3, 10.0],
+        diagnostics: Diagnostics::not_fitted("bench"),
+    };
+    m
+}
+
+fn eyes(x_m: f32, f: f32, w: u32, h: u32) -> [Eye; 2] {
+    std::array::from_fn(|e| Eye {
+        focal_px: f,
+        centre_px: [w as f32 / 2.0, h as f32 / 2.0],
+        view_from_world: Mat4::from_translation(Vec3::new(x_m + if e == 0 { -0.032 } else { 0.032 }, 0.0, 0.0))
+            .inverse(),
+    })
+}
+
+struct Setup {
+    frame: GBufferFrame,
+    now: Vec<Vec3>,
+    before: Vec<Vec3>,
+}
+
+/// The toy at 2 m, scaled so its projected bounds cover `coverage` of eye 0; the
+/// head moving 0.6 m/s sideways and the toy animating.
+fn setup(scene: &Scene, r: &StereoRenderer<'_>, f: f32, coverage: f64) -> (Setup, f64) {
+    let (w, h) = r.size();
+    let t = 0.7f32;
+    let dt = 1.0 / 45.0;
+    let build = |scale: f32| {
+        let place = Mat4::from_translation(Vec3::new(0.0, 0.0, -OBJECT_DEPTH_M)) * Mat4::from_scale(Vec3::splat(scale));
+        Setup {
+            frame: GBufferFrame {
+                eyes: eyes(0.6 * t, f, w, h),
+                prev_eyes: eyes(0.6 * (t - dt), f, w, h),
+                world_from_nodes: scene.world_from_nodes(t, place),
+                prev_world_from_nodes: scene.world_from_nodes(t - dt, place),
+                light_dir: Vec3::new(0.4, 1.0, 0.6),
+                ambient: 0.35,
+            },
+            now: scene.world_corners(t, place),
+            before: scene.world_corners(t - dt, place),
+        }
+    };
+    let frac = |s: &Setup| {
+        let rect = r.rects(&s.frame.eyes, &s.frame.prev_eyes, &s.now, &s.before, 0)[0];
+        rect.area() as f64 / (w as f64 * h as f64)
+    };
+    let (mut lo, mut hi) = (0.1f32, 20.0f32);
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if frac(&build(mid)) < coverage {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let s = build(lo);
+    let c = frac(&s);
+    (s, c)
+}
+
+/// Median-of-REPS profile of a frame (after one warm-up).
+fn profile(r: &mut StereoRenderer<'_>, snap: &Snapshot, s: &Setup, matched: bool) -> FrameProfile {
+    let input = FrameInput { gbuffer: &s.frame, corners_now: &s.now, corners_prev: &s.before };
+    let mut runs = vec![];
+    for i in 0..=REPS {
+        r.render(snap, &input, matched).expect("render");
+        let p = r.last_profile().expect("profile").expect("profiling on");
+        if i > 0 {
+            runs.push(p);
+        }
+    }
+    runs.sort_by(|a, b| total(a).total_cmp(&total(b)));
+    runs[runs.len() / 2]
+}
+
+fn total(p: &FrameProfile) -> f64 {
+    p.gbuffer_ms + p.dof_ms + p.mb_ms + p.grain_ms + p.composite_ms
+}
+
+fn main() {
+    let ctx = match GpuContext::new(&GpuOptions {
+        validation: false,
+        prefer_device: std::env::var("BLIND_AUGMENT_DEVICE").ok(),
+    }) {
+        Ok(c) => c,
+        Err(e) => {
+            println!("frame benchmark skipped: no Vulkan device ({e})");
+            return;
+        }
+    };
+    let scene = Scene::from_glb(TOY, "toy.glb").expect("bundled asset");
+    let snap = Snapshot::new(1, model());
+    println!("## Frame cost on {} (GPU timestamps, median of {REPS})\n", ctx.device_name());
+    println!("Composite = over the background (on the headset: the compositor's layer blend). Effects = DoF + MB + grain. Compute invocations of the effects exclude the full-screen composite.\n");
+    println!("| eye (px) | coverage | G-buffer ms | DoF ms | MB ms | grain ms | composite ms | naive frame ms | matched frame ms | effects / G-buffer | fragment inv. (G-buffer) | compute inv. (effects) |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (w, h) in [(1680u32, 1760u32), (2064, 2208)] {
+        let f = 743.0 * w as f32 / 1680.0;
+        let mut r = StereoRenderer::new(&ctx, &scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
+        r.enable_profiling().expect("timestamps");
+        let grey = vec![128u8; (w * h * 4 * 2) as usize];
+        r.set_background(&grey).expect("background");
+        let composite_inv = (w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2;
+        for coverage in [0.1, 0.5] {
+            let (s, got) = setup(&scene, &r, f, coverage);
+            let naive = profile(&mut r, &snap, &s, false);
+            let m = profile(&mut r, &snap, &s, true);
+            let effects = m.dof_ms + m.mb_ms + m.grain_ms;
+            println!(
+                "| {w}×{h} | {:.0}% | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {} | {} |",
+                got * 100.0,
+                m.gbuffer_ms,
+                m.dof_ms,
+                m.mb_ms,
+                m.grain_ms,
+                m.composite_ms,
+                naive.gbuffer_ms + naive.composite_ms,
+                total(&m),
+                effects / m.gbuffer_ms,
+                m.gbuffer_stats.fragment_invocations,
+                m.effects_stats.compute_invocations.saturating_sub(composite_inv),
+            );
+        }
+    }
+    settings_table(&ctx, &scene, &snap);
+}
+
+/// Per quality setting at 1680×1760, 10% coverage: GPU cost of the stage and its
+/// error against the CPU reference (DoF: the exact 2-D scatter; MB: the twin with
+/// 64 taps, the reconstruction's converged result).
+fn settings_table(ctx: &GpuContext, scene: &Scene, snap: &Snapshot) {
+    let (w, h) = (1680u32, 1760u32);
+    let f = 743.0;
+    println!("\n## Quality settings at {w}×{h}, 10% coverage: error vs the CPU reference, next to GPU cost\n");
+    println!("Error over the work rectangle of eye 0, premultiplied RGBA, in 8-bit steps (×255).\n");
+    println!("| effect | setting | MAE ×255 | p99 ×255 | GPU ms | compute invocations |");
+    println!("|---|---|---|---|---|---|");
+    let mut dof_only = snap.model.clone();
+    dof_only.motion_blur.present = false;
+    dof_only.noise.present = false;
+    let mut mb_only = snap.model.clone();
+    mb_only.depth_of_field.present = false;
+    mb_only.noise.present = false;
+    let half_f16 = |b: &[u8]| -> Vec<[f32; 4]> {
+        let v: Vec<f32> = b.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect();
+        v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect()
+    };
+    let n = (w * h) as usize;
+    let mut reference_dof: Option<Vec<[f32; 4]>> = None;
+    let mut reference_mb: Option<Vec<[f32; 4]>> = None;
+    let configs: Vec<(&str, String, LayerSettings, &CameraModel)> = vec![
+        ("DoF", "full-rate taps (step 1)".into(), LayerSettings { dof_step_px: 1, ..Default::default() }, &dof_only),
+        ("DoF", "half-rate taps (step 2)".into(), LayerSettings { dof_step_px: 2, ..Default::default() }, &dof_only),
+        ("MB", "6 taps".into(), LayerSettings { mb_samples: 6, ..Default::default() }, &mb_only),
+        ("MB", "12 taps (default)".into(), LayerSettings { mb_samples: 12, ..Default::default() }, &mb_only),
+        ("MB", "24 taps".into(), LayerSettings { mb_samples: 24, ..Default::default() }, &mb_only),
+    ];
+    for (effect, name, settings, model) in configs {
+        let mut r = StereoRenderer::new(ctx, scene, w, h, settings, Some(f)).expect("renderer");
+        r.enable_profiling().expect("timestamps");
+        r.set_background(&vec![128u8; n * 8]).expect("background");
+        let (s, _) = setup(scene, &r, f, 0.1);
+        let snap_local = Snapshot::new(2, model.clone());
+        let p = profile(&mut r, &snap_local, &s, true);
+        let fx = r.last_effects.expect("effects");
+        let rect = fx.rects[0];
+        let colour = half_f16(&r.gbuffer().colour().download().expect("colour"));
+        let motion = half_f16(&r.gbuffer().motion().download().expect("motion"));
+        let layer =
+            Layer { width: w as usize, height: h as usize, colour: colour[..n].to_vec(), motion: motion[..n].to_vec() };
+        let (gpu, reference, ms) = if effect == "DoF" {
+            let gpu = half_f16(&r.effects().dof_out.download().expect("dof"))[..n].to_vec();
+            let reference = reference_dof
+                .get_or_insert_with(|| defocus_layer_exact(&layer, &model.depth_of_field, fx.ppr_ratio))
+                .clone();
+            (gpu, reference, p.dof_ms)
+        } else {
+            let gpu = half_f16(&r.effects().mb_out.download().expect("mb"))[..n].to_vec();
+            let reference = reference_mb
+                .get_or_insert_with(|| {
+                    motion_blur_layer(
+                        &layer.colour,
+                        &layer.motion,
+                        w as usize,
+                        h as usize,
+                        fx.exposure_ratio,
+                        settings.mb_tile_px,
+                        64,
+                        fx.frame,
+                        0,
+                        rect,
+                    )
+                })
+                .clone();
+            (gpu, reference, p.mb_ms)
+        };
+        let (mae, p99) = error_in(&gpu, &reference, rect, w as usize);
+        println!(
+            "| {effect} | {name} | {:.3} | {:.2} | {ms:.1} | {} |",
+            mae * 255.0,
+            p99 * 255.0,
+            p.effects_stats
+                .compute_invocations
+                .saturating_sub((w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2)
+        );
+    }
+}
+
+fn error_in(a: &[[f32; 4]], b: &[[f32; 4]], rect: Rect, w: usize) -> (f64, f64) {
+    let mut errs = vec![];
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let i = y as usize * w + x as usize;
+            for c in 0..4 {
+                errs.push((a[i][c] - b[i][c]).abs() as f64);
+            }
+        }
+    }
+    if errs.is_empty() {
+        return (0.0, 0.0);
+    }
+    let mae = errs.iter().sum::<f64>() / errs.len() as f64;
+    let k = ((errs.len() - 1) as f64 * 0.99) as usize;
+    let p99 = *errs.select_nth_unstable_by(k, |x, y| x.total_cmp(y)).1;
+    (mae, p99)
+}
