@@ -111,3 +111,18 @@ fn gbuffer_stereo_depth_and_motion() {
     let msgs = ctx.take_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }
+
+/// Bad scene input is an error naming the input, never a panic.
+#[test]
+fn bad_glb_is_a_clear_error() {
+    let err = Scene::from_glb(b"not a glb", "broken.glb").expect_err("garbage");
+    assert!(err.to_string().contains("broken.glb"), "{err}");
+    let truncated = &TOY[..TOY.len() / 2];
+    let err = Scene::from_glb(truncated, "half.glb").expect_err("truncated");
+    assert!(err.to_string().contains("half.glb"), "{err}");
+    // Animation sampled outside its keyframes clamps; transforms stay finite.
+    let scene = Scene::from_glb(TOY, "toy.glb").expect("asset");
+    for t in [-5.0f32, 0.0, 1.234, 1e6] {
+        assert!(scene.world_from_nodes(t, Mat4::IDENTITY).iter().all(|m| m.is_finite()), "t = {t}");
+    }
+}

@@ -202,6 +202,14 @@ impl Scene {
                     Some(t) => t.into_f32().collect(),
                     None => vec![[0.0; 2]; positions.len()],
                 };
+                // A NaN here would become a NaN fragment in the G-buffer and spread
+                // through every blur: refuse it at load time.
+                if normals.iter().flatten().chain(uvs.iter().flatten()).any(|v| !v.is_finite()) {
+                    return Err(invalid(
+                        name,
+                        format!("mesh {}: non-finite normal or texture coordinate", mesh.index()),
+                    ));
+                }
                 let vertices = positions
                     .iter()
                     .enumerate()
