@@ -185,8 +185,30 @@ fn settings_table(ctx: &GpuContext, scene: &Scene, snap: &Snapshot) {
     let mut reference_dof: Option<Vec<[f32; 4]>> = None;
     let mut reference_mb: Option<Vec<[f32; 4]>> = None;
     let configs: Vec<(&str, String, LayerSettings, &CameraModel)> = vec![
-        ("DoF", "full-rate taps (step 1)".into(), LayerSettings { dof_step_px: 1, ..Default::default() }, &dof_only),
-        ("DoF", "half-rate taps (step 2)".into(), LayerSettings { dof_step_px: 2, ..Default::default() }, &dof_only),
+        (
+            "DoF",
+            "full resolution, step 1".into(),
+            LayerSettings { dof_half_res: false, dof_step_px: 1, ..Default::default() },
+            &dof_only,
+        ),
+        (
+            "DoF",
+            "full resolution, step 2".into(),
+            LayerSettings { dof_half_res: false, dof_step_px: 2, ..Default::default() },
+            &dof_only,
+        ),
+        (
+            "DoF",
+            "half resolution, step 1 (default)".into(),
+            LayerSettings { dof_half_res: true, ..Default::default() },
+            &dof_only,
+        ),
+        (
+            "DoF",
+            "half resolution, step 2".into(),
+            LayerSettings { dof_half_res: true, dof_step_px: 2, ..Default::default() },
+            &dof_only,
+        ),
         ("MB", "6 taps".into(), LayerSettings { mb_samples: 6, ..Default::default() }, &mb_only),
         ("MB", "12 taps (default)".into(), LayerSettings { mb_samples: 12, ..Default::default() }, &mb_only),
         ("MB", "24 taps".into(), LayerSettings { mb_samples: 24, ..Default::default() }, &mb_only),

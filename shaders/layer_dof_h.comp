@@ -1,6 +1,6 @@
 #version 450
 // Depth of field on the virtual layer, horizontal pass (src/render/layer.rs; CPU
-// twin synth::layer::defocus_layer). Scatter-as-gather: every covered source pixel
+// twin synth::layer::separable_scatter), at full or half resolution. Scatter-as-gather: every covered source pixel
 // spreads its premultiplied colour with a Gaussian of its OWN blur σ(Z) — a gather
 // with the receiving pixel's σ (the paper's addDoF) cannot spread a silhouette into
 // the transparent pixels around it, which is what blurs the alpha edge. Kernel taps
@@ -9,15 +9,10 @@
 // which the vertical pass spreads with (exact for constant σ).
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
-layout(std140, set = 0, binding = 0) uniform Effect {
-    uvec4 head;          // generation, flags, exposure (bits), frame_interval (bits)
-    uvec4 dof;           // form, units, range lo (bits), range hi (bits)
-    vec4 dof_coeffs;
-} e;
-layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray colour_in;
-layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray motion_in;
-layout(rgba16f, set = 0, binding = 3) uniform writeonly image2DArray colour_out;
-layout(r32f, set = 0, binding = 4) uniform writeonly image2DArray sigma_out;
+layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray colour_in;
+layout(r32f, set = 0, binding = 1) uniform readonly image2DArray sigma_in;
+layout(rgba16f, set = 0, binding = 2) uniform writeonly image2DArray colour_out;
+layout(r32f, set = 0, binding = 3) uniform writeonly image2DArray sigma_out;
 
 layout(push_constant) uniform Push {
     ivec4 rect[2];       // per eye: x, y, width, height
@@ -48,27 +43,6 @@ float tap(float d, float h, float sigma) {
     return 0.5 * (erf_as((d + h) * k) - erf_as((d - h) * k));
 }
 
-// δ(Z) of model::DofCurve::sigma_px with the depth clamp of DepthOfField::sigma_px,
-// in camera pixels, then in eye pixels. Metric depth only (the renderer's depth).
-float sigma_eye(float z) {
-    // Absent, or relative-inverse units (no metric scale for virtual depths).
-    if ((e.head.y & 4u) == 0u || e.dof.y != 0u) {
-        return 0.0;
-    }
-    float lo = uintBitsToFloat(e.dof.z);
-    float hi = uintBitsToFloat(e.dof.w);
-    z = clamp(z, lo, hi);
-    float d = 0.0;
-    if (e.dof.x == 1u) {
-        d = (e.dof_coeffs.x * z + e.dof_coeffs.y) * z + e.dof_coeffs.z;
-    } else if (e.dof.x == 2u) {
-        d = e.dof_coeffs.x * abs(1.0 / z - e.dof_coeffs.y) + e.dof_coeffs.z;
-    } else if (e.dof.x == 3u) {
-        d = e.dof_coeffs.x;
-    }
-    return clamp(d, 0.0, 10.0) * p.ppr_ratio;
-}
-
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
     ivec4 r = p.rect[layer];
@@ -85,11 +59,10 @@ void main() {
         if (x < r.x || x >= r.x + r.z) {
             continue;
         }
-        vec4 m = imageLoad(motion_in, ivec3(x, xy.y, layer));
-        if (m.w <= 0.0) {
+        float sigma = imageLoad(sigma_in, ivec3(x, xy.y, layer)).x;
+        if (sigma < 0.0) {
             continue;
         }
-        float sigma = sigma_eye(m.z);
         float k = tap(float(-d), h, sigma);
         vec4 c = imageLoad(colour_in, ivec3(x, xy.y, layer));
         acc += k * c;

@@ -35,6 +35,16 @@ pub fn tile_rect(rect: Rect, tile_px: i32, width: usize, height: usize) -> Rect 
     Rect { x: x0, y: y0, w: x1 - x0 + 1, h: y1 - y0 + 1 }
 }
 
+/// The half-resolution rectangle covering full-resolution `rect`.
+pub fn half_rect(rect: Rect) -> Rect {
+    if rect.area() == 0 {
+        return Rect::default();
+    }
+    let (x0, y0) = (rect.x.div_euclid(2), rect.y.div_euclid(2));
+    let (x1, y1) = ((rect.x + rect.w + 1).div_euclid(2), (rect.y + rect.h + 1).div_euclid(2));
+    Rect { x: x0, y: y0, w: x1 - x0, h: y1 - y0 }
+}
+
 /// Grain synthesis weights of one noise model, as the GPU reads them:
 /// [node][channel][band] with `nodes` luma nodes over `luma_range` (computed from
 /// the model by `synth::SynthesisTable`; carried by each `worker::Snapshot`).

@@ -13,11 +13,14 @@
 use super::grain::GrainRecorder;
 use super::params::{EffectParams, FLAG_DEPTH_OF_FIELD, FLAG_MOTION_BLUR, FLAG_NOISE};
 use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, QueryPool, Resource, EYES};
-use crate::model::{tile_rect, Rect};
+use crate::model::{half_rect, tile_rect, Rect};
 use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 
+const DOF_SIGMA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_sigma.spv"));
+const DOF_DOWN: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_down.spv"));
+const DOF_UP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_up.spv"));
 const DOF_H: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_h.spv"));
 const DOF_V: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_v.spv"));
 const MB_TILES: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_tiles.spv"));
@@ -85,6 +88,9 @@ const _: () = assert!(std::mem::size_of::<CompositePush>() == 64);
 pub struct LayerSettings {
     /// DoF tap spacing in px: 1 = every pixel, 2 = every other (¼ of the taps in 2-D).
     pub dof_step_px: i32,
+    /// DoF at half resolution (2×2 down, scatter with σ/2, bilinear up): ≈ 8× fewer
+    /// taps, sharp content softened.
+    pub dof_half_res: bool,
     /// MB taps per pixel (McGuire's S).
     pub mb_samples: u32,
     /// MB tile size K (px): also the longest half-streak reconstructed.
@@ -97,7 +103,16 @@ pub struct LayerSettings {
 
 impl Default for LayerSettings {
     fn default() -> Self {
-        Self { dof_step_px: 1, mb_samples: 12, mb_tile_px: 16, render_interval_s: 1.0 / 45.0, grain: true }
+        Self {
+            // Chosen from BENCHMARKS.md's settings table: half resolution costs ⅙ of
+            // full resolution at p99 1.5 8-bit steps from the exact scatter.
+            dof_step_px: 1,
+            dof_half_res: true,
+            mb_samples: 12,
+            mb_tile_px: 16,
+            render_interval_s: 1.0 / 45.0,
+            grain: true,
+        }
     }
 }
 
@@ -190,12 +205,19 @@ pub struct LayerEffects<'a> {
     luma: ComputePipeline<'a>,
     composite: ComputePipeline<'a>,
     grain: GrainRecorder<'a>,
+    dof_sigma: ComputePipeline<'a>,
+    dof_down: ComputePipeline<'a>,
+    dof_up: ComputePipeline<'a>,
     /// The frame's parameters, copied from the slot's uniform buffer at the start
     /// of the chain (one fixed binding for every pass; queue order + barrier keep
     /// the previous frame's reads before the copy).
     params: Buffer<'a>,
     pub dof_tmp: Image<'a>,
     sigma_tmp: Image<'a>,
+    sigma_full: Image<'a>,
+    colour_half: Image<'a>,
+    sigma_half: Image<'a>,
+    dof_half: Image<'a>,
     pub dof_out: Image<'a>,
     tiles: Image<'a>,
     neighbour: Image<'a>,
@@ -255,8 +277,12 @@ impl<'a> LayerEffects<'a> {
             width: w,
             height: h,
             settings,
-            dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[ub, st, st, st, st], push, 1, "layer dof h")?,
-            dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st], push, 1, "layer dof v")?,
+            // Set 0: full resolution, set 1: half resolution.
+            dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[st, st, st, st], push, 2, "layer dof h")?,
+            dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st], push, 2, "layer dof v")?,
+            dof_sigma: ComputePipeline::with_layout(ctx, DOF_SIGMA, &[ub, st, st], push, 1, "layer dof sigma")?,
+            dof_down: ComputePipeline::with_layout(ctx, DOF_DOWN, &[st, st, st, st], push, 1, "layer dof down")?,
+            dof_up: ComputePipeline::with_layout(ctx, DOF_UP, &[st, st], push, 1, "layer dof up")?,
             mb_tiles: ComputePipeline::with_layout(ctx, MB_TILES, &[st, st], push, 1, "layer mb tiles")?,
             mb_neighbour: ComputePipeline::with_layout(ctx, MB_NEIGHBOUR, &[st, st], push, 1, "layer mb neighbour")?,
             mb_gather: ComputePipeline::with_layout(ctx, MB_GATHER, &[st, st, st, st, st], push, 1, "layer mb gather")?,
@@ -273,14 +299,23 @@ impl<'a> LayerEffects<'a> {
             )?,
             dof_tmp: storage_image(ctx, w, h, f16, "dof horizontal")?,
             sigma_tmp: storage_image(ctx, w, h, vk::Format::R32_SFLOAT, "dof sigma")?,
+            sigma_full: storage_image(ctx, w, h, vk::Format::R32_SFLOAT, "dof source sigma")?,
+            colour_half: storage_image(ctx, w.div_ceil(2), h.div_ceil(2), f16, "dof half colour")?,
+            sigma_half: storage_image(ctx, w.div_ceil(2), h.div_ceil(2), vk::Format::R32_SFLOAT, "dof half sigma")?,
+            dof_half: storage_image(ctx, w.div_ceil(2), h.div_ceil(2), f16, "dof half out")?,
             dof_out: storage_image(ctx, w, h, f16, "dof out")?,
             tiles: storage_image(ctx, tw, th, f16, "mb tile max")?,
             neighbour: storage_image(ctx, tw, th, f16, "mb neighbour max")?,
             mb_out: storage_image(ctx, w, h, f16, "mb out")?,
         };
         use Resource::{Buffer as B, Image as I};
-        me.dof_h.bind_resources(0, &[B(&me.params), I(colour), I(motion), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
+        me.dof_sigma.bind_resources(0, &[B(&me.params), I(motion), I(&me.sigma_full)])?;
+        me.dof_h.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
         me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out)])?;
+        me.dof_down.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.colour_half), I(&me.sigma_half)])?;
+        me.dof_h.bind_resources(1, &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
+        me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half)])?;
+        me.dof_up.bind_resources(0, &[I(&me.dof_half), I(&me.dof_out)])?;
         me.mb_tiles.bind_resources(0, &[I(motion), I(&me.tiles)])?;
         me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;
         me.mb_gather.bind_resources(0, &[I(colour), I(&me.dof_out), I(motion), I(&me.neighbour), I(&me.mb_out)])?;
@@ -367,8 +402,22 @@ impl<'a> LayerEffects<'a> {
         let gh = rects[0].h.max(rects[1].h);
         let mut source = 0; // 0: G-buffer colour, 1: DoF output, 2: MB output
         if any && fx.dof {
-            self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
-            self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            self.dof_sigma.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            if self.settings.dof_half_res {
+                let step = self.settings.dof_step_px;
+                let hr = rects.map(half_rect);
+                let mut hp = push;
+                hp.rect = [to4(hr[0]), to4(hr[1])];
+                hp.radius = ((fx.dof_radius_px + 1) / 2 + step - 1) / step * step;
+                let (hgw, hgh) = (hr[0].w.max(hr[1].w), hr[0].h.max(hr[1].h));
+                self.dof_down.record(cmd, bytemuck::bytes_of(&push), groups(hgw, hgh));
+                self.dof_h.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
+                self.dof_v.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
+                self.dof_up.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            } else {
+                self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+                self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+            }
             source = 1;
         }
         stamp(STAMP_DOF);

@@ -5,7 +5,7 @@
 //! unapproximated reference the quality settings are measured against.
 
 use crate::image::LUMA_WEIGHTS;
-pub use crate::model::{tile_rect, Rect};
+pub use crate::model::{half_rect, tile_rect, Rect};
 use crate::model::{DepthOfField, DepthUnits, MAX_DOF_SIGMA_PX};
 
 /// One eye of the virtual layer: premultiplied RGBA and (motion x, motion y in px
@@ -57,59 +57,74 @@ pub fn sigma_eye_px(dof: &DepthOfField, z_m: f32, ppr_ratio: f32) -> f32 {
     dof.sigma_px(z_m).clamp(0.0, MAX_DOF_SIGMA_PX) * ppr_ratio
 }
 
-/// Separable scatter-as-gather defocus of one eye over `rect` (zero outside it):
-/// horizontal pass spreading each covered pixel with its own σ and carrying the
-/// coverage-weighted σ, then a vertical pass with that σ (`layer_dof_h/v.comp`).
-/// `radius` is a multiple of `step` (taps every `step` px, each the Gaussian's mass
-/// over its span). Pixels outside `rect` keep their input.
-pub fn defocus_layer(
-    layer: &Layer,
-    dof: &DepthOfField,
-    ppr_ratio: f32,
+/// Per-pixel source blur σ in eye pixels (`layer_dof_sigma.comp`); −1 marks
+/// uncovered pixels (they scatter nothing).
+pub fn dof_sigma_plane(layer: &Layer, dof: &DepthOfField, ppr_ratio: f32, rect: Rect) -> Vec<f32> {
+    let mut out = vec![-1.0f32; layer.colour.len()];
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let i = y as usize * layer.width + x as usize;
+            let m = layer.motion[i];
+            if m[3] > 0.0 {
+                out[i] = sigma_eye_px(dof, m[2], ppr_ratio);
+            }
+        }
+    }
+    out
+}
+
+/// Separable scatter-as-gather over `rect` of a `width`-wide image (zero outside
+/// `rect`): a horizontal pass spreading each source pixel (σ ≥ 0) with its own σ and
+/// carrying the coverage-weighted σ, then a vertical pass with that σ
+/// (`layer_dof_h/v.comp`). `radius` is a multiple of `step` (taps every `step` px,
+/// each the Gaussian's mass over its span). Pixels outside `rect` keep `colour`.
+pub fn separable_scatter(
+    colour: &[[f32; 4]],
+    sigma: &[f32],
+    width: usize,
     radius: i32,
     step: i32,
     rect: Rect,
 ) -> Vec<[f32; 4]> {
-    let (w, step) = (layer.width as i32, step.max(1));
+    let (w, step) = (width as i32, step.max(1));
     let h = 0.5 * step as f32;
     let idx = |x: i32, y: i32| (y * w + x) as usize;
-    let mut hc = vec![[0.0f32; 4]; layer.colour.len()];
-    let mut hs = vec![0.0f32; layer.colour.len()];
+    let mut hc = vec![[0.0f32; 4]; colour.len()];
+    let mut hs = vec![0.0f32; colour.len()];
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
             let (mut acc, mut s_acc, mut w_acc) = ([0.0f32; 4], 0.0f32, 0.0f32);
             let mut d = -radius;
             while d <= radius {
-                let sx = x + d;
+                let (sx, off) = (x + d, d);
                 d += step;
                 if sx < rect.x || sx >= rect.x + rect.w {
                     continue;
                 }
-                let m = layer.motion[idx(sx, y)];
-                if m[3] <= 0.0 {
+                let sg = sigma[idx(sx, y)];
+                if sg < 0.0 {
                     continue;
                 }
-                let sigma = sigma_eye_px(dof, m[2], ppr_ratio);
-                let k = tap(-((d - step) as f32), h, sigma);
-                let c = layer.colour[idx(sx, y)];
+                let k = tap(-(off as f32), h, sg);
+                let c = colour[idx(sx, y)];
                 for i in 0..4 {
                     acc[i] += k * c[i];
                 }
                 let wk = k * c[3];
-                s_acc += wk * sigma;
+                s_acc += wk * sg;
                 w_acc += wk;
             }
             hc[idx(x, y)] = acc;
             hs[idx(x, y)] = if w_acc > 1e-6 { s_acc / w_acc } else { 0.0 };
         }
     }
-    let mut out = layer.colour.clone();
+    let mut out = colour.to_vec();
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
             let mut acc = [0.0f32; 4];
             let mut d = -radius;
             while d <= radius {
-                let sy = y + d;
+                let (sy, off) = (y + d, d);
                 d += step;
                 if sy < rect.y || sy >= rect.y + rect.h {
                     continue;
@@ -118,12 +133,94 @@ pub fn defocus_layer(
                 if c == [0.0; 4] {
                     continue;
                 }
-                let k = tap(-((d - step) as f32), h, hs[idx(x, sy)]);
+                let k = tap(-(off as f32), h, hs[idx(x, sy)]);
                 for i in 0..4 {
                     acc[i] += k * c[i];
                 }
             }
             out[idx(x, y)] = acc;
+        }
+    }
+    out
+}
+
+/// Full-resolution defocus of one eye over `rect`: σ plane, then the separable
+/// scatter. Pixels outside `rect` keep their input.
+pub fn defocus_layer(
+    layer: &Layer,
+    dof: &DepthOfField,
+    ppr_ratio: f32,
+    radius: i32,
+    step: i32,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    let sigma = dof_sigma_plane(layer, dof, ppr_ratio, rect);
+    separable_scatter(&layer.colour, &sigma, layer.width, radius, step, rect)
+}
+
+/// Half-resolution defocus (`layer_dof_down.comp` → separable scatter at half
+/// resolution with σ/2 and radius `radius_half` → `layer_dof_up.comp`): 2×2 box
+/// average of the premultiplied colour and the alpha-weighted σ/2 of the covered
+/// pixels, the scatter, then a bilinear upsample (clamped to the half rectangle).
+/// ≈ 8× fewer taps; sharp (σ ≲ 1 px) content is softened by the 2×2 average.
+pub fn defocus_layer_half(
+    layer: &Layer,
+    dof: &DepthOfField,
+    ppr_ratio: f32,
+    radius_half: i32,
+    step: i32,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    let sigma_full = dof_sigma_plane(layer, dof, ppr_ratio, rect);
+    let (w, h) = (layer.width, layer.height);
+    let (hw, hh) = (w.div_ceil(2), h.div_ceil(2));
+    let hr = half_rect(rect);
+    let mut colour = vec![[0.0f32; 4]; hw * hh];
+    let mut sigma = vec![-1.0f32; hw * hh];
+    for hy in hr.y..hr.y + hr.h {
+        for hx in hr.x..hr.x + hr.w {
+            let (mut c, mut sw, mut ss) = ([0.0f32; 4], 0.0f32, 0.0f32);
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (x, y) = (2 * hx + dx, 2 * hy + dy);
+                if !rect.contains(x, y) {
+                    continue;
+                }
+                let i = y as usize * w + x as usize;
+                let p = layer.colour[i];
+                for k in 0..4 {
+                    c[k] += 0.25 * p[k];
+                }
+                let sg = sigma_full[i];
+                if sg >= 0.0 {
+                    let wt = p[3].max(1e-3);
+                    sw += wt;
+                    ss += wt * 0.5 * sg;
+                }
+            }
+            let j = hy as usize * hw + hx as usize;
+            colour[j] = c;
+            sigma[j] = if sw > 0.0 { ss / sw } else { -1.0 };
+        }
+    }
+    let blurred = separable_scatter(&colour, &sigma, hw, radius_half, step, hr);
+    let mut out = layer.colour.clone();
+    let fetch = |x: i32, y: i32| {
+        let xc = x.clamp(hr.x, hr.x + hr.w - 1);
+        let yc = y.clamp(hr.y, hr.y + hr.h - 1);
+        blurred[yc as usize * hw + xc as usize]
+    };
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let (fx, fy) = (x as f32 * 0.5 - 0.25, y as f32 * 0.5 - 0.25);
+            let (x0, y0) = (fx.floor(), fy.floor());
+            let (ax, ay) = (fx - x0, fy - y0);
+            let (x0, y0) = (x0 as i32, y0 as i32);
+            let (a, b, c, d) = (fetch(x0, y0), fetch(x0 + 1, y0), fetch(x0, y0 + 1), fetch(x0 + 1, y0 + 1));
+            out[y as usize * w + x as usize] = std::array::from_fn(|k| {
+                let top = a[k] + (b[k] - a[k]) * ax;
+                let bottom = c[k] + (d[k] - c[k]) * ax;
+                top + (bottom - top) * ay
+            });
         }
     }
     out

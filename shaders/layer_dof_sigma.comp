@@ -1,0 +1,57 @@
+#version 450
+// Depth of field, step 1 (src/render/layer.rs; twin synth::layer::dof_sigma_plane):
+// each covered pixel's own blur σ in eye pixels from its depth through the fitted
+// δ(Z), once per pixel (the scatter passes read it per tap); −1 where uncovered.
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(std140, set = 0, binding = 0) uniform Effect {
+    uvec4 head;          // generation, flags, exposure (bits), frame_interval (bits)
+    uvec4 dof;           // form, units, range lo (bits), range hi (bits)
+    vec4 dof_coeffs;
+} e;
+layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray motion_in;
+layout(r32f, set = 0, binding = 2) uniform writeonly image2DArray sigma_out;
+
+layout(push_constant) uniform Push {
+    ivec4 rect[2];       // per eye: x, y, width, height
+    ivec2 size;
+    int radius;
+    int step;
+    float ppr_ratio;     // eye-buffer pixels per camera pixel
+    float exposure_ratio;
+    uint frame;
+    uint samples;
+} p;
+
+
+// δ(Z) of model::DofCurve::sigma_px with the depth clamp of DepthOfField::sigma_px,
+// in camera pixels, then in eye pixels. Metric depth only (the renderer's depth).
+float sigma_eye(float z) {
+    // Absent, or relative-inverse units (no metric scale for virtual depths).
+    if ((e.head.y & 4u) == 0u || e.dof.y != 0u) {
+        return 0.0;
+    }
+    float lo = uintBitsToFloat(e.dof.z);
+    float hi = uintBitsToFloat(e.dof.w);
+    z = clamp(z, lo, hi);
+    float d = 0.0;
+    if (e.dof.x == 1u) {
+        d = (e.dof_coeffs.x * z + e.dof_coeffs.y) * z + e.dof_coeffs.z;
+    } else if (e.dof.x == 2u) {
+        d = e.dof_coeffs.x * abs(1.0 / z - e.dof_coeffs.y) + e.dof_coeffs.z;
+    } else if (e.dof.x == 3u) {
+        d = e.dof_coeffs.x;
+    }
+    return clamp(d, 0.0, 10.0) * p.ppr_ratio;
+}
+
+void main() {
+    int layer = int(gl_GlobalInvocationID.z);
+    ivec4 r = p.rect[layer];
+    ivec2 xy = r.xy + ivec2(gl_GlobalInvocationID.xy);
+    if (gl_GlobalInvocationID.x >= uint(r.z) || gl_GlobalInvocationID.y >= uint(r.w)) {
+        return;
+    }
+    vec4 m = imageLoad(motion_in, ivec3(xy, layer));
+    imageStore(sigma_out, ivec3(xy, layer), vec4(m.w > 0.0 ? sigma_eye(m.z) : -1.0));
+}
