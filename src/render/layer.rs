@@ -11,7 +11,7 @@
 //! absent in the camera model are not dispatched at all.
 
 use super::grain::GrainRecorder;
-use super::params::{EffectParams, FLAG_DEPTH_OF_FIELD, FLAG_MOTION_BLUR, FLAG_NOISE};
+use super::params::EffectParams;
 use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, QueryPool, Resource, EYES};
 use crate::model::{half_rect, tile_rect, Rect};
 use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
@@ -466,9 +466,4 @@ impl<'a> LayerEffects<'a> {
         stamp(STAMP_COMPOSITE);
         Ok(())
     }
-}
-
-/// Per-snapshot flags as `FrameEffects` sees them (for logs and reports).
-pub fn effect_flags(p: &EffectParams) -> (bool, bool, bool) {
-    (p.flags & FLAG_NOISE != 0, p.flags & FLAG_MOTION_BLUR != 0, p.flags & FLAG_DEPTH_OF_FIELD != 0)
 }
