@@ -62,13 +62,11 @@ const _: () = assert!(std::mem::size_of::<InitParams>() == 16);
 const _: () = assert!(std::mem::size_of::<ScaleParams>() == 24);
 const _: () = assert!(std::mem::offset_of!(ScaleParams, lo) == 16);
 
+/// Whole-image grain with its own submissions: `GrainRecorder`'s dispatch sequence
+/// (the one the frame records) on a recorder sized for each call, for the twin test
+/// and the reference benchmark.
 pub struct GrainPass<'a> {
     ctx: &'a GpuContext,
-    reduce: ComputePipeline<'a>,
-    expand: ComputePipeline<'a>,
-    combine: ComputePipeline<'a>,
-    init: ComputePipeline<'a>,
-    scale: ComputePipeline<'a>,
 }
 
 /// 2-D workgroup counts for 8×8 groups.
@@ -78,73 +76,7 @@ fn groups(w: usize, h: usize) -> [u32; 3] {
 
 impl<'a> GrainPass<'a> {
     pub fn new(ctx: &'a GpuContext) -> Result<Self, GpuError> {
-        Ok(Self {
-            ctx,
-            reduce: ComputePipeline::new(ctx, REDUCE, 2, 24, "pyr_reduce")?,
-            expand: ComputePipeline::new(ctx, EXPAND, 2, 24, "pyr_expand")?,
-            combine: ComputePipeline::new(ctx, COMBINE, 3, 8, "pyr_combine")?,
-            init: ComputePipeline::new(ctx, INIT, 1, 16, "grain_init")?,
-            scale: ComputePipeline::new(ctx, SCALE, 3, 24, "grain_scale")?,
-        })
-    }
-
-    /// Bind, record one dispatch, submit and wait (each dispatch has its own bindings).
-    fn dispatch(
-        &self,
-        p: &ComputePipeline<'_>,
-        bufs: &[&Buffer<'_>],
-        push: &[u8],
-        g: [u32; 3],
-    ) -> Result<(), GpuError> {
-        p.bind(bufs)?;
-        self.ctx.dispatch_and_wait(|cmd| p.record(cmd, push, g))
-    }
-
-    /// Separable reduce of a `channels`-plane buffer of `w × h`.
-    fn reduce(&self, src: &Buffer<'_>, w: usize, h: usize, channels: usize) -> Result<Buffer<'a>, GpuError> {
-        let (w2, h2) = (w.div_ceil(2), h.div_ceil(2));
-        let tmp = self.ctx.storage_buffer((channels * w2 * h * 4) as u64, "reduce tmp")?;
-        let out = self.ctx.storage_buffer((channels * w2 * h2 * 4) as u64, "reduce out")?;
-        let c = channels as u32;
-        let px = PyrParams { in_w: w as u32, in_h: h as u32, out_w: w2 as u32, out_h: h as u32, channels: c, axis: 0 };
-        self.dispatch(&self.reduce, &[src, &tmp], bytemuck::bytes_of(&px), groups(w2, h))?;
-        let py =
-            PyrParams { in_w: w2 as u32, in_h: h as u32, out_w: w2 as u32, out_h: h2 as u32, channels: c, axis: 1 };
-        self.dispatch(&self.reduce, &[&tmp, &out], bytemuck::bytes_of(&py), groups(w2, h2))?;
-        Ok(out)
-    }
-
-    /// Separable expand of a 3-plane buffer of `w × h` to `width × height`.
-    fn expand(
-        &self,
-        src: &Buffer<'_>,
-        w: usize,
-        h: usize,
-        width: usize,
-        height: usize,
-    ) -> Result<Buffer<'a>, GpuError> {
-        let tmp = self.ctx.storage_buffer((3 * width * h * 4) as u64, "expand tmp")?;
-        let out = self.ctx.storage_buffer((3 * width * height * 4) as u64, "expand out")?;
-        let px =
-            PyrParams { in_w: w as u32, in_h: h as u32, out_w: width as u32, out_h: h as u32, channels: 3, axis: 0 };
-        self.dispatch(&self.expand, &[src, &tmp], bytemuck::bytes_of(&px), groups(width, h))?;
-        let py = PyrParams {
-            in_w: width as u32,
-            in_h: h as u32,
-            out_w: width as u32,
-            out_h: height as u32,
-            channels: 3,
-            axis: 1,
-        };
-        self.dispatch(&self.expand, &[&tmp, &out], bytemuck::bytes_of(&py), groups(width, height))?;
-        Ok(out)
-    }
-
-    fn combine(&self, a: &Buffer<'_>, b: &Buffer<'_>, count: usize, subtract: bool) -> Result<Buffer<'a>, GpuError> {
-        let out = self.ctx.storage_buffer((count * 4) as u64, "combine out")?;
-        let params = CombineParams { count: count as u32, subtract: subtract as u32 };
-        self.dispatch(&self.combine, &[a, b, &out], bytemuck::bytes_of(&params), [(count as u32).div_ceil(64), 1, 1])?;
-        Ok(out)
+        Ok(Self { ctx })
     }
 
     /// Noise field (planar R, G, B) for content of luma `luma` (`width × height`).
@@ -178,54 +110,23 @@ impl<'a> GrainPass<'a> {
                 problem: "needs ≥ 2 nodes of 3×5 finite, non-negative weights and a finite luma range".into(),
             });
         }
-        // Level sizes, finest first.
-        let mut sizes = vec![(width, height)];
-        for _ in 0..NOISE_LEVELS {
-            let &(w, h) = sizes.last().unwrap_or(&(width, height));
-            sizes.push((w.div_ceil(2), h.div_ceil(2)));
-        }
-        // Luma Gaussian pyramid (1 channel).
-        let mut lumas = vec![self.ctx.upload(bytemuck::cast_slice(luma), "grain luma 0")?];
-        for l in 0..NOISE_LEVELS {
-            let (w, h) = sizes[l];
-            let next = self.reduce(&lumas[l], w, h, 1)?;
-            lumas.push(next);
-        }
-        // White noise and its Laplacian pyramid (3 channels).
-        let white = self.ctx.storage_buffer((3 * n * 4) as u64, "grain white")?;
-        let ip = InitParams {
-            width: width as u32,
-            height: height as u32,
-            seed_lo: seed as u32,
-            seed_hi: (seed >> 32) as u32,
-        };
-        self.dispatch(&self.init, &[&white], bytemuck::bytes_of(&ip), groups(width, height))?;
-        let mut gauss = vec![white];
-        let mut bands = vec![];
-        for l in 0..NOISE_LEVELS {
-            let (w, h) = sizes[l];
-            let (w2, h2) = sizes[l + 1];
-            let down = self.reduce(&gauss[l], w, h, 3)?;
-            let up = self.expand(&down, w2, h2, w, h)?;
-            bands.push(self.combine(&gauss[l], &up, 3 * w * h, true)?);
-            gauss.push(down);
-        }
+        let recorder = GrainRecorder::new(self.ctx, width, height, table.nodes)?;
+        let luma_buf = self.ctx.upload(bytemuck::cast_slice(luma), "grain luma")?;
         let table_buf = self.ctx.upload(bytemuck::cast_slice(&table.weights), "grain table")?;
-        let lowpass = gauss.pop().ok_or(GpuError::Input { input: "pyramid", problem: "empty".into() })?;
-        for (l, band) in bands.iter().chain(std::iter::once(&lowpass)).enumerate() {
-            let (w, h) = sizes[l];
-            let sp = ScaleParams { width: w as u32, height: h as u32, level: l as u32, nodes: table.nodes, lo, hi };
-            self.dispatch(&self.scale, &[band, &lumas[l], &table_buf], bytemuck::bytes_of(&sp), groups(w, h))?;
-        }
-        // Collapse from the low-pass up.
-        let mut cur = lowpass;
-        for l in (0..NOISE_LEVELS).rev() {
-            let (w, h) = sizes[l];
-            let (w2, h2) = sizes[l + 1];
-            let up = self.expand(&cur, w2, h2, w, h)?;
-            cur = self.combine(&up, &bands[l], 3 * w * h, false)?;
-        }
-        let bytes = self.ctx.download(&cur)?;
+        // Transfers apart from the timed dispatches (`dispatch_and_wait` times only
+        // the synthesis).
+        self.ctx.submit_and_wait(|cmd| {
+            self.ctx.record_copy(cmd, &luma_buf, &recorder.luma, luma_buf.size);
+            self.ctx.record_copy(cmd, &table_buf, &recorder.table, table_buf.size);
+        })?;
+        let mut recorded = Ok(());
+        self.ctx.dispatch_and_wait(|cmd| {
+            // The copies above (an earlier submission) become visible to the shaders.
+            crate::gpu::record_full_barrier(self.ctx, cmd);
+            recorded = recorder.record(cmd, width, height, table.nodes, table.luma_range, seed);
+        })?;
+        recorded?;
+        let bytes = self.ctx.download(recorder.field())?;
         Ok(bytemuck::cast_slice(&bytes[..3 * n * 4]).to_vec())
     }
 }

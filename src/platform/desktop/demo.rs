@@ -113,22 +113,6 @@ fn flat_noise_std(noise: &Noise, y: f32) -> [f64; 3] {
     })
 }
 
-fn side_by_side(panels: &[&Rgb]) -> Rgb {
-    let (w, h) = (panels[0].width, panels[0].height);
-    let gap = 6;
-    let total = panels.len() * w + (panels.len() - 1) * gap;
-    let mut out = Rgb::new(total, h, [1.0; 3]);
-    for (k, p) in panels.iter().enumerate() {
-        for c in 0..3 {
-            for y in 0..h {
-                let dst = y * total + k * (w + gap);
-                out.channels[c][dst..dst + w].copy_from_slice(&p.channels[c][y * w..(y + 1) * w]);
-            }
-        }
-    }
-    out
-}
-
 fn fit_one(image: &Rgb, reference: &Rgb, effects: Effects, depth: &Plane, flow: &Flow) -> Result<FitOutput> {
     let inputs = FitInputs {
         image,
@@ -204,7 +188,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     io::save_rgb(&out.join("distorted.png"), &i_all, BitDepth::Eight)?;
     io::save_depth(&out.join("depth_m.pfm"), &disparity)?;
     io::save_flow(&out.join("flow.flo"), &flow)?;
-    let sbs = side_by_side(&[&clean, &i_all, &resynth_acc, &resynth_fast]);
+    let sbs = super::render_cmd::side_by_side(&[&clean, &i_all, &resynth_acc, &resynth_fast], 6);
     io::save_rgb(&out.join("side_by_side.png"), &sbs, BitDepth::Eight)?;
 
     eprintln!("rendering: bundled glTF object over a {SEQUENCE_FRAMES}-frame background sequence (stereo, Vulkan)");
