@@ -1,7 +1,8 @@
 //! Compiles every `shaders/*.comp` (GLSL 450 compute) and `shaders/*.wgsl` (graphics
 //! stages; one SPIR-V file per entry point, `{stem}.{entry}.spv`) to SPIR-V in OUT_DIR
 //! with naga, validating each module, so shader errors are build errors with the file
-//! named.
+//! named. GLSL files may pull shared code from `shaders/*.glsl` with a line
+//! `#include "name.glsl"` (resolved here: naga's GLSL front end has no includes).
 
 use std::path::Path;
 
@@ -36,6 +37,7 @@ fn main() {
     for path in entries.into_iter().filter(|p| p.extension().is_some_and(|e| e == "comp")) {
         println!("cargo:rerun-if-changed={}", path.display());
         let source = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let source = resolve_includes(dir, &path, &source);
         let module = naga::front::glsl::Frontend::default()
             .parse(&naga::front::glsl::Options::from(naga::ShaderStage::Compute), &source)
             .unwrap_or_else(|e| panic!("{}: GLSL parse errors: {e:?}", path.display()));
@@ -55,4 +57,24 @@ fn main() {
         let name = path.file_stem().and_then(|s| s.to_str()).expect("utf-8 shader name");
         std::fs::write(Path::new(&out).join(format!("{name}.spv")), bytes).expect("write SPIR-V");
     }
+}
+
+/// Replace each `#include "name.glsl"` line with that file from `dir` (one level:
+/// included files do not include others, which keeps line numbers easy to follow).
+fn resolve_includes(dir: &Path, path: &Path, source: &str) -> String {
+    let mut out = String::with_capacity(source.len());
+    for line in source.lines() {
+        let trimmed = line.trim();
+        if let Some(rest) = trimmed.strip_prefix("#include") {
+            let name = rest.trim().trim_matches('"');
+            let inc = dir.join(name);
+            let text = std::fs::read_to_string(&inc)
+                .unwrap_or_else(|e| panic!("{}: #include {}: {e}", path.display(), inc.display()));
+            out.push_str(&text);
+        } else {
+            out.push_str(line);
+        }
+        out.push('\n');
+    }
+    out
 }

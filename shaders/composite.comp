@@ -10,7 +10,7 @@ layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray raw_colour;
 layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray dof_colour;
 layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray mb_colour;
 layout(rgba8, set = 0, binding = 3) uniform readonly image2DArray background;
-layout(std430, set = 0, binding = 4) readonly buffer Noise { float noise[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Noise { vec4 noise[]; };  // RGB + unused
 layout(rgba8, set = 0, binding = 5) uniform writeonly image2DArray out_image;
 
 layout(push_constant) uniform Push {
@@ -42,8 +42,7 @@ void main() {
     if (p.use_noise != 0 && inside && a > 0.0) {
         int row = (xy.y - r.y) + (layer == 0 ? 0 : p.row1);
         int i = row * p.noise_width + (xy.x - r.x);
-        int plane = p.noise_width * p.noise_height;
-        rgb += a * vec3(noise[i], noise[plane + i], noise[2 * plane + i]);
+        rgb += a * noise[i].rgb;
     }
     imageStore(out_image, ivec3(xy, layer), vec4(clamp(rgb, 0.0, 1.0), 1.0));
 }

@@ -1,10 +1,12 @@
 #version 450
-// Unit white noise per pixel and channel, twin of synth::gaussian (src/synth/rng.rs):
-// PCG hash of (x, y, channel, seed), Box–Muller cosine branch. Same u32 arithmetic;
-// ln/cos may differ from the CPU's libm in the last bits.
+// Level 0 of the grain's joint pyramid from a luma buffer (the reference path,
+// render::GrainPass): vec4 per pixel = unit white noise R, G, B (twin of
+// synth::gaussian) and the content's luma. In the frame, layer_luma.comp writes the
+// same vec4s straight from the layer colour.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
-layout(std430, set = 0, binding = 0) buffer Dst { float dst[]; };
+layout(std430, set = 0, binding = 0) readonly buffer Luma { float luma[]; };
+layout(std430, set = 0, binding = 1) buffer Dst { vec4 dst[]; };
 
 layout(push_constant) uniform Params {
     uint width;
@@ -13,20 +15,7 @@ layout(push_constant) uniform Params {
     uint seed_hi;
 } p;
 
-uint pcg_hash(uint v) {
-    uint state = v * 747796405u + 2891336453u;
-    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
-
-float gaussian(uint x, uint y, uint c) {
-    uint s = p.seed_lo ^ pcg_hash(p.seed_hi);
-    uint h1 = pcg_hash(x ^ pcg_hash(y ^ pcg_hash(c ^ pcg_hash(s))));
-    uint h2 = pcg_hash(h1 ^ 0x9e3779b9u);
-    float u1 = (float(h1 >> 8u) + 1.0) * (1.0 / 16777216.0);
-    float u2 = float(h2 >> 8u) * (1.0 / 16777216.0);
-    return sqrt(-2.0 * log(u1)) * cos(6.2831855 * u2);
-}
+#include "grain_common.glsl"
 
 void main() {
     uint x = gl_GlobalInvocationID.x;
@@ -34,8 +23,6 @@ void main() {
     if (x >= p.width || y >= p.height) {
         return;
     }
-    uint plane = p.width * p.height;
-    for (uint c = 0u; c < 3u; c++) {
-        dst[c * plane + y * p.width + x] = gaussian(x, y, c);
-    }
+    uint i = y * p.width + x;
+    dst[i] = vec4(white_rgb(x, y, p.seed_lo, p.seed_hi), luma[i]);
 }

@@ -1,22 +1,28 @@
 #version 450
-// Luma of the virtual content for the grain (Rec. 601 on un-premultiplied colour,
-// as image::Rgb::luma), packed for GrainPass: eye 0's rectangle in rows
-// [0, h0), eye 1's in rows [h0, h0 + h1), width = the wider rectangle.
-// Twin: the luma step of synth::layer::grain_layer.
+// Level 0 of the grain's joint pyramid straight from the layer colour: vec4 per
+// pixel = unit white noise R, G, B (twin of synth::gaussian, fresh per frame through
+// the seed) and the luma of the virtual content (Rec. 601 on un-premultiplied colour, as
+// image::Rgb::luma). Packed: eye 0's rectangle in rows [0, row1), eye 1's in rows
+// [row1, height), width = the wider rectangle. Twin: the luma step of
+// synth::layer::grain_layer and render::GrainPass's grain_init.comp.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray raw_colour;
 layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray dof_colour;
 layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray mb_colour;
-layout(std430, set = 0, binding = 3) buffer Luma { float luma[]; };
+layout(std430, set = 0, binding = 3) buffer Level0 { vec4 dst[]; };
 
 layout(push_constant) uniform Push {
     ivec4 rect[2];
     int width;           // packed width
     int row1;            // first packed row of eye 1
     int use_fx;
-    int pad1;
+    int height;          // packed height (row1 + eye 1's rows)
+    uint seed_lo;
+    uint seed_hi;
 } p;
+
+#include "grain_common.glsl"
 
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
@@ -36,5 +42,7 @@ void main() {
             y = 0.299 * u.r + 0.587 * u.g + 0.114 * u.b;
         }
     }
-    luma[(ly + (layer == 0 ? 0 : p.row1)) * p.width + lx] = y;
+    uint py = uint(ly + (layer == 0 ? 0 : p.row1));
+    uint i = py * uint(p.width) + uint(lx);
+    dst[i] = vec4(white_rgb(uint(lx), py, p.seed_lo, p.seed_hi), y);
 }

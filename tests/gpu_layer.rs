@@ -12,7 +12,7 @@ use ash::vk;
 use blind_augment::gpu::{Buffer, GpuContext, Image, EYES};
 use blind_augment::model::*;
 use blind_augment::render::layer::FrameEffects;
-use blind_augment::render::{EffectParams, LayerEffects, LayerSettings};
+use blind_augment::render::{planar_rgb, EffectParams, LayerEffects, LayerSettings, GRAIN_TEXEL_FLOATS};
 use blind_augment::synth::layer::{composite, defocus_layer, defocus_layer_half, motion_blur_layer, Layer, Rect};
 use blind_augment::synth::{white_sensor_noise, SynthesisTable};
 use common::*;
@@ -331,7 +331,9 @@ fn layer_grain_follows_the_model() {
             let fx = run(&ctx, &rig, &fxs, &m, frame);
             assert!(fx.noise && !fx.dof && !fx.motion_blur);
             let bytes = ctx.download(fxs.grain_field()).expect("download");
-            let v: Vec<f32> = bytemuck::cast_slice(&bytes[..3 * W * 2 * H * 4]).to_vec();
+            let texels: &[[f32; GRAIN_TEXEL_FLOATS]] =
+                bytemuck::cast_slice(&bytes[..GRAIN_TEXEL_FLOATS * W * 2 * H * 4]);
+            let v = planar_rgb(texels);
             fields.push(v);
         }
         assert_ne!(fields[0], fields[1], "grain must be fresh every frame");

@@ -64,10 +64,14 @@ struct LumaPush {
     rect: [[i32; 4]; 2],
     width: i32,
     row1: i32,
-    /// [source: 0 raw colour, 1 DoF output, 2 MB output; unused]
-    pad: [i32; 2],
+    /// Source: 0 raw colour, 1 DoF output, 2 MB output.
+    use_fx: i32,
+    /// Packed height (eye 0's rows + eye 1's).
+    height: i32,
+    seed: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<LumaPush>() == 48);
+const _: () = assert!(std::mem::size_of::<LumaPush>() == 56);
+const _: () = assert!(std::mem::offset_of!(LumaPush, seed) == 48);
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -286,7 +290,7 @@ impl<'a> LayerEffects<'a> {
             mb_tiles: ComputePipeline::with_layout(ctx, MB_TILES, &[st, st], push, 1, "layer mb tiles")?,
             mb_neighbour: ComputePipeline::with_layout(ctx, MB_NEIGHBOUR, &[st, st], push, 1, "layer mb neighbour")?,
             mb_gather: ComputePipeline::with_layout(ctx, MB_GATHER, &[st, st, st, st, st], push, 1, "layer mb gather")?,
-            luma: ComputePipeline::with_layout(ctx, LUMA, &[st, st, st, sb], 48, 1, "layer luma")?,
+            luma: ComputePipeline::with_layout(ctx, LUMA, &[st, st, st, sb], 56, 1, "layer luma")?,
             composite: ComputePipeline::with_layout(ctx, COMPOSITE, &[st, st, st, st, sb, st], 64, 1, "composite")?,
             // Both eyes' rectangles stacked: at most the full eye, twice as tall.
             grain: GrainRecorder::new(ctx, w as usize, 2 * h as usize, grain_nodes)?,
@@ -319,7 +323,7 @@ impl<'a> LayerEffects<'a> {
         me.mb_tiles.bind_resources(0, &[I(motion), I(&me.tiles)])?;
         me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;
         me.mb_gather.bind_resources(0, &[I(colour), I(&me.dof_out), I(motion), I(&me.neighbour), I(&me.mb_out)])?;
-        me.luma.bind_resources(0, &[I(colour), I(&me.dof_out), I(&me.mb_out), B(&me.grain.luma)])?;
+        me.luma.bind_resources(0, &[I(colour), I(&me.dof_out), I(&me.mb_out), B(me.grain.level0())])?;
         me.composite.bind_resources(
             0,
             &[I(colour), I(&me.dof_out), I(&me.mb_out), I(background), B(me.grain.field()), I(output)],
@@ -327,7 +331,8 @@ impl<'a> LayerEffects<'a> {
         Ok(me)
     }
 
-    /// The last recorded grain field (planar RGB, eyes stacked as in `layer_luma`).
+    /// The last recorded grain field (vec4 R, G, B, 0 per pixel, eyes stacked as in
+    /// `layer_luma`; `grain::planar_rgb` converts).
     pub fn grain_field(&self) -> &Buffer<'a> {
         self.grain.field()
     }
@@ -446,16 +451,23 @@ impl<'a> LayerEffects<'a> {
         if let Some((nodes, range)) = noise_table {
             let nw = gw.max(1);
             let nh = (rects[0].h + rects[1].h).max(1);
-            let lp = LumaPush { rect: [to4(rects[0]), to4(rects[1])], width: nw, row1: rects[0].h, pad: [0; 2] };
-            // Luma of the chain's output (0: raw colour, 1: DoF, 2: MB).
-            let lp = LumaPush { pad: [source, 0], ..lp };
+            let seed = (fx.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5eed;
+            // Luma of the chain's output (0: raw colour, 1: DoF, 2: MB) and the
+            // frame's white noise: level 0 of the grain's joint pyramid.
+            let lp = LumaPush {
+                rect: [to4(rects[0]), to4(rects[1])],
+                width: nw,
+                row1: rects[0].h,
+                use_fx: source,
+                height: nh,
+                seed: [seed as u32, (seed >> 32) as u32],
+            };
             self.luma.record(
                 cmd,
                 bytemuck::bytes_of(&lp),
                 [(nw as u32).div_ceil(8), (rects[0].h.max(rects[1].h) as u32).div_ceil(8), EYES],
             );
-            let seed = (fx.frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5eed;
-            self.grain.record(cmd, nw as usize, nh as usize, nodes, range, seed)?;
+            self.grain.record(cmd, nw as usize, nh as usize, nodes, range)?;
             cp.use_noise = 1;
             cp.noise_width = nw;
             cp.noise_height = nh;

@@ -12,7 +12,7 @@ pub mod stereo;
 
 pub use dof::DofPass;
 pub use gbuffer::{Eye, GBufferFrame, GBufferPass};
-pub use grain::{GrainPass, GrainRecorder, GrainTable};
+pub use grain::{planar_rgb, GrainPass, GrainRecorder, GrainTable, GRAIN_TEXEL_FLOATS};
 pub use layer::{FrameEffects, LayerEffects, LayerSettings};
 pub use motion_blur::MotionBlurPass;
 pub use params::EffectParams;
