@@ -130,14 +130,19 @@ fn main() {
     println!("Composite = over the background (on the headset: the compositor's layer blend). Effects = DoF + MB + grain. Compute invocations of the effects exclude the full-screen composite.\n");
     println!("| eye (px) | coverage | G-buffer ms | DoF ms | MB ms | grain ms | composite ms | naive frame ms | matched frame ms | effects / G-buffer | fragment inv. (G-buffer) | compute inv. (effects) |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for (w, h) in [(1680u32, 1760u32), (2064, 2208)] {
+    // FRAME_BENCH_QUICK=1: only 1680×1760 at 10%, no settings table (for profiling
+    // between full runs; BENCHMARKS.md figures come from the full run).
+    let quick = std::env::var("FRAME_BENCH_QUICK").is_ok_and(|v| v == "1");
+    let sizes: &[(u32, u32)] = if quick { &[(1680, 1760)] } else { &[(1680, 1760), (2064, 2208)] };
+    let coverages: &[f64] = if quick { &[0.1] } else { &[0.1, 0.5] };
+    for &(w, h) in sizes {
         let f = 743.0 * w as f32 / 1680.0;
         let mut r = StereoRenderer::new(&ctx, &scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
         r.enable_profiling().expect("timestamps");
         let grey = vec![128u8; (w * h * 4 * 2) as usize];
         r.set_background(&grey).expect("background");
         let composite_inv = (w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2;
-        for coverage in [0.1, 0.5] {
+        for &coverage in coverages {
             let (s, got) = setup(&scene, &r, f, coverage);
             let naive = profile(&mut r, &snap, &s, false);
             let m = profile(&mut r, &snap, &s, true);
@@ -158,7 +163,9 @@ fn main() {
             );
         }
     }
-    settings_table(&ctx, &scene, &snap);
+    if !quick {
+        settings_table(&ctx, &scene, &snap);
+    }
 }
 
 /// Per quality setting at 1680×1760, 10% coverage: GPU cost of the stage and its

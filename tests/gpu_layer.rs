@@ -137,7 +137,7 @@ fn rig<'a>(ctx: &'a GpuContext, layers: &[Layer; 2], background: &[[f32; 4]]) ->
 
 /// Run the chain for `model` over the full eyes; returns the effects used.
 fn run(ctx: &GpuContext, rig: &Rig<'_>, fxs: &LayerEffects<'_>, model: &CameraModel, frame: u32) -> FrameEffects {
-    let mut fx = FrameEffects::from_model(model, None, fxs.settings());
+    let mut fx = FrameEffects::from_model(model, None, None, fxs.settings());
     fx.rects = [Rect::full(W, H); 2];
     fx.frame = frame;
     rig.params.write(bytemuck::bytes_of(&EffectParams::from_model(model, 1))).expect("params");

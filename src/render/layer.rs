@@ -139,8 +139,17 @@ pub struct FrameEffects {
 impl FrameEffects {
     /// Effects of `model` for eye buffers with `eye_pixels_per_radian`. The ratio
     /// falls back to 1 when the model does not know its camera's (desktop: the
-    /// background is the eye's view). Rects start empty (see `dilate_rects`).
-    pub fn from_model(model: &CameraModel, eye_pixels_per_radian: Option<f32>, settings: &LayerSettings) -> Self {
+    /// background is the eye's view). `content_depth_m`: the view depths the
+    /// virtual content spans this frame (near, far); the DoF reach is the largest
+    /// blur over that span instead of over the model's whole fitted range — only what
+    /// the scene requires (a model fitted down to 0.3 m would otherwise make every
+    /// frame pay the reach of a 0.3 m blur). Rects start empty (see `dilate_rects`).
+    pub fn from_model(
+        model: &CameraModel,
+        eye_pixels_per_radian: Option<f32>,
+        content_depth_m: Option<[f32; 2]>,
+        settings: &LayerSettings,
+    ) -> Self {
         let ppr_ratio = match (eye_pixels_per_radian, model.reference.pixels_per_radian) {
             (Some(e), Some(c)) if e.is_finite() && c.is_finite() && e > 0.0 && c > 0.0 => e / c,
             _ => 1.0,
@@ -152,7 +161,14 @@ impl FrameEffects {
         }
         let step = settings.dof_step_px.clamp(1, 4);
         let dof_radius_px = if dof {
-            let [lo, hi] = dof_model.depth_range;
+            let [mut lo, mut hi] = dof_model.depth_range;
+            if let Some([near, far]) = content_depth_m {
+                if near.is_finite() && far.is_finite() && near <= far {
+                    // `sigma_px` clamps depths to the fitted range, so content
+                    // outside it takes the range's end blur, as the shader does.
+                    (lo, hi) = (near, far);
+                }
+            }
             let sigma_max = (0..=64)
                 .map(|i| dof_model.sigma_px(lo + (hi - lo) * i as f32 / 64.0))
                 .fold(0.0f32, f32::max)
@@ -477,5 +493,43 @@ impl<'a> LayerEffects<'a> {
         self.composite.record(cmd, bytemuck::bytes_of(&cp), groups(self.width as i32, self.height as i32));
         stamp(STAMP_COMPOSITE);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Diagnostics, DofCurve};
+
+    fn thin_lens() -> CameraModel {
+        let mut m = CameraModel::empty(1280, 960);
+        m.depth_of_field = crate::model::DepthOfField {
+            present: true,
+            units: DepthUnits::MetricM,
+            curve: Some(DofCurve::ThinLens { k: 23.04, focus_depth: 3.143, c0: 0.2 }),
+            depth_range: [0.3, 10.0],
+            diagnostics: Diagnostics::not_fitted("test"),
+        };
+        m
+    }
+
+    /// The DoF reach follows the content's depth span: 3·max σ over it (eye px,
+    /// ratio 1, rounded up), not over the model's whole fitted range — whose near end
+    /// (0.3 m) hits the σ clamp (10 px → reach 30).
+    #[test]
+    fn dof_reach_follows_the_content_depth() {
+        let m = thin_lens();
+        let s = LayerSettings::default();
+        let whole = FrameEffects::from_model(&m, None, None, &s);
+        assert_eq!(whole.dof_radius_px, 30);
+        // Content at 2.9–3.4 m around the 3.143 m focus: σ ≤ 23.04·|1/2.9 − 1/3.143| + 0.2 = 0.81.
+        let near_focus = FrameEffects::from_model(&m, None, Some([2.9, 3.4]), &s);
+        let sigma_max = m.depth_of_field.sigma_px(2.9).max(m.depth_of_field.sigma_px(3.4));
+        assert_eq!(near_focus.dof_radius_px, (3.0 * sigma_max).ceil() as i32);
+        assert!(near_focus.dof_radius_px <= 3);
+        // Invalid spans fall back to the whole range.
+        for bad in [[f32::NAN, 3.0], [3.0, 2.0]] {
+            assert_eq!(FrameEffects::from_model(&m, None, Some(bad), &s).dof_radius_px, 30);
+        }
     }
 }

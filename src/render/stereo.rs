@@ -196,6 +196,29 @@ impl<'a> StereoRenderer<'a> {
         })
     }
 
+    /// View depth range (m, the clip w) of the content's `corners`, both eyes, now
+    /// and one frame before: every point of the content lies within its bounding
+    /// box, and depth is affine, so the corners bound it. None when a corner is
+    /// behind the near plane or not finite.
+    pub fn content_depth_m(&self, eyes: &[Eye; 2], prev: &[Eye; 2], now: &[Vec3], before: &[Vec3]) -> Option<[f32; 2]> {
+        let (w, h) = self.size();
+        let (mut near, mut far) = (f32::MAX, f32::MIN);
+        for e in 0..2 {
+            for (eye, pts) in [(&eyes[e], now), (&prev[e], before)] {
+                let m = clip_from_view(eye.focal_px, eye.centre_px, w, h, NEAR_M, FAR_M) * eye.view_from_world;
+                for p in pts {
+                    let z = (m * p.extend(1.0)).w;
+                    if !z.is_finite() || z <= NEAR_M {
+                        return None;
+                    }
+                    near = near.min(z);
+                    far = far.max(z);
+                }
+            }
+        }
+        (near <= far).then_some([near, far])
+    }
+
     /// Replace both eyes' background with RGBA8 texels (`w × h × 2`, eye-major).
     pub fn set_background(&self, rgba: &[u8]) -> Result<(), GpuError> {
         self.ring.wait_all()?;
@@ -211,7 +234,9 @@ impl<'a> StereoRenderer<'a> {
         matched: bool,
     ) -> Result<FrameEffects, GpuError> {
         let model = &snapshot.model;
-        let mut fx = FrameEffects::from_model(model, self.eye_pixels_per_radian, &self.settings);
+        let g = input.gbuffer;
+        let depth = self.content_depth_m(&g.eyes, &g.prev_eyes, input.corners_now, input.corners_prev);
+        let mut fx = FrameEffects::from_model(model, self.eye_pixels_per_radian, depth, &self.settings);
         if !matched {
             fx.dof = false;
             fx.motion_blur = false;
@@ -219,7 +244,6 @@ impl<'a> StereoRenderer<'a> {
         }
         fx.frame = self.frame;
         self.frame = self.frame.wrapping_add(1);
-        let g = input.gbuffer;
         fx.rects =
             self.rects(&g.eyes, &g.prev_eyes, input.corners_now, input.corners_prev, fx.margin_px(&self.settings));
         if self.profile.is_some() {

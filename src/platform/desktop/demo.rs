@@ -378,7 +378,7 @@ fn render_demo(
     )?;
     let mut snapshot_model = fitted.clone();
     snapshot_model.reference.pixels_per_radian.get_or_insert(FOCAL_PX);
-    let fx = FrameEffects::from_model(&snapshot_model, Some(FOCAL_PX), &settings);
+    let fx = FrameEffects::from_model(&snapshot_model, Some(FOCAL_PX), None, &settings);
     let sigma = fitted.depth_of_field.sigma_px(2.5);
     let mut r = String::new();
     let _ = writeln!(r, "\n## Render: bundled glTF object over the background sequence\n");
@@ -392,7 +392,7 @@ fn render_demo(
     let _ = writeln!(
         r,
         "| DoF | δ({:.2} m) = {sigma:.2} px (fitted curve; the renderer's reach {} px) |",
-        2.5, fx.dof_radius_px
+        2.5, stats.dof_radius_px
     );
     let _ = writeln!(
         r,

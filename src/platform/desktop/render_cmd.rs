@@ -34,6 +34,8 @@ pub struct RenderStats {
     pub naive_ms: f64,
     pub matched_ms: f64,
     pub device: String,
+    /// Largest DoF reach (eye px) the matched frames used (from the content's depth).
+    pub dof_radius_px: i32,
 }
 
 pub struct RenderedFrame {
@@ -136,7 +138,10 @@ pub fn render_sequence(
         let mut images = [Rgb::new(1, 1, [0.0; 3]), Rgb::new(1, 1, [0.0; 3])];
         for (i, matched) in [false, true].into_iter().enumerate() {
             let start = Instant::now();
-            renderer.render(&snapshot, &input, matched).context("rendering")?;
+            let fx = renderer.render(&snapshot, &input, matched).context("rendering")?;
+            if fx.dof {
+                stats.dof_radius_px = stats.dof_radius_px.max(fx.dof_radius_px);
+            }
             renderer.finish().context("waiting for the GPU")?;
             let ms = start.elapsed().as_secs_f64() * 1e3;
             if matched {
