@@ -1,13 +1,20 @@
 #version 450
 // Half-resolution DoF, down step (twin: synth::layer::defocus_layer_half): per 2×2
 // block inside the full-resolution rectangle, the box average of the premultiplied
-// colour and the alpha-weighted σ/2 of its covered pixels (−1 if none).
+// colour and the alpha-weighted σ/2 of its covered pixels (−1 if none). Each pixel's
+// σ comes from its depth here (as layer_dof_sigma.comp computes it for the
+// full-resolution path): no full-resolution σ image is written and read back.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
-layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray colour_in;
-layout(r32f, set = 0, binding = 1) uniform readonly image2DArray sigma_in;
-layout(rgba16f, set = 0, binding = 2) uniform writeonly image2DArray colour_out;
-layout(r32f, set = 0, binding = 3) uniform writeonly image2DArray sigma_out;
+layout(std140, set = 0, binding = 0) uniform Effect {
+    uvec4 head;          // generation, flags, exposure (bits), frame_interval (bits)
+    uvec4 dof;           // form, units, range lo (bits), range hi (bits)
+    vec4 dof_coeffs;
+} e;
+layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray colour_in;
+layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray motion_in;
+layout(rgba16f, set = 0, binding = 3) uniform writeonly image2DArray colour_out;
+layout(r32f, set = 0, binding = 4) uniform writeonly image2DArray sigma_out;
 
 layout(push_constant) uniform Push {
     ivec4 rect[2];       // full-resolution rectangles
@@ -19,6 +26,8 @@ layout(push_constant) uniform Push {
     uint frame;
     uint samples;
 } p;
+
+#include "dof_sigma.glsl"
 
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
@@ -39,8 +48,9 @@ void main() {
         }
         vec4 px = imageLoad(colour_in, ivec3(xy, layer));
         c += 0.25 * px;
-        float sg = imageLoad(sigma_in, ivec3(xy, layer)).x;
-        if (sg >= 0.0) {
+        vec4 m = imageLoad(motion_in, ivec3(xy, layer));
+        if (m.w > 0.0) {
+            float sg = sigma_eye(m.z);
             float wt = max(px.a, 1e-3);
             sw += wt;
             ss += wt * 0.5 * sg;

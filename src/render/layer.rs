@@ -301,7 +301,7 @@ impl<'a> LayerEffects<'a> {
             dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[st, st, st, st], push, 2, "layer dof h")?,
             dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st], push, 2, "layer dof v")?,
             dof_sigma: ComputePipeline::with_layout(ctx, DOF_SIGMA, &[ub, st, st], push, 1, "layer dof sigma")?,
-            dof_down: ComputePipeline::with_layout(ctx, DOF_DOWN, &[st, st, st, st], push, 1, "layer dof down")?,
+            dof_down: ComputePipeline::with_layout(ctx, DOF_DOWN, &[ub, st, st, st, st], push, 1, "layer dof down")?,
             dof_up: ComputePipeline::with_layout(ctx, DOF_UP, &[st, st], push, 1, "layer dof up")?,
             mb_tiles: ComputePipeline::with_layout(ctx, MB_TILES, &[st, st], push, 1, "layer mb tiles")?,
             mb_neighbour: ComputePipeline::with_layout(ctx, MB_NEIGHBOUR, &[st, st], push, 1, "layer mb neighbour")?,
@@ -332,7 +332,10 @@ impl<'a> LayerEffects<'a> {
         me.dof_sigma.bind_resources(0, &[B(&me.params), I(motion), I(&me.sigma_full)])?;
         me.dof_h.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
         me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out)])?;
-        me.dof_down.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.colour_half), I(&me.sigma_half)])?;
+        me.dof_down.bind_resources(
+            0,
+            &[B(&me.params), I(colour), I(motion), I(&me.colour_half), I(&me.sigma_half)],
+        )?;
         me.dof_h.bind_resources(1, &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
         me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half)])?;
         me.dof_up.bind_resources(0, &[I(&me.dof_half), I(&me.dof_out)])?;
@@ -423,8 +426,8 @@ impl<'a> LayerEffects<'a> {
         let gh = rects[0].h.max(rects[1].h);
         let mut source = 0; // 0: G-buffer colour, 1: DoF output, 2: MB output
         if any && fx.dof {
-            self.dof_sigma.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             if self.settings.dof_half_res {
+                // σ per pixel is computed inside the down step (no full-res σ image).
                 let step = self.settings.dof_step_px;
                 let hr = rects.map(half_rect);
                 let mut hp = push;
@@ -436,6 +439,7 @@ impl<'a> LayerEffects<'a> {
                 self.dof_v.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
                 self.dof_up.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             } else {
+                self.dof_sigma.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
                 self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
                 self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             }
