@@ -168,6 +168,14 @@ fn main() {
     }
 }
 
+fn fixed_mb(samples: u32) -> LayerSettings {
+    LayerSettings { mb_samples: samples, mb_taps_per_px: 0.0, ..Default::default() }
+}
+
+fn adaptive_mb(samples: u32, taps_per_px: f32) -> LayerSettings {
+    LayerSettings { mb_samples: samples, mb_taps_per_px: taps_per_px, ..Default::default() }
+}
+
 /// Per quality setting at 1680×1760, 10% coverage: GPU cost of the stage and its
 /// error against the CPU reference (DoF: the exact 2-D scatter; MB: the twin with
 /// 64 taps, the reconstruction's converged result).
@@ -216,9 +224,12 @@ fn settings_table(ctx: &GpuContext, scene: &Scene, snap: &Snapshot) {
             LayerSettings { dof_half_res: true, dof_step_px: 2, ..Default::default() },
             &dof_only,
         ),
-        ("MB", "6 taps".into(), LayerSettings { mb_samples: 6, ..Default::default() }, &mb_only),
-        ("MB", "12 taps (default)".into(), LayerSettings { mb_samples: 12, ..Default::default() }, &mb_only),
-        ("MB", "24 taps".into(), LayerSettings { mb_samples: 24, ..Default::default() }, &mb_only),
+        ("MB", "6 taps".into(), fixed_mb(6), &mb_only),
+        ("MB", "12 taps".into(), fixed_mb(12), &mb_only),
+        ("MB", "24 taps".into(), fixed_mb(24), &mb_only),
+        ("MB", "≤ 12 taps, 1 per streak px (default)".into(), adaptive_mb(12, 1.0), &mb_only),
+        ("MB", "≤ 12 taps, 2 per streak px".into(), adaptive_mb(12, 2.0), &mb_only),
+        ("MB", "≤ 24 taps, 2 per streak px".into(), adaptive_mb(24, 2.0), &mb_only),
     ];
     for (effect, name, settings, model) in configs {
         let mut r = StereoRenderer::new(ctx, scene, w, h, settings, Some(f)).expect("renderer");
@@ -251,6 +262,7 @@ fn settings_table(ctx: &GpuContext, scene: &Scene, snap: &Snapshot) {
                         fx.exposure_ratio,
                         settings.mb_tile_px,
                         64,
+                        0.0,
                         fx.frame,
                         0,
                         rect,

@@ -3,7 +3,8 @@
 // along the neighbourhood's dominant half-streak, each weighted by depth-ordered
 // cone/cylinder coverage tests, so a moving object's streak spreads over what lies
 // behind it (including the transparent pixels around it: the blurred alpha edge) and
-// a static foreground stays sharp. Per-pixel jitter from an integer hash (identical
+// a static foreground stays sharp. Tap count follows the streak length
+// (LayerSettings::mb_taps_per_px), capped at `samples`. Per-pixel jitter from an integer hash (identical
 // on the CPU twin, synth::layer::motion_blur_layer), fresh each frame.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
@@ -22,6 +23,7 @@ layout(push_constant) uniform Push {
     float exposure_ratio;
     uint frame;
     uint samples;
+    float taps_per_px;   // 0: always `samples`
 } p;
 
 const float SOFT_Z_M = 0.05;   // depth softness of the ordering tests (metres)
@@ -77,7 +79,12 @@ void main() {
     vec4 sum = cx * weight;
     uint h = hash(uint(x.x) * 1973u + uint(x.y) * 9277u + uint(layer) * 26699u + p.frame * 7919u);
     float j = float(h & 0xffffu) / 65536.0 - 0.5;
+    // Taps ∝ the neighbourhood's full streak (2·|vn| px), at least 2, at most
+    // `samples`: uniform per tile, so lanes stay together.
     uint n = max(p.samples, 1u);
+    if (p.taps_per_px > 0.0) {
+        n = clamp(uint(ceil(2.0 * length(vn) * p.taps_per_px)), min(2u, n), n);
+    }
     for (uint i = 0u; i < n; i++) {
         float t = mix(-1.0, 1.0, (float(i) + j + 1.0) / (float(n) + 1.0));
         ivec2 y = x + ivec2(floor(vn * t + 0.5));

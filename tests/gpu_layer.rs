@@ -239,6 +239,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
                     fx.exposure_ratio,
                     settings.mb_tile_px,
                     settings.mb_samples,
+                    settings.mb_taps_per_px,
                     fx.frame,
                     e as u32,
                     full,

@@ -53,8 +53,11 @@ pub struct LayerPush {
     pub exposure_ratio: f32,
     pub frame: u32,
     pub samples: u32,
+    /// MB taps per pixel of the neighbourhood's full streak (0: always `samples`).
+    pub taps_per_px: f32,
 }
-const _: () = assert!(std::mem::size_of::<LayerPush>() == 64);
+const _: () = assert!(std::mem::size_of::<LayerPush>() == 68);
+const _: () = assert!(std::mem::offset_of!(LayerPush, taps_per_px) == 64);
 const _: () = assert!(std::mem::offset_of!(LayerPush, size) == 32);
 const _: () = assert!(std::mem::offset_of!(LayerPush, ppr_ratio) == 48);
 
@@ -95,8 +98,13 @@ pub struct LayerSettings {
     /// DoF at half resolution (2×2 down, scatter with σ/2, bilinear up): ≈ 8× fewer
     /// taps, sharp content softened.
     pub dof_half_res: bool,
-    /// MB taps per pixel (McGuire's S).
+    /// Most MB taps per pixel (McGuire's S).
     pub mb_samples: u32,
+    /// MB taps per pixel of streak length: a pixel takes
+    /// clamp(⌈2·|neighbourhood half-streak|·this⌉, 2, `mb_samples`) taps, so short
+    /// streaks (slow heads) stop paying for the longest one's taps. 0 = always
+    /// `mb_samples`.
+    pub mb_taps_per_px: f32,
     /// MB tile size K (px): also the longest half-streak reconstructed.
     pub mb_tile_px: i32,
     /// Display frame interval: motion vectors are per render frame.
@@ -113,6 +121,7 @@ impl Default for LayerSettings {
             dof_step_px: 1,
             dof_half_res: true,
             mb_samples: 12,
+            mb_taps_per_px: 1.0,
             mb_tile_px: 16,
             render_interval_s: 1.0 / 45.0,
             grain: true,
@@ -280,10 +289,14 @@ impl<'a> LayerEffects<'a> {
                 });
             }
         }
-        if settings.mb_tile_px < 4 || settings.mb_samples == 0 || !(1..=4).contains(&settings.dof_step_px) {
+        if settings.mb_tile_px < 4
+            || settings.mb_samples == 0
+            || !(1..=4).contains(&settings.dof_step_px)
+            || !(settings.mb_taps_per_px >= 0.0 && settings.mb_taps_per_px <= 64.0)
+        {
             return Err(GpuError::Input {
                 input: "layer settings",
-                problem: format!("{settings:?}: tile ≥ 4 px, ≥ 1 MB sample, DoF step 1–4"),
+                problem: format!("{settings:?}: tile ≥ 4 px, ≥ 1 MB sample, 0–64 MB taps per px, DoF step 1–4"),
             });
         }
         let f16 = vk::Format::R16G16B16A16_SFLOAT;
@@ -332,10 +345,7 @@ impl<'a> LayerEffects<'a> {
         me.dof_sigma.bind_resources(0, &[B(&me.params), I(motion), I(&me.sigma_full)])?;
         me.dof_h.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
         me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out)])?;
-        me.dof_down.bind_resources(
-            0,
-            &[B(&me.params), I(colour), I(motion), I(&me.colour_half), I(&me.sigma_half)],
-        )?;
+        me.dof_down.bind_resources(0, &[B(&me.params), I(colour), I(motion), I(&me.colour_half), I(&me.sigma_half)])?;
         me.dof_h.bind_resources(1, &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
         me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half)])?;
         me.dof_up.bind_resources(0, &[I(&me.dof_half), I(&me.dof_out)])?;
@@ -421,6 +431,7 @@ impl<'a> LayerEffects<'a> {
             exposure_ratio: fx.exposure_ratio,
             frame: fx.frame,
             samples: self.settings.mb_samples,
+            taps_per_px: self.settings.mb_taps_per_px,
         };
         let gw = rects[0].w.max(rects[1].w);
         let gh = rects[0].h.max(rects[1].h);

@@ -295,7 +295,8 @@ pub fn hash32(mut x: u32) -> u32 {
 }
 
 /// McGuire et al. 2012 reconstruction over `rect` of one eye (`layer_mb_*.comp`):
-/// TileMax → NeighborMax → `samples` jittered taps along the neighbourhood's
+/// TileMax → NeighborMax → up to `samples` jittered taps (∝ the streak with
+/// `taps_per_px` > 0) along the neighbourhood's
 /// half-streak with depth-ordered cone/cylinder weights. `colour` is the input layer
 /// (after DoF), `motion` the G-buffer's. Pixels outside `rect` keep their input.
 #[allow(clippy::too_many_arguments)]
@@ -307,6 +308,7 @@ pub fn motion_blur_layer(
     exposure_ratio: f32,
     tile_px: i32,
     samples: u32,
+    taps_per_px: f32,
     frame: u32,
     eye: u32,
     rect: Rect,
@@ -365,14 +367,21 @@ pub fn motion_blur_layer(
     };
     let cylinder = |dist: f32, vlen: f32| 1.0 - smoothstep(0.95 * vlen, 1.05 * vlen, dist);
     let mut out = colour.to_vec();
-    let n = samples.max(1);
+    let max_n = samples.max(1);
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
             let vn = neighbour[((y / tile_px) * tw + x / tile_px) as usize];
             let cx = colour[idx(x, y)];
-            if (vn[0] * vn[0] + vn[1] * vn[1]).sqrt() < 0.5 {
+            let vn_len = (vn[0] * vn[0] + vn[1] * vn[1]).sqrt();
+            if vn_len < 0.5 {
                 continue;
             }
+            // Taps ∝ the neighbourhood's full streak, as layer_mb_gather.comp.
+            let n = if taps_per_px > 0.0 {
+                ((2.0 * vn_len * taps_per_px).ceil() as u32).clamp(2.min(max_n), max_n)
+            } else {
+                max_n
+            };
             let mx = motion[idx(x, y)];
             let zx = if mx[3] > 0.0 { mx[2] } else { MB_EMPTY_Z_M };
             let hx = half_streak(mx, exposure_ratio, tile_px);
