@@ -27,6 +27,9 @@ float erf_as(float x) {
 }
 
 float tap(float d, float h, float sigma) {
+    if (abs(d) - h > 4.0 * sigma) {
+        return 0.0;
+    }
     if (sigma < 1e-4) {
         return (abs(d) < h) ? 1.0 : 0.0;
     }
@@ -48,12 +51,11 @@ void main() {
         if (y < r.y || y >= r.y + r.w) {
             continue;
         }
-        vec4 c = imageLoad(colour_in, ivec3(xy.x, y, layer));
-        if (c == vec4(0.0)) {
+        float k = tap(float(-d), h, imageLoad(sigma_in, ivec3(xy.x, y, layer)).x);
+        if (k == 0.0) {
             continue;
         }
-        float sigma = imageLoad(sigma_in, ivec3(xy.x, y, layer)).x;
-        acc += tap(float(-d), h, sigma) * c;
+        acc += k * imageLoad(colour_in, ivec3(xy.x, y, layer));
     }
     imageStore(colour_out, ivec3(xy, layer), acc);
 }

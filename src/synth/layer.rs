@@ -38,8 +38,12 @@ pub fn erf_as(x: f32) -> f32 {
     s * y
 }
 
-/// Mass of N(0, σ²) over [d − h, d + h] (a delta for σ → 0).
+/// Mass of N(0, σ²) over [d − h, d + h] (a delta for σ → 0); 0 beyond 4σ (tail
+/// < 6.4e-5 of the mass), as the shaders cut it to skip far taps.
 pub fn tap(d: f32, h: f32, sigma: f32) -> f32 {
+    if d.abs() - h > 4.0 * sigma {
+        return 0.0;
+    }
     if sigma < 1e-4 {
         return if d.abs() < h { 1.0 } else { 0.0 };
     }
