@@ -225,9 +225,9 @@ fn settings_table(ctx: &GpuContext, scene: &Scene, snap: &Snapshot) {
             &dof_only,
         ),
         ("MB", "6 taps".into(), fixed_mb(6), &mb_only),
-        ("MB", "12 taps".into(), fixed_mb(12), &mb_only),
+        ("MB", "12 taps (default)".into(), fixed_mb(12), &mb_only),
         ("MB", "24 taps".into(), fixed_mb(24), &mb_only),
-        ("MB", "≤ 12 taps, 1 per streak px (default)".into(), adaptive_mb(12, 1.0), &mb_only),
+        ("MB", "≤ 12 taps, 1 per streak px".into(), adaptive_mb(12, 1.0), &mb_only),
         ("MB", "≤ 12 taps, 2 per streak px".into(), adaptive_mb(12, 2.0), &mb_only),
         ("MB", "≤ 24 taps, 2 per streak px".into(), adaptive_mb(24, 2.0), &mb_only),
     ];

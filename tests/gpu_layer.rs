@@ -297,6 +297,44 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
         let diff = changed(&cpu, &full_res);
         assert!(diff > 1e-4 && diff < 8.0 / 255.0, "half vs full resolution: mean |Δ| {diff}");
     }
+    // Streak-proportional MB taps (a quality setting; the default is fixed): same
+    // tolerance against the twin, and a different result from the fixed count
+    // (fewer taps where the streak is short), so the setting is really in effect.
+    let adaptive = LayerSettings { mb_taps_per_px: 1.0, ..settings };
+    let fxs_adaptive = LayerEffects::new(
+        &ctx,
+        &rig.colour,
+        &rig.motion,
+        &rig.background,
+        &rig.output,
+        adaptive,
+        SynthesisTable::node_count() as u32,
+    )
+    .expect("chain");
+    let m = model(false, true, false);
+    let fx = run(&ctx, &rig, &fxs_adaptive, &m, 5);
+    let out = from_f16_bytes(&fxs_adaptive.mb_out.download().expect("download"));
+    for e in 0..2 {
+        let n = W * H;
+        let twin = |taps_per_px: f32| {
+            motion_blur_layer(
+                &layers[e].colour,
+                &layers[e].motion,
+                W,
+                H,
+                fx.exposure_ratio,
+                adaptive.mb_tile_px,
+                adaptive.mb_samples,
+                taps_per_px,
+                fx.frame,
+                e as u32,
+                full,
+            )
+        };
+        let cpu = twin(adaptive.mb_taps_per_px);
+        check(&format!("mb_adaptive_eye{e}"), &out[e * n..(e + 1) * n], &cpu);
+        assert!(changed(&cpu, &twin(0.0)) > 1e-5, "adaptive taps changed nothing");
+    }
     let msgs = ctx.take_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }

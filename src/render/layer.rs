@@ -102,8 +102,8 @@ pub struct LayerSettings {
     pub mb_samples: u32,
     /// MB taps per pixel of streak length: a pixel takes
     /// clamp(⌈2·|neighbourhood half-streak|·this⌉, 2, `mb_samples`) taps, so short
-    /// streaks (slow heads) stop paying for the longest one's taps. 0 = always
-    /// `mb_samples`.
+    /// streaks (slow heads) stop paying for the longest one's taps. 0 (default) =
+    /// always `mb_samples`.
     pub mb_taps_per_px: f32,
     /// MB tile size K (px): also the longest half-streak reconstructed.
     pub mb_tile_px: i32,
@@ -120,8 +120,10 @@ impl Default for LayerSettings {
             // full resolution at p99 1.5 8-bit steps from the exact scatter.
             dof_step_px: 1,
             dof_half_res: true,
+            // Fixed 12 MB taps: the streak-proportional rule (1 or 2 taps per px) is
+            // cheaper but measurably noisier (BENCHMARKS.md settings table).
             mb_samples: 12,
-            mb_taps_per_px: 1.0,
+            mb_taps_per_px: 0.0,
             mb_tile_px: 16,
             render_interval_s: 1.0 / 45.0,
             grain: true,
