@@ -18,10 +18,10 @@ layout(push_constant) uniform Push {
     ivec2 size;
     int use_fx;
     int use_noise;
-    int noise_width;     // packed grain field (see layer_luma.comp)
-    int noise_height;
+    int noise_width;     // packed grain field, one vec4 per pixel (see layer_luma.comp)
     int row1;
-    int pad;
+    int pad0;
+    int pad1;
 } p;
 
 void main() {

@@ -136,6 +136,20 @@ fn rig<'a>(ctx: &'a GpuContext, layers: &[Layer; 2], background: &[[f32; 4]]) ->
 }
 
 /// Run the chain for `model` over the full eyes; returns the effects used.
+/// The effect chain over the rig's images with `settings`.
+fn chain<'a>(ctx: &'a GpuContext, rig: &Rig<'a>, settings: LayerSettings) -> LayerEffects<'a> {
+    LayerEffects::new(
+        ctx,
+        &rig.colour,
+        &rig.motion,
+        &rig.background,
+        &rig.output,
+        settings,
+        SynthesisTable::node_count() as u32,
+    )
+    .expect("chain")
+}
+
 fn run(ctx: &GpuContext, rig: &Rig<'_>, fxs: &LayerEffects<'_>, model: &CameraModel, frame: u32) -> FrameEffects {
     let mut fx = FrameEffects::from_model(model, None, None, fxs.settings());
     fx.rects = [Rect::full(W, H); 2];
@@ -199,16 +213,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
     let rig = rig(&ctx, &layers, &bg);
     // Full-resolution DoF first (its twin is defocus_layer); half resolution below.
     let settings = LayerSettings { dof_half_res: false, ..LayerSettings::default() };
-    let fxs = LayerEffects::new(
-        &ctx,
-        &rig.colour,
-        &rig.motion,
-        &rig.background,
-        &rig.output,
-        settings,
-        SynthesisTable::node_count() as u32,
-    )
-    .expect("chain");
+    let fxs = chain(&ctx, &rig, settings);
     let full = Rect::full(W, H);
     for (name, m) in
         [("dof", model(true, false, false)), ("mb", model(false, true, false)), ("dof+mb", model(true, true, false))]
@@ -270,16 +275,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
     }
     // Half-resolution DoF (the cheaper quality setting) against its twin.
     let half = LayerSettings { dof_half_res: true, ..settings };
-    let fxs_half = LayerEffects::new(
-        &ctx,
-        &rig.colour,
-        &rig.motion,
-        &rig.background,
-        &rig.output,
-        half,
-        SynthesisTable::node_count() as u32,
-    )
-    .expect("chain");
+    let fxs_half = chain(&ctx, &rig, half);
     let m = model(true, false, false);
     let fx = run(&ctx, &rig, &fxs_half, &m, 0);
     let dof_out = from_f16_bytes(&fxs_half.dof_out.download().expect("download"));
@@ -301,16 +297,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
     // tolerance against the twin, and a different result from the fixed count
     // (fewer taps where the streak is short), so the setting is really in effect.
     let adaptive = LayerSettings { mb_taps_per_px: 1.0, ..settings };
-    let fxs_adaptive = LayerEffects::new(
-        &ctx,
-        &rig.colour,
-        &rig.motion,
-        &rig.background,
-        &rig.output,
-        adaptive,
-        SynthesisTable::node_count() as u32,
-    )
-    .expect("chain");
+    let fxs_adaptive = chain(&ctx, &rig, adaptive);
     let m = model(false, true, false);
     let fx = run(&ctx, &rig, &fxs_adaptive, &m, 5);
     let out = from_f16_bytes(&fxs_adaptive.mb_out.download().expect("download"));
@@ -355,16 +342,7 @@ fn layer_grain_follows_the_model() {
         };
         let layers = [flat.clone(), flat];
         let rig = rig(&ctx, &layers, &vec![[0.0, 0.0, 0.0, 1.0]; W * H]);
-        let fxs = LayerEffects::new(
-            &ctx,
-            &rig.colour,
-            &rig.motion,
-            &rig.background,
-            &rig.output,
-            LayerSettings::default(),
-            SynthesisTable::node_count() as u32,
-        )
-        .expect("chain");
+        let fxs = chain(&ctx, &rig, LayerSettings::default());
         let mut fields = vec![];
         for frame in 0..6 {
             let fx = run(&ctx, &rig, &fxs, &m, frame);

@@ -84,9 +84,8 @@ struct CompositePush {
     use_fx: i32,
     use_noise: i32,
     noise_width: i32,
-    noise_height: i32,
     row1: i32,
-    pad: i32,
+    pad: [i32; 2],
 }
 const _: () = assert!(std::mem::size_of::<CompositePush>() == 64);
 
@@ -503,7 +502,6 @@ impl<'a> LayerEffects<'a> {
             self.grain.record(cmd, nw as usize, nh as usize, nodes, range)?;
             cp.use_noise = 1;
             cp.noise_width = nw;
-            cp.noise_height = nh;
             cp.row1 = rects[0].h;
         }
         stamp(STAMP_GRAIN);
