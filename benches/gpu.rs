@@ -77,18 +77,18 @@ fn main() {
             || drop(mb.run(w, h, &planar, &flow_xy, 0.5).expect("mb")),
             || drop(synth::add_motion_blur(&img, &flow, 0.5)),
         );
-        println!("| motion blur (λ = 0.5, 8 px/frame) | {size} | {g:.1} ms | {c:.1} ms |");
+        println!("| motion blur (λ = 0.5, 8 px/frame) | {size} | {g:.2} ms | {c:.1} ms |");
         let (g, c) = measure(
             &ctx,
             || drop(dof.run(w, h, &planar, &sigma.data).expect("dof")),
             || drop(synth::add_defocus(&img, &sigma)),
         );
-        println!("| depth of field (σ ≤ 2.6 px) | {size} | {g:.1} ms | {c:.1} ms |");
+        println!("| depth of field (σ ≤ 2.6 px) | {size} | {g:.2} ms | {c:.1} ms |");
         let (g, c) = measure(
             &ctx,
             || drop(grain.run(w, h, &luma.data, &table, 1).expect("grain")),
             || drop(synth::noise_field(&luma, &noise, 1)),
         );
-        println!("| grain (4 levels + low-pass) | {size} | {g:.1} ms | {c:.1} ms |");
+        println!("| grain (4 levels + low-pass) | {size} | {g:.2} ms | {c:.1} ms |");
     }
 }

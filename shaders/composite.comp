@@ -14,7 +14,7 @@ layout(std430, set = 0, binding = 4) readonly buffer Noise { vec4 noise[]; };  /
 layout(rgba8, set = 0, binding = 5) uniform writeonly image2DArray out_image;
 
 layout(push_constant) uniform Push {
-    ivec4 rect[2];       // where the chain's output is valid; elsewhere raw colour
+    ivec4 rect[2];       // where the virtual content is; elsewhere background only
     ivec2 size;
     int use_fx;
     int use_noise;
@@ -33,9 +33,12 @@ void main() {
     ivec4 r = p.rect[layer];
     bool inside = xy.x >= r.x && xy.y >= r.y && xy.x < r.x + r.z && xy.y < r.y + r.w;
     ivec3 at = ivec3(xy, layer);
-    // The chain's last output inside the rectangles (1: DoF, 2: MB), else raw.
-    vec4 c = (p.use_fx == 2 && inside) ? imageLoad(mb_colour, at)
-             : ((p.use_fx == 1 && inside) ? imageLoad(dof_colour, at) : imageLoad(raw_colour, at));
+    // The chain's last output (1: DoF, 2: MB) or raw colour inside the eye's
+    // rectangle; outside it nothing: the G-buffer pass only wrote the rectangle
+    // covering both eyes' (render area), so texels out there are stale.
+    vec4 c = !inside ? vec4(0.0)
+             : (p.use_fx == 2 ? imageLoad(mb_colour, at)
+                : (p.use_fx == 1 ? imageLoad(dof_colour, at) : imageLoad(raw_colour, at)));
     vec4 bg = imageLoad(background, ivec3(xy, layer));
     float a = clamp(c.a, 0.0, 1.0);
     vec3 rgb = bg.rgb * (1.0 - a) + c.rgb;

@@ -23,6 +23,29 @@ impl Rect {
     }
 }
 
+/// The one rectangle a multiview pass may be confined to so that it covers every
+/// rectangle in `rects`: their union, widened outward to multiples of `align_px`
+/// (so that whole tiles and 2×2 half-resolution blocks over any of them lie
+/// inside) and clipped to `width × height`. Empty when every rectangle is.
+pub fn covering_rect(rects: &[Rect], align_px: i32, width: usize, height: usize) -> Rect {
+    let align = align_px.max(1);
+    let (mut x0, mut y0, mut x1, mut y1) = (i32::MAX, i32::MAX, i32::MIN, i32::MIN);
+    for r in rects.iter().filter(|r| r.area() > 0) {
+        x0 = x0.min(r.x);
+        y0 = y0.min(r.y);
+        x1 = x1.max(r.x + r.w);
+        y1 = y1.max(r.y + r.h);
+    }
+    if x0 > x1 {
+        return Rect::default();
+    }
+    let down = |v: i32| v.div_euclid(align) * align;
+    let up = |v: i32| (v + align - 1).div_euclid(align) * align;
+    let (x0, y0) = (down(x0).max(0), down(y0).max(0));
+    let (x1, y1) = (up(x1).min(width as i32), up(y1).min(height as i32));
+    Rect { x: x0, y: y0, w: (x1 - x0).max(0), h: (y1 - y0).max(0) }
+}
+
 /// Tiles (of `tile_px`) covering `rect`, as (x0, y0, w, h) in tile units.
 pub fn tile_rect(rect: Rect, tile_px: i32, width: usize, height: usize) -> Rect {
     if rect.area() == 0 {
@@ -53,4 +76,30 @@ pub struct GrainTable {
     pub luma_range: [f32; 2],
     pub nodes: u32,
     pub weights: Vec<f32>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covering_rect_holds_every_rect_and_its_tiles() {
+        let a = Rect { x: 37, y: 5, w: 100, h: 41 };
+        let b = Rect { x: 60, y: 90, w: 13, h: 7 };
+        let c = covering_rect(&[a, b, Rect::default()], 16, 300, 200);
+        assert_eq!(c, Rect { x: 32, y: 0, w: 112, h: 112 });
+        // Every tile of 16 over a or b, and every 2×2 block, lies inside.
+        for r in [a, b] {
+            let t = tile_rect(r, 16, 300, 200);
+            assert!(c.contains(t.x * 16, t.y * 16) && c.contains((t.x + t.w) * 16 - 1, (t.y + t.h) * 16 - 1));
+            let hr = half_rect(r);
+            assert!(c.contains(hr.x * 2, hr.y * 2) && c.contains((hr.x + hr.w) * 2 - 1, (hr.y + hr.h) * 2 - 1));
+        }
+        // Clipped to the target; empty in, empty out.
+        assert_eq!(
+            covering_rect(&[Rect { x: 290, y: 190, w: 10, h: 10 }], 16, 300, 200),
+            Rect { x: 288, y: 176, w: 12, h: 24 }
+        );
+        assert_eq!(covering_rect(&[Rect::default(), Rect::default()], 16, 300, 200), Rect::default());
+    }
 }

@@ -6,7 +6,7 @@
 //! `diagnostics` (how sure the estimator is, how it got there).
 
 pub mod geometry;
-pub use geometry::{half_rect, tile_rect, GrainTable, Rect};
+pub use geometry::{covering_rect, half_rect, tile_rect, GrainTable, Rect};
 pub mod kernels;
 mod validate;
 

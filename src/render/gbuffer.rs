@@ -5,6 +5,7 @@
 use crate::gpu::{
     Buffer, GpuContext, GpuError, GraphicsDesc, GraphicsPipeline, Image, MultiviewTarget, Texture, VertexAttribute,
 };
+use crate::model::Rect;
 use crate::scene::{Scene, Vertex};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
@@ -195,6 +196,19 @@ impl<'a> GBufferPass<'a> {
     /// Write slot `slot`'s uniforms (the slot's previous frame must be complete:
     /// callers use `FrameRing::begin`, which waits for it) and record the pass.
     pub fn record(&self, cmd: vk::CommandBuffer, slot: usize, frame: &GBufferFrame) -> Result<(), GpuError> {
+        self.record_in(cmd, slot, frame, Rect::full(self.target.width as usize, self.target.height as usize))
+    }
+
+    /// `record` confined to `area` (both eyes; see `MultiviewTarget::record_begin_in`):
+    /// the clear and the rasterisation cost follow the content's screen area, not
+    /// the eye buffer's. Texels outside `area` are stale; an empty `area` clears 1×1.
+    pub fn record_in(
+        &self,
+        cmd: vk::CommandBuffer,
+        slot: usize,
+        frame: &GBufferFrame,
+        area: Rect,
+    ) -> Result<(), GpuError> {
         let (w, h) = (self.target.width, self.target.height);
         let clip = |e: &Eye| clip_from_view(e.focal_px, e.centre_px, w, h, NEAR_M, FAR_M) * e.view_from_world;
         let u = FrameUniforms {
@@ -219,7 +233,8 @@ impl<'a> GBufferPass<'a> {
         }
         let slot = slot % self.uniforms.len();
         self.uniforms[slot].write(bytemuck::bytes_of(&u))?;
-        self.target.record_begin(cmd, &[[0.0; 4], [0.0; 4]]);
+        let area = [area.x.max(0) as u32, area.y.max(0) as u32, area.w.max(0) as u32, area.h.max(0) as u32];
+        self.target.record_begin_in(cmd, &[[0.0; 4], [0.0; 4]], area);
         self.pipeline.record_bind(cmd, slot);
         for m in &self.meshes {
             let (Some(now), Some(prev)) = (frame.world_from_nodes.get(m.node), frame.prev_world_from_nodes.get(m.node))

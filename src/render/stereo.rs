@@ -8,7 +8,7 @@ use super::gbuffer::{clip_from_view, Eye, GBufferFrame, GBufferPass, FAR_M, NEAR
 use super::layer::{FrameEffects, LayerEffects, LayerSettings};
 use super::params::EffectParams;
 use crate::gpu::{Buffer, FrameRing, GpuContext, GpuError, Image, QueryPool, Statistics, EYES};
-use crate::model::{Rect, GRAIN_TABLE_NODES};
+use crate::model::{covering_rect, Rect, GRAIN_TABLE_NODES};
 use crate::scene::Scene;
 use crate::worker::Snapshot;
 use ash::vk;
@@ -38,6 +38,8 @@ pub struct StereoRenderer<'a> {
     eye_pixels_per_radian: Option<f32>,
     frame: u32,
     pub last_effects: Option<FrameEffects>,
+    /// Where the last frame's G-buffer pass wrote (see `render`); stale outside.
+    gbuffer_area: Rect,
     profile: Option<Profile<'a>>,
 }
 
@@ -117,6 +119,7 @@ impl<'a> StereoRenderer<'a> {
             eye_pixels_per_radian,
             frame: 0,
             last_effects: None,
+            gbuffer_area: Rect::default(),
             profile: None,
         })
     }
@@ -159,6 +162,12 @@ impl<'a> StereoRenderer<'a> {
 
     pub fn gbuffer(&self) -> &GBufferPass<'a> {
         &self.gbuffer
+    }
+
+    /// The rectangle (both eyes) the last frame's G-buffer pass wrote; texels
+    /// outside it are left from earlier frames (or undefined) and mean nothing.
+    pub fn gbuffer_area(&self) -> Rect {
+        self.gbuffer_area
     }
 
     pub fn effects(&self) -> &LayerEffects<'a> {
@@ -276,7 +285,16 @@ impl<'a> StereoRenderer<'a> {
         if let Some(s) = stats {
             s.record_begin(cmd, 0);
         }
-        let recorded = self.gbuffer.record(cmd, slot, g);
+        // The G-buffer pass is confined to the rectangle covering both eyes' work
+        // rectangles (one render area per multiview pass), widened to whole MB
+        // tiles and 2×2 DoF blocks: every texel the effects read is written this
+        // frame, and the clear and raster cost follow the content's screen area.
+        // Outside it the G-buffer is stale; the composite treats it as empty.
+        let tile = self.settings.mb_tile_px.max(1);
+        let (w, h) = self.size();
+        let area = covering_rect(&fx.rects, if tile % 2 == 0 { tile } else { 2 * tile }, w as usize, h as usize);
+        self.gbuffer_area = area;
+        let recorded = self.gbuffer.record_in(cmd, slot, g, area);
         if let Some(s) = stats {
             s.record_end(cmd, 0);
         }

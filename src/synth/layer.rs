@@ -443,7 +443,8 @@ pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect) -> Vec<f32> {
 }
 
 /// `composite.comp` for one eye: out = bg·(1 − α) + C + α·n (n: planar RGB grain
-/// of `rect`'s size, or none), clamped to [0, 1]; `fx` replaces `raw` inside `rect`.
+/// of `rect`'s size, or none), clamped to [0, 1]; the virtual layer is `fx` (or
+/// `raw`) inside `rect` and empty outside it.
 pub fn composite(
     background: &[[f32; 4]],
     raw: &[[f32; 4]],
@@ -457,9 +458,12 @@ pub fn composite(
         .map(|i| {
             let (x, y) = ((i % width) as i32, (i / width) as i32);
             let inside = rect.contains(x, y);
+            // Outside the rectangle: no virtual content (the GPU's G-buffer is
+            // only written inside the rectangles, so its composite reads nothing there).
             let c = match fx {
-                Some(f) if inside => f[i],
-                _ => raw[i],
+                _ if !inside => [0.0; 4],
+                Some(f) => f[i],
+                None => raw[i],
             };
             let a = c[3].clamp(0.0, 1.0);
             let mut rgb: [f32; 3] = std::array::from_fn(|k| background[i][k] * (1.0 - a) + c[k]);
