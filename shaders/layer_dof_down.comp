@@ -15,6 +15,10 @@ layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray colour_in;
 layout(rgba16f, set = 0, binding = 2) uniform readonly image2DArray motion_in;
 layout(rgba16f, set = 0, binding = 3) uniform writeonly image2DArray colour_out;
 layout(r32f, set = 0, binding = 4) uniform writeonly image2DArray sigma_out;
+// Per 8×8 block of this dispatch (= the scatter passes' workgroups, whose rectangle
+// is the half-resolution one): the largest σ written in it (−1 if none), for
+// layer_dof_reach.comp.
+layout(r32f, set = 0, binding = 5) uniform writeonly image2DArray tile_sigma_out;
 
 layout(push_constant) uniform Push {
     ivec4 rect[2];       // full-resolution rectangles
@@ -29,33 +33,47 @@ layout(push_constant) uniform Push {
 
 #include "dof_sigma.glsl"
 
+shared float block_sigma[64];
+
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
     ivec4 r = p.rect[layer];
     ivec2 h0 = r.xy / 2;
     ivec2 h1 = (r.xy + r.zw + 1) / 2;
     ivec2 hxy = h0 + ivec2(gl_GlobalInvocationID.xy);
-    if (r.z <= 0 || r.w <= 0 || hxy.x >= h1.x || hxy.y >= h1.y) {
-        return;
-    }
-    vec4 c = vec4(0.0);
-    float sw = 0.0;
-    float ss = 0.0;
-    for (int k = 0; k < 4; k++) {
-        ivec2 xy = 2 * hxy + ivec2(k & 1, k >> 1);
-        if (xy.x < r.x || xy.y < r.y || xy.x >= r.x + r.z || xy.y >= r.y + r.w) {
-            continue;
+    float sigma_half = -1.0;
+    // No early return: every invocation reaches the barrier below (a barrier in
+    // non-uniform control flow is undefined behaviour).
+    if (r.z > 0 && r.w > 0 && hxy.x < h1.x && hxy.y < h1.y) {
+        vec4 c = vec4(0.0);
+        float sw = 0.0;
+        float ss = 0.0;
+        for (int k = 0; k < 4; k++) {
+            ivec2 xy = 2 * hxy + ivec2(k & 1, k >> 1);
+            if (xy.x < r.x || xy.y < r.y || xy.x >= r.x + r.z || xy.y >= r.y + r.w) {
+                continue;
+            }
+            vec4 px = imageLoad(colour_in, ivec3(xy, layer));
+            c += 0.25 * px;
+            vec4 m = imageLoad(motion_in, ivec3(xy, layer));
+            if (m.w > 0.0) {
+                float sg = sigma_eye(m.z);
+                float wt = max(px.a, 1e-3);
+                sw += wt;
+                ss += wt * 0.5 * sg;
+            }
         }
-        vec4 px = imageLoad(colour_in, ivec3(xy, layer));
-        c += 0.25 * px;
-        vec4 m = imageLoad(motion_in, ivec3(xy, layer));
-        if (m.w > 0.0) {
-            float sg = sigma_eye(m.z);
-            float wt = max(px.a, 1e-3);
-            sw += wt;
-            ss += wt * 0.5 * sg;
-        }
+        sigma_half = sw > 0.0 ? ss / sw : -1.0;
+        imageStore(colour_out, ivec3(hxy, layer), c);
+        imageStore(sigma_out, ivec3(hxy, layer), vec4(sigma_half));
     }
-    imageStore(colour_out, ivec3(hxy, layer), c);
-    imageStore(sigma_out, ivec3(hxy, layer), vec4(sw > 0.0 ? ss / sw : -1.0));
+    block_sigma[gl_LocalInvocationIndex] = sigma_half;
+    barrier();
+    if (gl_LocalInvocationIndex == 0u) {
+        float m = -1.0;
+        for (int i = 0; i < 64; i++) {
+            m = max(m, block_sigma[i]);
+        }
+        imageStore(tile_sigma_out, ivec3(gl_WorkGroupID.xy, layer), vec4(m));
+    }
 }

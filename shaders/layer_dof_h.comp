@@ -14,6 +14,10 @@ layout(r32f, set = 0, binding = 1) uniform readonly image2DArray sigma_in;
 layout(rgba16f, set = 0, binding = 2) uniform writeonly image2DArray colour_out;
 layout(r32f, set = 0, binding = 3) uniform writeonly image2DArray sigma_out;
 
+// Per workgroup (8×8 block of this dispatch): the largest source σ within reach
+// (layer_dof_reach.comp); the tap loop stops where every tap is exactly zero.
+layout(r32f, set = 0, binding = 4) uniform readonly image2DArray reach_in;
+
 layout(push_constant) uniform Push {
     ivec4 rect[2];       // per eye: x, y, width, height
     ivec2 size;
@@ -59,7 +63,13 @@ void main() {
     float s_acc = 0.0;
     float w_acc = 0.0;
     float h = 0.5 * float(p.step);
-    for (int d = -p.radius; d <= p.radius; d += p.step) {
+    // Taps beyond 4σ_max + h are zero (`tap`); +1 absorbs float rounding of the
+    // bound. First tap: the full loop's lattice point −radius + k·step nearest
+    // inside −reach, so the taps visited are the full loop's non-zero ones, in order.
+    float sigma_max = imageLoad(reach_in, ivec3(gl_WorkGroupID.xy, layer)).x;
+    int reach = clamp(int(ceil(4.0 * sigma_max + h)) + 1, 0, p.radius);
+    int d0 = -p.radius + (p.radius - reach + p.step - 1) / p.step * p.step;
+    for (int d = d0; d <= reach; d += p.step) {
         int x = xy.x + d;
         if (x < r.x || x >= r.x + r.z) {
             continue;

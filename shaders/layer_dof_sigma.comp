@@ -11,6 +11,9 @@ layout(std140, set = 0, binding = 0) uniform Effect {
 } e;
 layout(rgba16f, set = 0, binding = 1) uniform readonly image2DArray motion_in;
 layout(r32f, set = 0, binding = 2) uniform writeonly image2DArray sigma_out;
+// Per 8×8 block (= the scatter passes' workgroups): the largest σ written in it (−1
+// if none), for layer_dof_reach.comp.
+layout(r32f, set = 0, binding = 3) uniform writeonly image2DArray tile_sigma_out;
 
 layout(push_constant) uniform Push {
     ivec4 rect[2];       // per eye: x, y, width, height
@@ -26,13 +29,26 @@ layout(push_constant) uniform Push {
 
 #include "dof_sigma.glsl"
 
+shared float block_sigma[64];
+
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
     ivec4 r = p.rect[layer];
     ivec2 xy = r.xy + ivec2(gl_GlobalInvocationID.xy);
-    if (gl_GlobalInvocationID.x >= uint(r.z) || gl_GlobalInvocationID.y >= uint(r.w)) {
-        return;
+    float sigma = -1.0;
+    // No early return: every invocation reaches the barrier (see layer_dof_down).
+    if (gl_GlobalInvocationID.x < uint(r.z) && gl_GlobalInvocationID.y < uint(r.w)) {
+        vec4 m = imageLoad(motion_in, ivec3(xy, layer));
+        sigma = m.w > 0.0 ? sigma_eye(m.z) : -1.0;
+        imageStore(sigma_out, ivec3(xy, layer), vec4(sigma));
     }
-    vec4 m = imageLoad(motion_in, ivec3(xy, layer));
-    imageStore(sigma_out, ivec3(xy, layer), vec4(m.w > 0.0 ? sigma_eye(m.z) : -1.0));
+    block_sigma[gl_LocalInvocationIndex] = sigma;
+    barrier();
+    if (gl_LocalInvocationIndex == 0u) {
+        float m = -1.0;
+        for (int i = 0; i < 64; i++) {
+            m = max(m, block_sigma[i]);
+        }
+        imageStore(tile_sigma_out, ivec3(gl_WorkGroupID.xy, layer), vec4(m));
+    }
 }

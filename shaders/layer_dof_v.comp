@@ -7,6 +7,10 @@ layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray colour_in;
 layout(r32f, set = 0, binding = 1) uniform readonly image2DArray sigma_in;
 layout(rgba16f, set = 0, binding = 2) uniform writeonly image2DArray colour_out;
 
+// Per workgroup (8×8 block of this dispatch): the largest source σ within reach
+// (layer_dof_reach.comp); the tap loop stops where every tap is exactly zero.
+layout(r32f, set = 0, binding = 3) uniform readonly image2DArray reach_in;
+
 layout(push_constant) uniform Push {
     ivec4 rect[2];
     ivec2 size;
@@ -46,7 +50,13 @@ void main() {
     }
     vec4 acc = vec4(0.0);
     float h = 0.5 * float(p.step);
-    for (int d = -p.radius; d <= p.radius; d += p.step) {
+    // Taps beyond 4σ_max + h are zero (`tap`); +1 absorbs float rounding of the
+    // bound. First tap: the full loop's lattice point −radius + k·step nearest
+    // inside −reach, so the taps visited are the full loop's non-zero ones, in order.
+    float sigma_max = imageLoad(reach_in, ivec3(gl_WorkGroupID.xy, layer)).x;
+    int reach = clamp(int(ceil(4.0 * sigma_max + h)) + 1, 0, p.radius);
+    int d0 = -p.radius + (p.radius - reach + p.step - 1) / p.step * p.step;
+    for (int d = d0; d <= reach; d += p.step) {
         int y = xy.y + d;
         if (y < r.y || y >= r.y + r.w) {
             continue;

@@ -8,7 +8,10 @@
 //! Work is bounded by per-eye screen rectangles (the projected bounds of the virtual
 //! content, dilated by the blur reach): every dispatch covers the rectangles only,
 //! so effect cost follows the content's screen area, not the eye buffer. Effects
-//! absent in the camera model are not dispatched at all.
+//! absent in the camera model are not dispatched at all. Within the rectangles the
+//! DoF taps follow the σ actually present: each 8×8 workgroup of the scatter passes
+//! stops its loop at 4σ of the largest source within reach (`layer_dof_reach`),
+//! beyond which every tap is exactly zero.
 
 use super::grain::GrainRecorder;
 use super::params::EffectParams;
@@ -23,6 +26,7 @@ const DOF_DOWN: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_down
 const DOF_UP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_up.spv"));
 const DOF_H: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_h.spv"));
 const DOF_V: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_v.spv"));
+const DOF_REACH: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_reach.spv"));
 const MB_TILES: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_tiles.spv"));
 const MB_NEIGHBOUR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_neighbour.spv"));
 const MB_GATHER: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_gather.spv"));
@@ -236,6 +240,7 @@ pub struct LayerEffects<'a> {
     composite: ComputePipeline<'a>,
     grain: GrainRecorder<'a>,
     dof_sigma: ComputePipeline<'a>,
+    dof_reach: ComputePipeline<'a>,
     dof_down: ComputePipeline<'a>,
     dof_up: ComputePipeline<'a>,
     /// The frame's parameters, copied from the slot's uniform buffer at the start
@@ -245,6 +250,10 @@ pub struct LayerEffects<'a> {
     pub dof_tmp: Image<'a>,
     sigma_tmp: Image<'a>,
     sigma_full: Image<'a>,
+    /// Per 8×8 block of the scatter passes' grid: largest σ in it, then (reach)
+    /// the largest within the pass radius — the per-workgroup tap-loop bound.
+    dof_tile_sigma: Image<'a>,
+    dof_reach_sigma: Image<'a>,
     colour_half: Image<'a>,
     sigma_half: Image<'a>,
     dof_half: Image<'a>,
@@ -312,10 +321,18 @@ impl<'a> LayerEffects<'a> {
             height: h,
             settings,
             // Set 0: full resolution, set 1: half resolution.
-            dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[st, st, st, st], push, 2, "layer dof h")?,
-            dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st], push, 2, "layer dof v")?,
-            dof_sigma: ComputePipeline::with_layout(ctx, DOF_SIGMA, &[ub, st, st], push, 1, "layer dof sigma")?,
-            dof_down: ComputePipeline::with_layout(ctx, DOF_DOWN, &[ub, st, st, st, st], push, 1, "layer dof down")?,
+            dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[st, st, st, st, st], push, 2, "layer dof h")?,
+            dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st, st], push, 2, "layer dof v")?,
+            dof_sigma: ComputePipeline::with_layout(ctx, DOF_SIGMA, &[ub, st, st, st], push, 1, "layer dof sigma")?,
+            dof_reach: ComputePipeline::with_layout(ctx, DOF_REACH, &[st, st], push, 1, "layer dof reach")?,
+            dof_down: ComputePipeline::with_layout(
+                ctx,
+                DOF_DOWN,
+                &[ub, st, st, st, st, st],
+                push,
+                1,
+                "layer dof down",
+            )?,
             dof_up: ComputePipeline::with_layout(ctx, DOF_UP, &[st, st], push, 1, "layer dof up")?,
             mb_tiles: ComputePipeline::with_layout(ctx, MB_TILES, &[st, st], push, 1, "layer mb tiles")?,
             mb_neighbour: ComputePipeline::with_layout(ctx, MB_NEIGHBOUR, &[st, st], push, 1, "layer mb neighbour")?,
@@ -334,6 +351,8 @@ impl<'a> LayerEffects<'a> {
             dof_tmp: storage_image(ctx, w, h, f16, "dof horizontal")?,
             sigma_tmp: storage_image(ctx, w, h, vk::Format::R32_SFLOAT, "dof sigma")?,
             sigma_full: storage_image(ctx, w, h, vk::Format::R32_SFLOAT, "dof source sigma")?,
+            dof_tile_sigma: storage_image(ctx, w.div_ceil(8), h.div_ceil(8), vk::Format::R32_SFLOAT, "dof tile sigma")?,
+            dof_reach_sigma: storage_image(ctx, w.div_ceil(8), h.div_ceil(8), vk::Format::R32_SFLOAT, "dof reach")?,
             colour_half: storage_image(ctx, w.div_ceil(2), h.div_ceil(2), f16, "dof half colour")?,
             sigma_half: storage_image(ctx, w.div_ceil(2), h.div_ceil(2), vk::Format::R32_SFLOAT, "dof half sigma")?,
             dof_half: storage_image(ctx, w.div_ceil(2), h.div_ceil(2), f16, "dof half out")?,
@@ -343,12 +362,22 @@ impl<'a> LayerEffects<'a> {
             mb_out: storage_image(ctx, w, h, f16, "mb out")?,
         };
         use Resource::{Buffer as B, Image as I};
-        me.dof_sigma.bind_resources(0, &[B(&me.params), I(motion), I(&me.sigma_full)])?;
-        me.dof_h.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
-        me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out)])?;
-        me.dof_down.bind_resources(0, &[B(&me.params), I(colour), I(motion), I(&me.colour_half), I(&me.sigma_half)])?;
-        me.dof_h.bind_resources(1, &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp)])?;
-        me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half)])?;
+        me.dof_sigma.bind_resources(0, &[B(&me.params), I(motion), I(&me.sigma_full), I(&me.dof_tile_sigma)])?;
+        me.dof_reach.bind_resources(0, &[I(&me.dof_tile_sigma), I(&me.dof_reach_sigma)])?;
+        me.dof_h.bind_resources(
+            0,
+            &[I(colour), I(&me.sigma_full), I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_reach_sigma)],
+        )?;
+        me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out), I(&me.dof_reach_sigma)])?;
+        me.dof_down.bind_resources(
+            0,
+            &[B(&me.params), I(colour), I(motion), I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tile_sigma)],
+        )?;
+        me.dof_h.bind_resources(
+            1,
+            &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_reach_sigma)],
+        )?;
+        me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half), I(&me.dof_reach_sigma)])?;
         me.dof_up.bind_resources(0, &[I(&me.dof_half), I(&me.dof_out)])?;
         me.mb_tiles.bind_resources(0, &[I(motion), I(&me.tiles)])?;
         me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;
@@ -447,11 +476,14 @@ impl<'a> LayerEffects<'a> {
                 hp.radius = ((fx.dof_radius_px + 1) / 2 + step - 1) / step * step;
                 let (hgw, hgh) = (hr[0].w.max(hr[1].w), hr[0].h.max(hr[1].h));
                 self.dof_down.record(cmd, bytemuck::bytes_of(&push), groups(hgw, hgh));
+                // One invocation per 8×8 block of the scatter grid.
+                self.dof_reach.record(cmd, bytemuck::bytes_of(&hp), groups((hgw + 7) / 8, (hgh + 7) / 8));
                 self.dof_h.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
                 self.dof_v.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
                 self.dof_up.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             } else {
                 self.dof_sigma.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+                self.dof_reach.record(cmd, bytemuck::bytes_of(&push), groups((gw + 7) / 8, (gh + 7) / 8));
                 self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
                 self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             }
