@@ -33,7 +33,7 @@ layout(push_constant) uniform Push {
 
 #include "dof_sigma.glsl"
 
-shared float block_sigma[64];
+#include "dof_block_max.glsl"
 
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
@@ -42,8 +42,7 @@ void main() {
     ivec2 h1 = (r.xy + r.zw + 1) / 2;
     ivec2 hxy = h0 + ivec2(gl_GlobalInvocationID.xy);
     float sigma_half = -1.0;
-    // No early return: every invocation reaches the barrier below (a barrier in
-    // non-uniform control flow is undefined behaviour).
+    // No early return: every invocation reaches write_block_max's barrier.
     if (r.z > 0 && r.w > 0 && hxy.x < h1.x && hxy.y < h1.y) {
         vec4 c = vec4(0.0);
         float sw = 0.0;
@@ -67,13 +66,5 @@ void main() {
         imageStore(colour_out, ivec3(hxy, layer), c);
         imageStore(sigma_out, ivec3(hxy, layer), vec4(sigma_half));
     }
-    block_sigma[gl_LocalInvocationIndex] = sigma_half;
-    barrier();
-    if (gl_LocalInvocationIndex == 0u) {
-        float m = -1.0;
-        for (int i = 0; i < 64; i++) {
-            m = max(m, block_sigma[i]);
-        }
-        imageStore(tile_sigma_out, ivec3(gl_WorkGroupID.xy, layer), vec4(m));
-    }
+    write_block_max(sigma_half, layer);
 }

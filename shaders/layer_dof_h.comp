@@ -29,28 +29,7 @@ layout(push_constant) uniform Push {
     uint samples;
 } p;
 
-// erf, Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5e-7); the CPU twin uses the same.
-float erf_as(float x) {
-    float s = sign(x);
-    float a = abs(x);
-    float t = 1.0 / (1.0 + 0.3275911 * a);
-    float y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * exp(-a * a);
-    return s * y;
-}
-
-// Mass of N(0, σ²) over [d − h, d + h]; 0 beyond 4σ (the tail there is < 6.4e-5
-// of the mass; cutting it skips the two erf and the colour read of far taps of
-// small-σ sources — the radius is set by the largest σ in view).
-float tap(float d, float h, float sigma) {
-    if (abs(d) - h > 4.0 * sigma) {
-        return 0.0;
-    }
-    if (sigma < 1e-4) {
-        return (abs(d) < h) ? 1.0 : 0.0;
-    }
-    float k = 0.70710678 / sigma;
-    return 0.5 * (erf_as((d + h) * k) - erf_as((d - h) * k));
-}
+#include "dof_tap.glsl"
 
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
@@ -63,12 +42,9 @@ void main() {
     float s_acc = 0.0;
     float w_acc = 0.0;
     float h = 0.5 * float(p.step);
-    // Taps beyond 4σ_max + h are zero (`tap`); +1 absorbs float rounding of the
-    // bound. First tap: the full loop's lattice point −radius + k·step nearest
-    // inside −reach, so the taps visited are the full loop's non-zero ones, in order.
     float sigma_max = imageLoad(reach_in, ivec3(gl_WorkGroupID.xy, layer)).x;
-    int reach = clamp(int(ceil(4.0 * sigma_max + h)) + 1, 0, p.radius);
-    int d0 = -p.radius + (p.radius - reach + p.step - 1) / p.step * p.step;
+    int reach = tap_reach(sigma_max, h, p.radius);
+    int d0 = tap_start(reach, p.radius, p.step);
     for (int d = d0; d <= reach; d += p.step) {
         int x = xy.x + d;
         if (x < r.x || x >= r.x + r.z) {

@@ -29,26 +29,18 @@ layout(push_constant) uniform Push {
 
 #include "dof_sigma.glsl"
 
-shared float block_sigma[64];
+#include "dof_block_max.glsl"
 
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
     ivec4 r = p.rect[layer];
     ivec2 xy = r.xy + ivec2(gl_GlobalInvocationID.xy);
     float sigma = -1.0;
-    // No early return: every invocation reaches the barrier (see layer_dof_down).
+    // No early return: every invocation reaches write_block_max's barrier.
     if (gl_GlobalInvocationID.x < uint(r.z) && gl_GlobalInvocationID.y < uint(r.w)) {
         vec4 m = imageLoad(motion_in, ivec3(xy, layer));
         sigma = m.w > 0.0 ? sigma_eye(m.z) : -1.0;
         imageStore(sigma_out, ivec3(xy, layer), vec4(sigma));
     }
-    block_sigma[gl_LocalInvocationIndex] = sigma;
-    barrier();
-    if (gl_LocalInvocationIndex == 0u) {
-        float m = -1.0;
-        for (int i = 0; i < 64; i++) {
-            m = max(m, block_sigma[i]);
-        }
-        imageStore(tile_sigma_out, ivec3(gl_WorkGroupID.xy, layer), vec4(m));
-    }
+    write_block_max(sigma, layer);
 }

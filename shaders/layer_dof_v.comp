@@ -22,24 +22,7 @@ layout(push_constant) uniform Push {
     uint samples;
 } p;
 
-float erf_as(float x) {
-    float s = sign(x);
-    float a = abs(x);
-    float t = 1.0 / (1.0 + 0.3275911 * a);
-    float y = 1.0 - (((((1.061405429 * t - 1.453152027) * t) + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t * exp(-a * a);
-    return s * y;
-}
-
-float tap(float d, float h, float sigma) {
-    if (abs(d) - h > 4.0 * sigma) {
-        return 0.0;
-    }
-    if (sigma < 1e-4) {
-        return (abs(d) < h) ? 1.0 : 0.0;
-    }
-    float k = 0.70710678 / sigma;
-    return 0.5 * (erf_as((d + h) * k) - erf_as((d - h) * k));
-}
+#include "dof_tap.glsl"
 
 void main() {
     int layer = int(gl_GlobalInvocationID.z);
@@ -50,12 +33,9 @@ void main() {
     }
     vec4 acc = vec4(0.0);
     float h = 0.5 * float(p.step);
-    // Taps beyond 4σ_max + h are zero (`tap`); +1 absorbs float rounding of the
-    // bound. First tap: the full loop's lattice point −radius + k·step nearest
-    // inside −reach, so the taps visited are the full loop's non-zero ones, in order.
     float sigma_max = imageLoad(reach_in, ivec3(gl_WorkGroupID.xy, layer)).x;
-    int reach = clamp(int(ceil(4.0 * sigma_max + h)) + 1, 0, p.radius);
-    int d0 = -p.radius + (p.radius - reach + p.step - 1) / p.step * p.step;
+    int reach = tap_reach(sigma_max, h, p.radius);
+    int d0 = tap_start(reach, p.radius, p.step);
     for (int d = d0; d <= reach; d += p.step) {
         int y = xy.y + d;
         if (y < r.y || y >= r.y + r.w) {
