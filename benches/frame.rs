@@ -127,6 +127,12 @@ fn profile(r: &mut StereoRenderer<'_>, snap: &Snapshot, s: &Setup, matched: bool
     runs[runs.len() / 2]
 }
 
+/// Invocations of the full-eye composite (8×8 groups over both eyes), which the
+/// effects' compute-invocation figures leave out.
+fn composite_invocations(w: u32, h: u32) -> u64 {
+    (w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2
+}
+
 fn total(p: &FrameProfile) -> f64 {
     p.gbuffer_ms + p.dof_ms + p.mb_ms + p.grain_ms + p.composite_ms
 }
@@ -159,7 +165,7 @@ fn main() {
         r.enable_profiling().expect("timestamps");
         let grey = vec![128u8; (w * h * 4 * 2) as usize];
         r.set_background(&grey).expect("background");
-        let composite_inv = (w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2;
+        let composite_inv = composite_invocations(w, h);
         for &coverage in coverages {
             let (s, got) = setup(&scene, &r, f, coverage);
             let naive = profile(&mut r, &snap, &s, false);
@@ -211,9 +217,7 @@ fn near_focus_rows(ctx: &GpuContext, scene: &Scene) {
             ms(p.mb_ms),
             ms(p.grain_ms),
             (p.dof_ms + p.mb_ms + p.grain_ms) / p.gbuffer_ms,
-            p.effects_stats
-                .compute_invocations
-                .saturating_sub((w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2),
+            p.effects_stats.compute_invocations.saturating_sub(composite_invocations(w, h)),
         );
     }
 }
@@ -333,9 +337,7 @@ fn settings_table(ctx: &GpuContext, scene: &Scene, snap: &Snapshot) {
             mae * 255.0,
             p99 * 255.0,
             ms(gpu_ms),
-            p.effects_stats
-                .compute_invocations
-                .saturating_sub((w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2)
+            p.effects_stats.compute_invocations.saturating_sub(composite_invocations(w, h))
         );
     }
 }

@@ -169,21 +169,16 @@ impl<'a> MultiviewTarget<'a> {
         Ok(me)
     }
 
-    /// Begin the render pass over the whole target, clearing colour attachment i
-    /// to `clear[i]` and depth to 1; full-target viewport and scissor.
-    pub fn record_begin(&self, cmd: vk::CommandBuffer, clear: &[[f32; 4]]) {
-        self.record_begin_in(cmd, clear, [0, 0, self.width, self.height]);
-    }
-
     /// Begin the render pass over `area` = [x, y, w, h] only (clamped to the
-    /// target, at least 1×1): the clear and every draw are confined to it (the
+    /// target, at least 1×1), clearing colour attachment i to `clear[i]` and depth
+    /// to 1: the clear and every draw are confined to it (the
     /// render area bounds the load op, and the scissor the rasteriser), so a frame
     /// whose content covers a small part of the eye pays for that part. Texels
     /// outside keep whatever they held: readers must stay inside `area`. The
     /// viewport stays the whole target, so clip space (and the projection) is
     /// unchanged. Multiview: one area for both views (Vulkan has one render area
     /// per pass), so callers pass the union of the eyes' rectangles.
-    pub fn record_begin_in(&self, cmd: vk::CommandBuffer, clear: &[[f32; 4]], area: [u32; 4]) {
+    pub fn record_begin(&self, cmd: vk::CommandBuffer, clear: &[[f32; 4]], area: [u32; 4]) {
         let mut values: Vec<vk::ClearValue> = (0..self.colour.len())
             .map(|i| vk::ClearValue {
                 color: vk::ClearColorValue { float32: clear.get(i).copied().unwrap_or([0.0; 4]) },

@@ -199,7 +199,7 @@ impl<'a> GBufferPass<'a> {
         self.record_in(cmd, slot, frame, Rect::full(self.target.width as usize, self.target.height as usize))
     }
 
-    /// `record` confined to `area` (both eyes; see `MultiviewTarget::record_begin_in`):
+    /// `record` confined to `area` (both eyes; see `MultiviewTarget::record_begin`):
     /// the clear and the rasterisation cost follow the content's screen area, not
     /// the eye buffer's. Texels outside `area` are stale; an empty `area` clears 1×1.
     pub fn record_in(
@@ -234,7 +234,7 @@ impl<'a> GBufferPass<'a> {
         let slot = slot % self.uniforms.len();
         self.uniforms[slot].write(bytemuck::bytes_of(&u))?;
         let area = [area.x.max(0) as u32, area.y.max(0) as u32, area.w.max(0) as u32, area.h.max(0) as u32];
-        self.target.record_begin_in(cmd, &[[0.0; 4], [0.0; 4]], area);
+        self.target.record_begin(cmd, &[[0.0; 4], [0.0; 4]], area);
         self.pipeline.record_bind(cmd, slot);
         for m in &self.meshes {
             let (Some(now), Some(prev)) = (frame.world_from_nodes.get(m.node), frame.prev_world_from_nodes.get(m.node))

@@ -72,27 +72,12 @@ impl<'a> StereoRenderer<'a> {
         eye_pixels_per_radian: Option<f32>,
     ) -> Result<Self, GpuError> {
         let gbuffer = GBufferPass::new(ctx, scene, width, height, FRAMES_IN_FLIGHT)?;
-        let usage = vk::ImageUsageFlags::STORAGE;
-        let background = Image::new(
-            ctx,
-            width,
-            height,
-            EYES,
-            vk::Format::R8G8B8A8_UNORM,
-            usage,
-            vk::ImageLayout::GENERAL,
-            "background",
-        )?;
-        let output = Image::new(
-            ctx,
-            width,
-            height,
-            EYES,
-            vk::Format::R8G8B8A8_UNORM,
-            usage,
-            vk::ImageLayout::GENERAL,
-            "output",
-        )?;
+        let rgba8 = |name: &str| {
+            let usage = vk::ImageUsageFlags::STORAGE;
+            Image::new(ctx, width, height, EYES, vk::Format::R8G8B8A8_UNORM, usage, vk::ImageLayout::GENERAL, name)
+        };
+        let background = rgba8("background")?;
+        let output = rgba8("output")?;
         let nodes = GRAIN_TABLE_NODES as u32;
         let effects =
             LayerEffects::new(ctx, gbuffer.colour(), gbuffer.motion(), &background, &output, settings, nodes)?;
