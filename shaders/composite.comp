@@ -1,6 +1,7 @@
 #version 450
-// Composite over the passthrough image (desktop: the background frame), per eye:
-// out = bg·(1 − α) + C + α·n, with C, α the (blurred) premultiplied virtual layer
+// Composite over the background, per eye (desktop: the camera frame, opaque; the
+// headset: transparent, the compositor blends the result over passthrough):
+// out = bg·(1 − α) + C + α·n, alpha = bg.a·(1 − α) + α, with C, α the (blurred) premultiplied virtual layer
 // and n the grain field at the virtual content's luma, faded by the blurred alpha
 // so the grain stops where the object does. Encoded (sRGB) space throughout: the
 // camera model was fitted on encoded frames. Twin: synth::layer::composite.
@@ -47,5 +48,10 @@ void main() {
         int i = row * p.noise_width + (xy.x - r.x);
         rgb += a * noise[i].rgb;
     }
-    imageStore(out_image, ivec3(xy, layer), vec4(clamp(rgb, 0.0, 1.0), 1.0));
+    // Premultiplied "over" alpha: 1 over an opaque background (desktop), the
+    // blurred virtual alpha over a transparent one (the headset's projection layer
+    // over passthrough, blended by the compositor). Premultiplied colour never
+    // exceeds its alpha.
+    float ao = clamp(bg.a * (1.0 - a) + a, 0.0, 1.0);
+    imageStore(out_image, ivec3(xy, layer), vec4(clamp(rgb, 0.0, ao), ao));
 }

@@ -443,7 +443,8 @@ pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect) -> Vec<f32> {
 }
 
 /// `composite.comp` for one eye: out = bg·(1 − α) + C + α·n (n: planar RGB grain
-/// of `rect`'s size, or none), clamped to [0, 1]; the virtual layer is `fx` (or
+/// of `rect`'s size, or none), alpha = bg.a·(1 − α) + α (premultiplied "over"),
+/// colour clamped to [0, alpha]; the virtual layer is `fx` (or
 /// `raw`) inside `rect` and empty outside it.
 pub fn composite(
     background: &[[f32; 4]],
@@ -473,7 +474,10 @@ pub fn composite(
                     rgb[k] += a * n[k * plane + j];
                 }
             }
-            [rgb[0].clamp(0.0, 1.0), rgb[1].clamp(0.0, 1.0), rgb[2].clamp(0.0, 1.0), 1.0]
+            // Premultiplied "over": opaque over an opaque background; the virtual
+            // alpha over a transparent one (the headset's passthrough layer).
+            let ao = (background[i][3] * (1.0 - a) + a).clamp(0.0, 1.0);
+            [rgb[0].clamp(0.0, ao), rgb[1].clamp(0.0, ao), rgb[2].clamp(0.0, ao), ao]
         })
         .collect()
 }

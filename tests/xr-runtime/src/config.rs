@@ -1,0 +1,149 @@
+//! The test runtime's configuration, read from `BA_XR_*` environment variables when
+//! an instance is created (the Khronos loader gives a runtime no other channel).
+//!
+//! | variable | meaning | default |
+//! |---|---|---|
+//! | `BA_XR_DISPLAY_HZ` | display refresh rate at start | 90 |
+//! | `BA_XR_REFRESH_RATES` | rates XR_FB_display_refresh_rate offers | 72,90,120 |
+//! | `BA_XR_EYE_SIZE` | recommended image rect per eye, `WxH` | 1680x1760 |
+//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, or `none` | passthrough,refresh_rate,space_warp |
+//! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` | opaque |
+//! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N` | none |
+//! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
+//! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
+//! | `BA_XR_HEAD` | head path: `sway` (±4 cm at 0.5 Hz, ±3° yaw) or `still` | sway |
+
+use std::path::PathBuf;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Command {
+    /// The runtime asks the application to exit (as the user quitting from the system UI).
+    Exit,
+    /// Session loss (device unplugged): XR_SESSION_STATE_LOSS_PENDING.
+    Loss,
+    /// XrEventDataInstanceLossPending.
+    InstanceLoss,
+    /// FOCUSED → VISIBLE (a system dialog over the app) ...
+    Unfocus,
+    /// ... and back.
+    Focus,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Head {
+    Sway,
+    Still,
+}
+
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub display_hz: f32,
+    pub refresh_rates: Vec<f32>,
+    pub eye_size: (u32, u32),
+    pub passthrough: bool,
+    pub refresh_rate: bool,
+    pub space_warp: bool,
+    pub blend_modes: Vec<openxr_sys::EnvironmentBlendMode>,
+    pub script: Vec<(u64, Command)>,
+    pub png_dir: Option<PathBuf>,
+    pub png_frames: Vec<u64>,
+    pub report: Option<PathBuf>,
+    pub head: Head,
+}
+
+fn var(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|s| !s.trim().is_empty())
+}
+
+impl Config {
+    /// Read the environment; a malformed value is an error naming the variable.
+    pub fn from_env() -> Result<Self, String> {
+        let display_hz = match var("BA_XR_DISPLAY_HZ") {
+            Some(s) => s.trim().parse::<f32>().ok().filter(|v| v.is_finite() && *v > 0.0 && *v <= 1000.0).ok_or(
+                format!("BA_XR_DISPLAY_HZ={s:?}: expected a refresh rate in Hz, e.g. 90"),
+            )?,
+            None => 90.0,
+        };
+        let refresh_rates = match var("BA_XR_REFRESH_RATES") {
+            Some(s) => s
+                .split(',')
+                .map(|r| r.trim().parse::<f32>().ok().filter(|v| v.is_finite() && *v > 0.0))
+                .collect::<Option<Vec<_>>>()
+                .ok_or(format!("BA_XR_REFRESH_RATES={s:?}: expected comma-separated rates in Hz"))?,
+            None => vec![72.0, 90.0, 120.0],
+        };
+        let eye_size = match var("BA_XR_EYE_SIZE") {
+            Some(s) => {
+                let parsed = s.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
+                parsed
+                    .filter(|&(w, h): &(u32, u32)| (8..=8192).contains(&w) && (8..=8192).contains(&h))
+                    .ok_or(format!("BA_XR_EYE_SIZE={s:?}: expected WxH between 8 and 8192"))?
+            }
+            None => (1680, 1760),
+        };
+        let extensions = var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp".into());
+        let mut ext = (false, false, false);
+        for e in extensions.split(',').map(str::trim) {
+            match e {
+                "passthrough" => ext.0 = true,
+                "refresh_rate" => ext.1 = true,
+                "space_warp" => ext.2 = true,
+                "none" => {}
+                other => return Err(format!("BA_XR_EXTENSIONS: unknown extension {other:?}")),
+            }
+        }
+        let mut blend_modes = vec![];
+        for b in var("BA_XR_BLEND_MODES").unwrap_or_else(|| "opaque".into()).split(',').map(str::trim) {
+            blend_modes.push(match b {
+                "opaque" => openxr_sys::EnvironmentBlendMode::OPAQUE,
+                "alpha_blend" => openxr_sys::EnvironmentBlendMode::ALPHA_BLEND,
+                "additive" => openxr_sys::EnvironmentBlendMode::ADDITIVE,
+                other => return Err(format!("BA_XR_BLEND_MODES: unknown blend mode {other:?}")),
+            });
+        }
+        let mut script = vec![];
+        if let Some(s) = var("BA_XR_SCRIPT") {
+            for item in s.split(',').map(str::trim) {
+                let (what, at) =
+                    item.split_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
+                let at: u64 = at.parse().map_err(|_| format!("BA_XR_SCRIPT: {item:?}: frame is not a number"))?;
+                let cmd = match what {
+                    "exit" => Command::Exit,
+                    "loss" => Command::Loss,
+                    "instance_loss" => Command::InstanceLoss,
+                    "unfocus" => Command::Unfocus,
+                    "focus" => Command::Focus,
+                    other => return Err(format!("BA_XR_SCRIPT: unknown command {other:?}")),
+                };
+                script.push((at, cmd));
+            }
+        }
+        let png_frames = match var("BA_XR_PNG_FRAMES") {
+            Some(s) => s
+                .split(',')
+                .map(|f| f.trim().parse::<u64>().ok())
+                .collect::<Option<Vec<_>>>()
+                .ok_or(format!("BA_XR_PNG_FRAMES={s:?}: expected comma-separated frame numbers"))?,
+            None => vec![],
+        };
+        let head = match var("BA_XR_HEAD").as_deref() {
+            None | Some("sway") => Head::Sway,
+            Some("still") => Head::Still,
+            Some(other) => return Err(format!("BA_XR_HEAD: unknown head path {other:?}")),
+        };
+        Ok(Self {
+            display_hz,
+            refresh_rates,
+            eye_size,
+            passthrough: ext.0,
+            refresh_rate: ext.1,
+            space_warp: ext.2,
+            blend_modes,
+            script,
+            png_dir: var("BA_XR_PNG_DIR").map(PathBuf::from),
+            png_frames,
+            report: var("BA_XR_REPORT").map(PathBuf::from),
+            head,
+        })
+    }
+}

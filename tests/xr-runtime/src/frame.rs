@@ -1,0 +1,400 @@
+//! The frame loop: `xrWaitFrame` paced on a display-refresh grid (halved while the
+//! app submits XR_FB_space_warp data, as Quest throttles an AppSW app), and
+//! `xrEndFrame` checking and recording the submitted layers (JSON report, PNG).
+
+use crate::{lock, Runtime};
+use openxr_sys as xr;
+use xr::Handle as _;
+use serde_json::json;
+
+#[derive(Default)]
+pub(crate) struct Pacing {
+    /// Display time of the frame last handed out by xrWaitFrame (ns).
+    pub last_display_ns: Option<i64>,
+    /// The display grid's origin (first vsync).
+    pub grid_origin_ns: i64,
+    /// xrWaitFrame calls not yet matched by xrBeginFrame.
+    pub waited: u32,
+    /// Between xrBeginFrame and xrEndFrame.
+    pub in_frame: bool,
+    /// Display times handed out and not yet ended (xrEndFrame must name one).
+    pub pending: Vec<i64>,
+    /// xrEndFrame calls so far (the script's and the PNG list's frame numbers).
+    pub ended: u64,
+    /// Frames whose display time had to slip past the next grid slot (the app was late).
+    pub missed: u64,
+    /// The last submitted frame carried space-warp data: render at half rate.
+    pub throttled: bool,
+}
+
+fn period_ns(hz: f32) -> i64 {
+    (1e9 / hz as f64).round() as i64
+}
+
+pub(crate) unsafe extern "system" fn wait_frame(
+    session: xr::Session,
+    _info: *const xr::FrameWaitInfo,
+    state: *mut xr::FrameState,
+) -> xr::Result {
+    if state.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    // Decide under the lock, sleep without it (other threads may call in meanwhile:
+    // the spec allows xrWaitFrame on one thread and the rest on another).
+    let (wake_ns, display_ns, period, should_render, epoch, result) = {
+        let mut guard = lock();
+        let Some(rt) = guard.as_mut() else { return xr::Result::ERROR_HANDLE_INVALID };
+        if rt.instance_lost {
+            return xr::Result::ERROR_INSTANCE_LOST;
+        }
+        let now = rt.now_ns();
+        let Some(s) = rt.session.as_mut().filter(|s| s.handle == session.into_raw()) else {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        };
+        if s.lost {
+            return xr::Result::ERROR_SESSION_LOST;
+        }
+        if !s.running {
+            return xr::Result::ERROR_SESSION_NOT_RUNNING;
+        }
+        let display = period_ns(s.display_hz);
+        let period = if s.frame.throttled { 2 * display } else { display };
+        let p = &mut s.frame;
+        if p.last_display_ns.is_none() {
+            p.grid_origin_ns = now;
+        }
+        // The frame is displayed one app period after the app is woken (the budget
+        // it has to render), on the display grid.
+        let earliest = now + period;
+        let mut target = p.last_display_ns.map_or(earliest, |l| l + period);
+        if target < earliest {
+            // Late: the frame slips to the next grid slot after `earliest`.
+            let k = (earliest - p.grid_origin_ns + display - 1) / display;
+            target = p.grid_origin_ns + k * display;
+            p.missed += 1;
+        }
+        p.last_display_ns = Some(target);
+        p.waited += 1;
+        p.pending.push(target);
+        let should_render = matches!(s.state, xr::SessionState::VISIBLE | xr::SessionState::FOCUSED);
+        let first = s.state == xr::SessionState::READY;
+        if first {
+            // The frame loop is now synchronised with the runtime (spec 9.3).
+            rt.set_state(xr::SessionState::SYNCHRONIZED);
+        }
+        let lost = rt.session.as_ref().is_some_and(|s| s.lost);
+        (target - period, target, period, should_render, rt.epoch, if lost { xr::Result::SESSION_LOSS_PENDING } else { xr::Result::SUCCESS })
+    };
+    // Sleep until the wake time (XrTime is 1 s + time since the epoch, see now_ns).
+    let wake = epoch + std::time::Duration::from_nanos((wake_ns - 1_000_000_000).max(0) as u64);
+    let now = std::time::Instant::now();
+    if wake > now {
+        std::thread::sleep(wake - now);
+    }
+    // SAFETY: non-null caller output; `ty`/`next` are the caller's.
+    unsafe {
+        (*state).predicted_display_time = xr::Time::from_nanos(display_ns);
+        (*state).predicted_display_period = xr::Duration::from_nanos(period);
+        (*state).should_render = should_render.into();
+    }
+    result
+}
+
+pub(crate) unsafe extern "system" fn begin_frame(session: xr::Session, _info: *const xr::FrameBeginInfo) -> xr::Result {
+    crate::with_runtime(|rt| {
+        let Some(s) = rt.session.as_mut().filter(|s| s.handle == session.into_raw()) else {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        };
+        if s.lost {
+            return xr::Result::ERROR_SESSION_LOST;
+        }
+        if !s.running {
+            return xr::Result::ERROR_SESSION_NOT_RUNNING;
+        }
+        if s.frame.waited == 0 {
+            return xr::Result::ERROR_CALL_ORDER_INVALID;
+        }
+        s.frame.waited -= 1;
+        // A second xrBeginFrame without xrEndFrame discards the previous frame.
+        let discarded = std::mem::replace(&mut s.frame.in_frame, true);
+        if discarded {
+            xr::Result::FRAME_DISCARDED
+        } else {
+            xr::Result::SUCCESS
+        }
+    })
+}
+
+/// What one projection view submitted (for the report and the PNG writer).
+pub(crate) struct SubmittedView {
+    pub swapchain: u64,
+    pub rect: xr::Rect2Di,
+    pub array_index: u32,
+}
+
+pub(crate) unsafe extern "system" fn end_frame(session: xr::Session, info: *const xr::FrameEndInfo) -> xr::Result {
+    crate::with_runtime(|rt| {
+        if info.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: non-null frame end info of the caller.
+        let info = unsafe { &*info };
+        let Some(s) = rt.session.as_mut().filter(|s| s.handle == session.into_raw()) else {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        };
+        if s.lost {
+            return xr::Result::ERROR_SESSION_LOST;
+        }
+        if !s.running {
+            return xr::Result::ERROR_SESSION_NOT_RUNNING;
+        }
+        if !s.frame.in_frame {
+            return xr::Result::ERROR_CALL_ORDER_INVALID;
+        }
+        let t = info.display_time.as_nanos();
+        let Some(i) = s.frame.pending.iter().position(|&p| p == t) else { return xr::Result::ERROR_TIME_INVALID };
+        s.frame.pending.drain(..=i);
+        s.frame.in_frame = false;
+        let frame_no = s.frame.ended;
+        s.frame.ended += 1;
+        let period = if s.frame.throttled { 2 } else { 1 } * period_ns(s.display_hz);
+        let missed_total = s.frame.missed;
+        let state = s.state;
+        if !rt.config.blend_modes.contains(&info.environment_blend_mode) {
+            return xr::Result::ERROR_ENVIRONMENT_BLEND_MODE_UNSUPPORTED;
+        }
+        // SAFETY: `layers` holds `layer_count` pointers to layer structs.
+        let layers = match unsafe { read_layers(rt, info) } {
+            Ok(l) => l,
+            Err(r) => return r,
+        };
+        let space_warp = layers.iter().any(|l| l.space_warp);
+        if let Some(s) = rt.session.as_mut() {
+            s.blend_mode = Some(info.environment_blend_mode);
+            s.frame.throttled = space_warp;
+        }
+        let layer_json: Vec<_> = layers.iter().map(|l| l.json.clone()).collect();
+        rt.log(json!({
+            "event": "frame",
+            "frame": frame_no,
+            "display_time_ns": t,
+            "period_ns": period,
+            "missed_total": missed_total,
+            "state": format!("{state:?}"),
+            "blend_mode": format!("{:?}", info.environment_blend_mode),
+            "layers": layer_json,
+        }));
+        if rt.config.png_frames.contains(&frame_no) {
+            if let Err(e) = write_pngs(rt, frame_no, &layers) {
+                eprintln!("ba-xr-runtime: frame {frame_no}: writing PNG: {e}");
+                return xr::Result::ERROR_RUNTIME_FAILURE;
+            }
+        }
+        // Visible after the first submitted frame, focused right after (no system
+        // UI over the app); scripted events follow.
+        if state == xr::SessionState::SYNCHRONIZED && frame_no == 0 {
+            rt.set_state(xr::SessionState::VISIBLE);
+            rt.set_state(xr::SessionState::FOCUSED);
+        }
+        rt.run_script(frame_no + 1);
+        xr::Result::SUCCESS
+    })
+}
+
+pub(crate) struct Layer {
+    pub json: serde_json::Value,
+    /// A passthrough layer (drawn where it stands in the layer order).
+    pub passthrough: bool,
+    pub views: Vec<SubmittedView>,
+    /// Blend flags of a projection layer.
+    pub source_alpha: bool,
+    pub unpremultiplied: bool,
+    pub space_warp: bool,
+}
+
+fn fov_json(f: &xr::Fovf) -> serde_json::Value {
+    json!([f.angle_left, f.angle_right, f.angle_up, f.angle_down])
+}
+
+/// Check and copy out the submitted layers (spec 10.5: layers are drawn in order,
+/// each over the previous; swapchain images must have been released).
+unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer>, xr::Result> {
+    if info.layer_count > 16 {
+        return Err(xr::Result::ERROR_LAYER_LIMIT_EXCEEDED);
+    }
+    let mut out = vec![];
+    for i in 0..info.layer_count as usize {
+        // SAFETY: `layer_count` pointers at `layers` (caller's contract).
+        let base = unsafe { *info.layers.add(i) };
+        if base.is_null() {
+            return Err(xr::Result::ERROR_LAYER_INVALID);
+        }
+        // SAFETY: every layer struct begins with the base header.
+        let ty = unsafe { (*base).ty };
+        match ty {
+            xr::StructureType::COMPOSITION_LAYER_PROJECTION => {
+                // SAFETY: the type tag says what the struct is.
+                let p = unsafe { &*(base as *const xr::CompositionLayerProjection) };
+                if p.view_count != 2 || p.views.is_null() {
+                    return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+                }
+                if !rt.spaces.contains_key(&p.space.into_raw()) {
+                    return Err(xr::Result::ERROR_HANDLE_INVALID);
+                }
+                let mut views = vec![];
+                let mut space_warp = false;
+                let mut view_json = vec![];
+                for v in 0..2 {
+                    // SAFETY: `view_count` views at `views`.
+                    let view = unsafe { &*p.views.add(v) };
+                    let sub = view.sub_image;
+                    let Some(sc) = rt.swapchains.get(&sub.swapchain.into_raw()) else {
+                        return Err(xr::Result::ERROR_HANDLE_INVALID);
+                    };
+                    if sc.last_released.is_none() {
+                        return Err(xr::Result::ERROR_LAYER_INVALID);
+                    }
+                    let r = sub.image_rect;
+                    if r.offset.x < 0
+                        || r.offset.y < 0
+                        || r.extent.width <= 0
+                        || r.extent.height <= 0
+                        || (r.offset.x + r.extent.width) as u32 > sc.width
+                        || (r.offset.y + r.extent.height) as u32 > sc.height
+                    {
+                        return Err(xr::Result::ERROR_SWAPCHAIN_RECT_INVALID);
+                    }
+                    if sub.image_array_index >= sc.array_size {
+                        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+                    }
+                    let mut sw = false;
+                    let mut next = view.next;
+                    while !next.is_null() {
+                        // SAFETY: chained structs begin with a BaseInStructure header.
+                        let b = unsafe { &*(next as *const xr::BaseInStructure) };
+                        if b.ty == xr::StructureType::COMPOSITION_LAYER_SPACE_WARP_INFO_FB {
+                            sw = true;
+                        }
+                        next = b.next as *const _;
+                    }
+                    space_warp |= sw;
+                    view_json.push(json!({
+                        "rect": [r.offset.x, r.offset.y, r.extent.width, r.extent.height],
+                        "array_index": sub.image_array_index,
+                        "swapchain_array_size": sc.array_size,
+                        "format": sc.format.as_raw(),
+                        "fov": fov_json(&view.fov),
+                        "position": [view.pose.position.x, view.pose.position.y, view.pose.position.z],
+                        "space_warp": sw,
+                    }));
+                    views.push(SubmittedView {
+                        swapchain: sub.swapchain.into_raw(),
+                        rect: r,
+                        array_index: sub.image_array_index,
+                    });
+                }
+                let f = p.layer_flags;
+                let source_alpha = f.contains(xr::CompositionLayerFlags::BLEND_TEXTURE_SOURCE_ALPHA);
+                let unpremultiplied = f.contains(xr::CompositionLayerFlags::UNPREMULTIPLIED_ALPHA);
+                out.push(Layer {
+                    json: json!({"type": "projection", "source_alpha": source_alpha, "unpremultiplied": unpremultiplied, "views": view_json}),
+                    passthrough: false,
+                    views,
+                    source_alpha,
+                    unpremultiplied,
+                    space_warp,
+                });
+            }
+            xr::StructureType::COMPOSITION_LAYER_PASSTHROUGH_FB => {
+                // SAFETY: the type tag says what the struct is.
+                let p = unsafe { &*(base as *const xr::CompositionLayerPassthroughFB) };
+                let Some(&(pt, layer_running)) = rt.passthrough_layers.get(&p.layer_handle.into_raw()) else {
+                    return Err(xr::Result::ERROR_HANDLE_INVALID);
+                };
+                let running = layer_running && rt.passthroughs.get(&pt).copied().unwrap_or(false);
+                out.push(Layer {
+                    json: json!({"type": "passthrough_fb", "running": running}),
+                    passthrough: running,
+                    views: vec![],
+                    source_alpha: false,
+                    unpremultiplied: false,
+                    space_warp: false,
+                });
+            }
+            other => {
+                out.push(Layer {
+                    json: json!({"type": format!("{other:?}")}),
+                    passthrough: false,
+                    views: vec![],
+                    source_alpha: false,
+                    unpremultiplied: false,
+                    space_warp: false,
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The synthetic "camera" image the test runtime shows as passthrough: a smooth
+/// gradient with a coarse checker, so a blend with it is visible in a PNG.
+pub fn passthrough_texel(x: u32, y: u32, w: u32, h: u32) -> [f32; 3] {
+    let (u, v) = (x as f32 / w.max(1) as f32, y as f32 / h.max(1) as f32);
+    let check = if ((x / 32) + (y / 32)) % 2 == 0 { 0.08 } else { 0.0 };
+    [0.25 + 0.4 * u + check, 0.35 + check, 0.25 + 0.4 * v + check]
+}
+
+/// Write, per eye, the projection layer as submitted (`frame_NNNN_eyeE.png`, RGBA)
+/// and the composition of all layers in order (`frame_NNNN_eyeE_composited.png`):
+/// passthrough where a running passthrough layer stands, then each projection
+/// layer blended by its flags (premultiplied by default, spec 10.6.1). Blending is
+/// on the encoded values, as the desktop composite does; a headset compositor blends
+/// in linear light.
+fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer]) -> Result<(), String> {
+    let Some(dir) = &rt.config.png_dir else { return Ok(()) };
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let vk = rt.vk.as_ref().ok_or("no Vulkan state")?;
+    let (w, h) = rt.config.eye_size;
+    for eye in 0..2 {
+        let mut canvas = vec![[0.0f32; 3]; (w * h) as usize];
+        for layer in layers {
+            if layer.passthrough {
+                for (i, c) in canvas.iter_mut().enumerate() {
+                    *c = passthrough_texel(i as u32 % w, i as u32 / w, w, h);
+                }
+            }
+            let Some(view) = layer.views.get(eye) else { continue };
+            let sc = rt.swapchains.get(&view.swapchain).ok_or("swapchain gone")?;
+            let rgba = vk.read_layer(sc, view.array_index)?;
+            let r = view.rect;
+            let mut sub = image::RgbaImage::new(r.extent.width as u32, r.extent.height as u32);
+            for y in 0..r.extent.height as u32 {
+                for x in 0..r.extent.width as u32 {
+                    let (sx, sy) = (x + r.offset.x as u32, y + r.offset.y as u32);
+                    let i = ((sy * sc.width + sx) * 4) as usize;
+                    let px = [rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3]];
+                    sub.put_pixel(x, y, image::Rgba(px));
+                    if x < w && y < h {
+                        let c = &mut canvas[(y * w + x) as usize];
+                        let a = if layer.source_alpha { px[3] as f32 / 255.0 } else { 1.0 };
+                        for k in 0..3 {
+                            let s = px[k] as f32 / 255.0;
+                            let s = if layer.unpremultiplied { s * a } else { s };
+                            c[k] = s + c[k] * (1.0 - a);
+                        }
+                    }
+                }
+            }
+            let p = dir.join(format!("frame_{frame:04}_eye{eye}.png"));
+            sub.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+        }
+        let mut out = image::RgbImage::new(w, h);
+        for (i, c) in canvas.iter().enumerate() {
+            let px = c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
+            out.put_pixel(i as u32 % w, i as u32 / w, image::Rgb(px));
+        }
+        let p = dir.join(format!("frame_{frame:04}_eye{eye}_composited.png"));
+        out.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,678 @@
+//! A headless OpenXR runtime for tests: the Khronos loader finds it through
+//! `XR_RUNTIME_JSON` and negotiates with `xrNegotiateLoaderRuntimeInterface`
+//! (OpenXR loader design doc, "Runtime Negotiation"). It implements what
+//! blind-augment's XR app uses — instance and system, XR_KHR_vulkan_enable2 over
+//! whatever Vulkan device the loader offers (lavapipe in CI), a primary-stereo view
+//! configuration with views from a scripted head path, swapchains backed by Vulkan
+//! images it owns on the application's device, `xrWaitFrame` paced at the display
+//! rate, the session lifecycle with scripted exit/loss, XR_FB_passthrough,
+//! XR_FB_display_refresh_rate and XR_FB_space_warp's throttling — and it reports
+//! every frame (JSON lines) and writes chosen frames' layers to PNG.
+//!
+//! It is one process-wide state behind a mutex (the loader allows one runtime per
+//! process); handles are counters. Configuration: `config.rs`.
+#![allow(clippy::missing_safety_doc)]
+
+mod config;
+mod frame;
+mod session;
+mod vulkan;
+
+pub use config::{Command, Config, Head};
+
+use openxr_sys as xr;
+use xr::Handle as _;
+use std::collections::{HashMap, VecDeque};
+use std::ffi::{c_char, CStr};
+use std::io::Write;
+use std::sync::{Mutex, MutexGuard};
+use std::time::Instant;
+
+/// What this runtime reports as its API version (the Debian loader is 1.0.20).
+const API_VERSION: xr::Version = xr::Version::new(1, 0, 20);
+
+pub(crate) const EXT_VULKAN2: &str = "XR_KHR_vulkan_enable2";
+pub(crate) const EXT_PASSTHROUGH: &str = "XR_FB_passthrough";
+pub(crate) const EXT_REFRESH: &str = "XR_FB_display_refresh_rate";
+pub(crate) const EXT_SPACE_WARP: &str = "XR_FB_space_warp";
+
+/// The one system this runtime has.
+pub(crate) const SYSTEM_ID: u64 = 1;
+
+pub(crate) enum Event {
+    State { session: u64, state: xr::SessionState, time: i64 },
+    InstanceLoss { time: i64 },
+    RefreshRate { from: f32, to: f32 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum SpaceKind {
+    View,
+    Local,
+    Stage,
+}
+
+pub(crate) struct Runtime {
+    pub config: Config,
+    pub epoch: Instant,
+    pub instance: u64,
+    pub enabled: Vec<String>,
+    pub instance_lost: bool,
+    pub paths: Vec<String>,
+    pub events: VecDeque<Event>,
+    pub next_handle: u64,
+    pub session: Option<session::Session>,
+    pub spaces: HashMap<u64, (u64, SpaceKind, xr::Posef)>,
+    pub swapchains: HashMap<u64, vulkan::Swapchain>,
+    pub passthroughs: HashMap<u64, bool>,
+    pub passthrough_layers: HashMap<u64, (u64, bool)>,
+    pub vk: Option<vulkan::VkState>,
+    pub report: Option<std::fs::File>,
+}
+
+impl Runtime {
+    pub fn now_ns(&self) -> i64 {
+        // XrTime is opaque, monotonic and positive; 1 s of headroom keeps it away from 0.
+        1_000_000_000 + self.epoch.elapsed().as_nanos() as i64
+    }
+
+    pub fn handle(&mut self) -> u64 {
+        self.next_handle += 1;
+        self.next_handle
+    }
+
+    pub fn has(&self, ext: &str) -> bool {
+        self.enabled.iter().any(|e| e == ext)
+    }
+
+    /// One JSON line in the report file (tests read it).
+    pub fn log(&mut self, value: serde_json::Value) {
+        if let Some(f) = &mut self.report {
+            let _ = writeln!(f, "{value}");
+        }
+    }
+}
+
+static RUNTIME: Mutex<Option<Runtime>> = Mutex::new(None);
+
+pub(crate) fn lock() -> MutexGuard<'static, Option<Runtime>> {
+    RUNTIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Run `f` on the live runtime of `instance` (or an error result).
+pub(crate) fn with_instance(instance: xr::Instance, f: impl FnOnce(&mut Runtime) -> xr::Result) -> xr::Result {
+    let mut guard = lock();
+    match guard.as_mut() {
+        Some(rt) if rt.instance == instance.into_raw() => {
+            if rt.instance_lost {
+                xr::Result::ERROR_INSTANCE_LOST
+            } else {
+                f(rt)
+            }
+        }
+        _ => xr::Result::ERROR_HANDLE_INVALID,
+    }
+}
+
+/// Run `f` on the runtime that owns any handle (session, space, swapchain ...).
+pub(crate) fn with_runtime(f: impl FnOnce(&mut Runtime) -> xr::Result) -> xr::Result {
+    let mut guard = lock();
+    match guard.as_mut() {
+        Some(rt) if rt.instance_lost => xr::Result::ERROR_INSTANCE_LOST,
+        Some(rt) => f(rt),
+        None => xr::Result::ERROR_HANDLE_INVALID,
+    }
+}
+
+/// Two-call idiom (OpenXR spec 2.11, "Buffer Size Parameters").
+pub(crate) unsafe fn two_call<T: Copy>(items: &[T], capacity: u32, count: *mut u32, out: *mut T) -> xr::Result {
+    if count.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    // SAFETY: `count` is non-null and points to a u32 the caller owns.
+    unsafe { *count = items.len() as u32 };
+    if capacity == 0 {
+        return xr::Result::SUCCESS;
+    }
+    if (capacity as usize) < items.len() {
+        return xr::Result::ERROR_SIZE_INSUFFICIENT;
+    }
+    if out.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    // SAFETY: the caller promised `capacity` elements at `out`, and capacity ≥ len.
+    unsafe { std::ptr::copy_nonoverlapping(items.as_ptr(), out, items.len()) };
+    xr::Result::SUCCESS
+}
+
+pub(crate) fn write_cstr(dst: &mut [c_char], s: &str) {
+    let n = s.len().min(dst.len() - 1);
+    for (d, b) in dst.iter_mut().zip(s.bytes().take(n)) {
+        *d = b as c_char;
+    }
+    dst[n] = 0;
+}
+
+/// The extensions this runtime offers under its configuration.
+fn offered(config: &Config) -> Vec<(&'static str, u32)> {
+    let mut v = vec![(EXT_VULKAN2, 2)];
+    if config.passthrough {
+        v.push((EXT_PASSTHROUGH, 4));
+    }
+    if config.refresh_rate {
+        v.push((EXT_REFRESH, 1));
+    }
+    if config.space_warp {
+        v.push((EXT_SPACE_WARP, 2));
+    }
+    v
+}
+
+/// The loader's entry point (loader design doc, "Runtime Interface Negotiation").
+#[no_mangle]
+pub unsafe extern "system" fn xrNegotiateLoaderRuntimeInterface(
+    loader_info: *const xr::NegotiateLoaderInfo,
+    request: *mut xr::NegotiateRuntimeRequest,
+) -> xr::Result {
+    if loader_info.is_null() || request.is_null() {
+        return xr::Result::ERROR_INITIALIZATION_FAILED;
+    }
+    // SAFETY: both pointers are non-null and point to the loader's structs.
+    let (info, req) = unsafe { (&*loader_info, &mut *request) };
+    if info.struct_type != xr::LoaderInterfaceStructs::LOADER_INFO
+        || req.struct_type != xr::LoaderInterfaceStructs::RUNTIME_REQUEST
+        || info.min_interface_version > 1
+        || info.max_interface_version < 1
+        || info.max_api_version.major() < 1
+    {
+        return xr::Result::ERROR_INITIALIZATION_FAILED;
+    }
+    req.runtime_interface_version = 1;
+    req.runtime_api_version = API_VERSION;
+    req.get_instance_proc_addr = Some(get_instance_proc_addr);
+    xr::Result::SUCCESS
+}
+
+macro_rules! pfn {
+    ($f:path) => {{
+        // SAFETY: the loader casts the pointer back to the signature the name has in
+        // the OpenXR registry, which is the signature of `$f`.
+        let p: xr::pfn::VoidFunction = unsafe { std::mem::transmute($f as *const ()) };
+        Some(p)
+    }};
+}
+
+unsafe extern "system" fn get_instance_proc_addr(
+    instance: xr::Instance,
+    name: *const c_char,
+    function: *mut Option<xr::pfn::VoidFunction>,
+) -> xr::Result {
+    if name.is_null() || function.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    // SAFETY: the loader passes a NUL-terminated name.
+    let name = unsafe { CStr::from_ptr(name) }.to_str().unwrap_or("");
+    let global = instance == xr::Instance::NULL;
+    let f: Option<xr::pfn::VoidFunction> = match name {
+        "xrEnumerateInstanceExtensionProperties" => pfn!(enumerate_instance_extension_properties),
+        "xrEnumerateApiLayerProperties" => pfn!(enumerate_api_layer_properties),
+        "xrCreateInstance" => pfn!(create_instance),
+        "xrGetInstanceProcAddr" => pfn!(get_instance_proc_addr),
+        _ if global => None,
+        "xrDestroyInstance" => pfn!(destroy_instance),
+        "xrGetInstanceProperties" => pfn!(get_instance_properties),
+        "xrPollEvent" => pfn!(session::poll_event),
+        "xrResultToString" => pfn!(result_to_string),
+        "xrStructureTypeToString" => pfn!(structure_type_to_string),
+        "xrGetSystem" => pfn!(get_system),
+        "xrGetSystemProperties" => pfn!(get_system_properties),
+        "xrEnumerateEnvironmentBlendModes" => pfn!(enumerate_environment_blend_modes),
+        "xrEnumerateViewConfigurations" => pfn!(enumerate_view_configurations),
+        "xrGetViewConfigurationProperties" => pfn!(get_view_configuration_properties),
+        "xrEnumerateViewConfigurationViews" => pfn!(enumerate_view_configuration_views),
+        "xrStringToPath" => pfn!(string_to_path),
+        "xrPathToString" => pfn!(path_to_string),
+        "xrCreateSession" => pfn!(session::create_session),
+        "xrDestroySession" => pfn!(session::destroy_session),
+        "xrBeginSession" => pfn!(session::begin_session),
+        "xrEndSession" => pfn!(session::end_session),
+        "xrRequestExitSession" => pfn!(session::request_exit_session),
+        "xrEnumerateReferenceSpaces" => pfn!(session::enumerate_reference_spaces),
+        "xrCreateReferenceSpace" => pfn!(session::create_reference_space),
+        "xrGetReferenceSpaceBoundsRect" => pfn!(session::get_reference_space_bounds_rect),
+        "xrLocateSpace" => pfn!(session::locate_space),
+        "xrDestroySpace" => pfn!(session::destroy_space),
+        "xrWaitFrame" => pfn!(frame::wait_frame),
+        "xrBeginFrame" => pfn!(frame::begin_frame),
+        "xrEndFrame" => pfn!(frame::end_frame),
+        "xrLocateViews" => pfn!(session::locate_views),
+        "xrEnumerateSwapchainFormats" => pfn!(vulkan::enumerate_swapchain_formats),
+        "xrCreateSwapchain" => pfn!(vulkan::create_swapchain),
+        "xrDestroySwapchain" => pfn!(vulkan::destroy_swapchain),
+        "xrEnumerateSwapchainImages" => pfn!(vulkan::enumerate_swapchain_images),
+        "xrAcquireSwapchainImage" => pfn!(vulkan::acquire_swapchain_image),
+        "xrWaitSwapchainImage" => pfn!(vulkan::wait_swapchain_image),
+        "xrReleaseSwapchainImage" => pfn!(vulkan::release_swapchain_image),
+        "xrGetVulkanGraphicsRequirements2KHR" => pfn!(vulkan::get_graphics_requirements),
+        "xrCreateVulkanInstanceKHR" => pfn!(vulkan::create_vulkan_instance),
+        "xrGetVulkanGraphicsDevice2KHR" => pfn!(vulkan::get_graphics_device),
+        "xrCreateVulkanDeviceKHR" => pfn!(vulkan::create_vulkan_device),
+        "xrCreatePassthroughFB" => pfn!(session::create_passthrough),
+        "xrDestroyPassthroughFB" => pfn!(session::destroy_passthrough),
+        "xrPassthroughStartFB" => pfn!(session::passthrough_start),
+        "xrPassthroughPauseFB" => pfn!(session::passthrough_pause),
+        "xrCreatePassthroughLayerFB" => pfn!(session::create_passthrough_layer),
+        "xrDestroyPassthroughLayerFB" => pfn!(session::destroy_passthrough_layer),
+        "xrPassthroughLayerPauseFB" => pfn!(session::passthrough_layer_pause),
+        "xrPassthroughLayerResumeFB" => pfn!(session::passthrough_layer_resume),
+        "xrPassthroughLayerSetStyleFB" => pfn!(session::passthrough_layer_set_style),
+        "xrCreateGeometryInstanceFB" => pfn!(session::create_geometry_instance),
+        "xrDestroyGeometryInstanceFB" => pfn!(session::destroy_geometry_instance),
+        "xrGeometryInstanceSetTransformFB" => pfn!(session::geometry_instance_set_transform),
+        "xrEnumerateDisplayRefreshRatesFB" => pfn!(session::enumerate_display_refresh_rates),
+        "xrGetDisplayRefreshRateFB" => pfn!(session::get_display_refresh_rate),
+        "xrRequestDisplayRefreshRateFB" => pfn!(session::request_display_refresh_rate),
+        _ => None,
+    };
+    // Extension functions only exist when their extension is enabled (spec 3.2).
+    let f = f.filter(|_| {
+        let ext = if name.ends_with("FB") && name.contains("RefreshRate") {
+            EXT_REFRESH
+        } else if name.ends_with("FB") {
+            EXT_PASSTHROUGH
+        } else if name.ends_with("KHR") {
+            EXT_VULKAN2
+        } else {
+            return true;
+        };
+        lock().as_ref().is_some_and(|rt| rt.has(ext))
+    });
+    // SAFETY: `function` is non-null (checked above).
+    unsafe { *function = f };
+    if f.is_some() {
+        xr::Result::SUCCESS
+    } else {
+        xr::Result::ERROR_FUNCTION_UNSUPPORTED
+    }
+}
+
+unsafe extern "system" fn enumerate_api_layer_properties(
+    _capacity: u32,
+    count: *mut u32,
+    _out: *mut xr::ApiLayerProperties,
+) -> xr::Result {
+    // SAFETY: two_call checks `count`; no layers to copy.
+    unsafe { two_call::<xr::ApiLayerProperties>(&[], 0, count, std::ptr::null_mut()) }
+}
+
+unsafe extern "system" fn enumerate_instance_extension_properties(
+    layer: *const c_char,
+    capacity: u32,
+    count: *mut u32,
+    out: *mut xr::ExtensionProperties,
+) -> xr::Result {
+    if !layer.is_null() {
+        return xr::Result::ERROR_API_LAYER_NOT_PRESENT;
+    }
+    let config = match Config::from_env() {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("ba-xr-runtime: {e}");
+            return xr::Result::ERROR_RUNTIME_FAILURE;
+        }
+    };
+    let props: Vec<xr::ExtensionProperties> = offered(&config)
+        .into_iter()
+        .map(|(name, version)| {
+            let mut p = xr::ExtensionProperties {
+                ty: xr::ExtensionProperties::TYPE,
+                next: std::ptr::null_mut(),
+                extension_name: [0; xr::MAX_EXTENSION_NAME_SIZE],
+                extension_version: version,
+            };
+            write_cstr(&mut p.extension_name, name);
+            p
+        })
+        .collect();
+    if capacity > 0 && !out.is_null() {
+        // Keep the caller's `ty`/`next` (it owns the chain); fill the rest.
+        for (i, p) in props.iter().enumerate().take(capacity as usize) {
+            // SAFETY: the caller provides `capacity` elements at `out`.
+            unsafe {
+                (*out.add(i)).extension_name = p.extension_name;
+                (*out.add(i)).extension_version = p.extension_version;
+            }
+        }
+    }
+    // SAFETY: `count` is checked inside; copying is done above.
+    let r = unsafe { two_call(&props, 0, count, out) };
+    if r == xr::Result::SUCCESS && capacity > 0 && (capacity as usize) < props.len() {
+        return xr::Result::ERROR_SIZE_INSUFFICIENT;
+    }
+    r
+}
+
+unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, out: *mut xr::Instance) -> xr::Result {
+    if info.is_null() || out.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    let config = match Config::from_env() {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("ba-xr-runtime: {e}");
+            return xr::Result::ERROR_RUNTIME_FAILURE;
+        }
+    };
+    // SAFETY: non-null create info from the loader.
+    let info = unsafe { &*info };
+    let mut enabled = vec![];
+    let offered = offered(&config);
+    for i in 0..info.enabled_extension_count as usize {
+        // SAFETY: `enabled_extension_names` holds `enabled_extension_count` C strings.
+        let name = unsafe { CStr::from_ptr(*info.enabled_extension_names.add(i)) }.to_string_lossy().into_owned();
+        if !offered.iter().any(|(n, _)| *n == name) {
+            return xr::Result::ERROR_EXTENSION_NOT_PRESENT;
+        }
+        enabled.push(name);
+    }
+    let mut guard = lock();
+    if guard.as_ref().is_some_and(|rt| rt.instance != 0) {
+        // One instance at a time (a runtime may limit this: XR_ERROR_LIMIT_REACHED).
+        return xr::Result::ERROR_LIMIT_REACHED;
+    }
+    let report = match &config.report {
+        Some(p) => match std::fs::OpenOptions::new().create(true).append(true).open(p) {
+            Ok(f) => Some(f),
+            Err(e) => {
+                eprintln!("ba-xr-runtime: BA_XR_REPORT {}: {e}", p.display());
+                return xr::Result::ERROR_RUNTIME_FAILURE;
+            }
+        },
+        None => None,
+    };
+    let mut rt = Runtime {
+        config,
+        epoch: Instant::now(),
+        instance: 0,
+        enabled,
+        instance_lost: false,
+        paths: vec![],
+        events: VecDeque::new(),
+        next_handle: 0x1000,
+        session: None,
+        spaces: HashMap::new(),
+        swapchains: HashMap::new(),
+        passthroughs: HashMap::new(),
+        passthrough_layers: HashMap::new(),
+        vk: None,
+        report,
+    };
+    rt.instance = rt.handle();
+    let extensions = rt.enabled.clone();
+    rt.log(serde_json::json!({"event": "instance", "extensions": extensions}));
+    // SAFETY: `out` is non-null.
+    unsafe { *out = xr::Instance::from_raw(rt.instance) };
+    *guard = Some(rt);
+    xr::Result::SUCCESS
+}
+
+unsafe extern "system" fn destroy_instance(instance: xr::Instance) -> xr::Result {
+    let mut guard = lock();
+    match guard.as_mut() {
+        Some(rt) if rt.instance == instance.into_raw() => {
+            // Children go with their parent (spec 2.8: destroying a handle destroys
+            // its children): swapchain images first, then the runtime's Vulkan state.
+            session::teardown_session(rt);
+            rt.log(serde_json::json!({"event": "instance_destroyed"}));
+            *guard = None;
+            xr::Result::SUCCESS
+        }
+        _ => xr::Result::ERROR_HANDLE_INVALID,
+    }
+}
+
+unsafe extern "system" fn get_instance_properties(
+    instance: xr::Instance,
+    props: *mut xr::InstanceProperties,
+) -> xr::Result {
+    with_instance(instance, |_| {
+        if props.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: non-null output struct of the caller.
+        let p = unsafe { &mut *props };
+        p.runtime_version = xr::Version::new(0, 1, 0);
+        write_cstr(&mut p.runtime_name, "blind-augment headless test runtime");
+        xr::Result::SUCCESS
+    })
+}
+
+unsafe extern "system" fn result_to_string(_i: xr::Instance, value: xr::Result, buffer: *mut c_char) -> xr::Result {
+    let s = format!("{value:?}");
+    // SAFETY: the buffer holds XR_MAX_RESULT_STRING_SIZE characters (spec).
+    let dst = unsafe { std::slice::from_raw_parts_mut(buffer, xr::MAX_RESULT_STRING_SIZE) };
+    write_cstr(dst, &s);
+    xr::Result::SUCCESS
+}
+
+unsafe extern "system" fn structure_type_to_string(
+    _i: xr::Instance,
+    value: xr::StructureType,
+    buffer: *mut c_char,
+) -> xr::Result {
+    let s = format!("{value:?}");
+    // SAFETY: the buffer holds XR_MAX_STRUCTURE_NAME_SIZE characters (spec).
+    let dst = unsafe { std::slice::from_raw_parts_mut(buffer, xr::MAX_STRUCTURE_NAME_SIZE) };
+    write_cstr(dst, &s);
+    xr::Result::SUCCESS
+}
+
+unsafe extern "system" fn get_system(
+    instance: xr::Instance,
+    info: *const xr::SystemGetInfo,
+    out: *mut xr::SystemId,
+) -> xr::Result {
+    with_instance(instance, |_| {
+        // SAFETY: non-null checked by the validation layer; checked again here.
+        if info.is_null() || out.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: as above.
+        if unsafe { (*info).form_factor } != xr::FormFactor::HEAD_MOUNTED_DISPLAY {
+            return xr::Result::ERROR_FORM_FACTOR_UNSUPPORTED;
+        }
+        // SAFETY: as above.
+        unsafe { *out = xr::SystemId::from_raw(SYSTEM_ID) };
+        xr::Result::SUCCESS
+    })
+}
+
+/// Walk an output struct's `next` chain (spec 2.7: chained structs).
+pub(crate) unsafe fn out_chain(mut next: *mut std::ffi::c_void, mut f: impl FnMut(*mut xr::BaseOutStructure)) {
+    while !next.is_null() {
+        let base = next as *mut xr::BaseOutStructure;
+        f(base);
+        // SAFETY: every chained struct begins with a BaseOutStructure header.
+        next = unsafe { (*base).next } as *mut std::ffi::c_void;
+    }
+}
+
+unsafe extern "system" fn get_system_properties(
+    instance: xr::Instance,
+    system: xr::SystemId,
+    props: *mut xr::SystemProperties,
+) -> xr::Result {
+    with_instance(instance, |rt| {
+        if system.into_raw() != SYSTEM_ID {
+            return xr::Result::ERROR_SYSTEM_INVALID;
+        }
+        if props.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: non-null output struct.
+        let p = unsafe { &mut *props };
+        p.system_id = system;
+        p.vendor_id = 0xba;
+        write_cstr(&mut p.system_name, "blind-augment headless HMD");
+        p.graphics_properties.max_layer_count = 16;
+        p.graphics_properties.max_swapchain_image_width = 8192;
+        p.graphics_properties.max_swapchain_image_height = 8192;
+        p.tracking_properties.orientation_tracking = xr::TRUE;
+        p.tracking_properties.position_tracking = xr::TRUE;
+        let (passthrough, space_warp) = (rt.has(EXT_PASSTHROUGH), rt.has(EXT_SPACE_WARP));
+        let (w, h) = rt.config.eye_size;
+        // SAFETY: the chain is the caller's, each struct starts with a header.
+        unsafe {
+            out_chain(p.next, |s| match (*s).ty {
+                xr::StructureType::SYSTEM_PASSTHROUGH_PROPERTIES_FB if passthrough => {
+                    (*(s as *mut xr::SystemPassthroughPropertiesFB)).supports_passthrough = xr::TRUE;
+                }
+                xr::StructureType::SYSTEM_SPACE_WARP_PROPERTIES_FB if space_warp => {
+                    let sw = &mut *(s as *mut xr::SystemSpaceWarpPropertiesFB);
+                    // Quest recommends motion vectors at a fraction of the eye size.
+                    sw.recommended_motion_vector_image_rect_width = w.div_ceil(4);
+                    sw.recommended_motion_vector_image_rect_height = h.div_ceil(4);
+                }
+                _ => {}
+            })
+        };
+        xr::Result::SUCCESS
+    })
+}
+
+unsafe extern "system" fn enumerate_environment_blend_modes(
+    instance: xr::Instance,
+    system: xr::SystemId,
+    config: xr::ViewConfigurationType,
+    capacity: u32,
+    count: *mut u32,
+    out: *mut xr::EnvironmentBlendMode,
+) -> xr::Result {
+    with_instance(instance, |rt| {
+        if system.into_raw() != SYSTEM_ID {
+            return xr::Result::ERROR_SYSTEM_INVALID;
+        }
+        if config != xr::ViewConfigurationType::PRIMARY_STEREO {
+            return xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+        }
+        let modes = rt.config.blend_modes.clone();
+        // SAFETY: the caller's two-call arguments.
+        unsafe { two_call(&modes, capacity, count, out) }
+    })
+}
+
+unsafe extern "system" fn enumerate_view_configurations(
+    instance: xr::Instance,
+    system: xr::SystemId,
+    capacity: u32,
+    count: *mut u32,
+    out: *mut xr::ViewConfigurationType,
+) -> xr::Result {
+    with_instance(instance, |_| {
+        if system.into_raw() != SYSTEM_ID {
+            return xr::Result::ERROR_SYSTEM_INVALID;
+        }
+        // SAFETY: the caller's two-call arguments.
+        unsafe { two_call(&[xr::ViewConfigurationType::PRIMARY_STEREO], capacity, count, out) }
+    })
+}
+
+unsafe extern "system" fn get_view_configuration_properties(
+    instance: xr::Instance,
+    system: xr::SystemId,
+    config: xr::ViewConfigurationType,
+    props: *mut xr::ViewConfigurationProperties,
+) -> xr::Result {
+    with_instance(instance, |_| {
+        if system.into_raw() != SYSTEM_ID {
+            return xr::Result::ERROR_SYSTEM_INVALID;
+        }
+        if config != xr::ViewConfigurationType::PRIMARY_STEREO {
+            return xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+        }
+        // SAFETY: caller's output struct.
+        unsafe {
+            (*props).view_configuration_type = config;
+            (*props).fov_mutable = xr::FALSE;
+        }
+        xr::Result::SUCCESS
+    })
+}
+
+unsafe extern "system" fn enumerate_view_configuration_views(
+    instance: xr::Instance,
+    system: xr::SystemId,
+    config: xr::ViewConfigurationType,
+    capacity: u32,
+    count: *mut u32,
+    out: *mut xr::ViewConfigurationView,
+) -> xr::Result {
+    with_instance(instance, |rt| {
+        if system.into_raw() != SYSTEM_ID {
+            return xr::Result::ERROR_SYSTEM_INVALID;
+        }
+        if config != xr::ViewConfigurationType::PRIMARY_STEREO {
+            return xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+        }
+        if count.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: non-null count.
+        unsafe { *count = 2 };
+        if capacity == 0 {
+            return xr::Result::SUCCESS;
+        }
+        if capacity < 2 {
+            return xr::Result::ERROR_SIZE_INSUFFICIENT;
+        }
+        let (w, h) = rt.config.eye_size;
+        for i in 0..2 {
+            // SAFETY: two elements at `out` (capacity ≥ 2); `ty`/`next` are the caller's.
+            let v = unsafe { &mut *out.add(i) };
+            v.recommended_image_rect_width = w;
+            v.recommended_image_rect_height = h;
+            v.max_image_rect_width = 8192;
+            v.max_image_rect_height = 8192;
+            v.recommended_swapchain_sample_count = 1;
+            v.max_swapchain_sample_count = 1;
+        }
+        xr::Result::SUCCESS
+    })
+}
+
+unsafe extern "system" fn string_to_path(instance: xr::Instance, s: *const c_char, out: *mut xr::Path) -> xr::Result {
+    with_instance(instance, |rt| {
+        // SAFETY: NUL-terminated string of the caller.
+        let s = unsafe { CStr::from_ptr(s) }.to_string_lossy().into_owned();
+        if !s.starts_with('/') || s.ends_with('/') || s.contains("//") {
+            return xr::Result::ERROR_PATH_FORMAT_INVALID;
+        }
+        let i = match rt.paths.iter().position(|p| *p == s) {
+            Some(i) => i,
+            None => {
+                rt.paths.push(s);
+                rt.paths.len() - 1
+            }
+        };
+        // SAFETY: caller's output.
+        unsafe { *out = xr::Path::from_raw(i as u64 + 1) };
+        xr::Result::SUCCESS
+    })
+}
+
+unsafe extern "system" fn path_to_string(
+    instance: xr::Instance,
+    path: xr::Path,
+    capacity: u32,
+    count: *mut u32,
+    buffer: *mut c_char,
+) -> xr::Result {
+    with_instance(instance, |rt| {
+        let Some(s) = (path.into_raw() as usize).checked_sub(1).and_then(|i| rt.paths.get(i)) else {
+            return xr::Result::ERROR_PATH_INVALID;
+        };
+        let bytes: Vec<c_char> = s.bytes().map(|b| b as c_char).chain([0]).collect();
+        // SAFETY: the caller's two-call arguments.
+        unsafe { two_call(&bytes, capacity, count, buffer) }
+    })
+}
