@@ -1,7 +1,7 @@
 //! blind-augment: blind estimation of a camera's noise, motion blur and depth of
 //! field (Prakash et al., "Blind Augmentation", TVCG 2025) and their CPU reference
 //! synthesis. See ARCHITECTURE.md for the module map and invariants.
-// The CPU core has no `unsafe`; only `gpu` (and `xr`, to come) opt out, per module.
+// The CPU core has no `unsafe`; only `gpu` and `xr` opt out, per module.
 #![deny(unsafe_code)]
 // Numeric kernels index several parallel arrays (channels, levels, samples) with one
 // index; iterator zips of four slices read worse than the index they replace.
@@ -17,3 +17,4 @@ pub mod render;
 pub mod scene;
 pub mod synth;
 pub mod worker;
+pub mod xr;

@@ -28,7 +28,10 @@ impl<'a> FrameRing<'a> {
             let uniform = Buffer::new(
                 ctx,
                 uniform_size,
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                // Also a copy source: the stereo renderer copies the slot's
+                // parameters into a device-local block at the frame's start
+                // (VUID-vkCmdCopyBuffer-srcBuffer-00118).
+                vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC,
                 vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
                 &format!("frame {i} uniforms"),
             )?;

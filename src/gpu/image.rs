@@ -153,6 +153,69 @@ impl<'a> Image<'a> {
         };
     }
 
+    /// Record a copy of every layer into `dst`, an image this context does not own
+    /// (an OpenXR swapchain image of the same size, layer count and a format of the
+    /// same texel layout), kept in `dst_layout` before and after (XR_KHR_vulkan_enable:
+    /// swapchain colour images are COLOR_ATTACHMENT_OPTIMAL between acquire and
+    /// release). Bits are copied unchanged: sRGB-encoded values written to an
+    /// RGBA8 UNORM image read as the same colours from an RGBA8 SRGB image.
+    pub fn record_copy_to_external(&self, cmd: vk::CommandBuffer, dst: vk::Image, dst_layout: vk::ImageLayout) {
+        let barrier = |image, from, to, src, dst_access| {
+            vk::ImageMemoryBarrier::default()
+                .src_access_mask(src)
+                .dst_access_mask(dst_access)
+                .old_layout(from)
+                .new_layout(to)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(image)
+                .subresource_range(self.range())
+        };
+        let before = [
+            // The effect chain's writes to the output, before the copy reads them
+            // (in TRANSFER_SRC_OPTIMAL for the copy, then back to its own layout).
+            barrier(
+                self.image,
+                self.layout,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                vk::AccessFlags::SHADER_WRITE,
+                vk::AccessFlags::TRANSFER_READ,
+            ),
+            barrier(dst, dst_layout, vk::ImageLayout::TRANSFER_DST_OPTIMAL, vk::AccessFlags::empty(), vk::AccessFlags::TRANSFER_WRITE),
+        ];
+        let after = [
+            barrier(
+                dst,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                dst_layout,
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::AccessFlags::MEMORY_READ,
+            ),
+            // The next frame's chain may overwrite the output only after the copy.
+            barrier(
+                self.image,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                self.layout,
+                vk::AccessFlags::TRANSFER_READ,
+                vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::SHADER_READ,
+            ),
+        ];
+        let region = vk::ImageCopy::default()
+            .src_subresource(self.layers())
+            .dst_subresource(self.layers())
+            .extent(vk::Extent3D { width: self.width, height: self.height, depth: 1 });
+        // SAFETY: `cmd` is recording outside a render pass; `dst` is a live image of
+        // this device at least as large, with as many layers (the caller's contract);
+        // the barriers order the chain's writes, the copy and the compositor's read.
+        unsafe {
+            let d = &self.ctx.device;
+            let stages = vk::PipelineStageFlags::ALL_COMMANDS;
+            d.cmd_pipeline_barrier(cmd, stages, vk::PipelineStageFlags::TRANSFER, vk::DependencyFlags::empty(), &[], &[], &before);
+            d.cmd_copy_image(cmd, self.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, dst, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &[region]);
+            d.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, stages, vk::DependencyFlags::empty(), &[], &[], &after);
+        }
+    }
+
     /// Replace the contents with `data` (tightly packed, layer-major).
     pub fn upload(&self, data: &[u8]) -> Result<(), GpuError> {
         if data.len() as u64 != self.byte_size() {

@@ -54,6 +54,52 @@ pub struct GpuOptions {
     pub prefer_device: Option<String>,
 }
 
+/// Who creates the Vulkan instance and device. On desktop, the context does
+/// (`DirectVulkan`); under OpenXR (XR_KHR_vulkan_enable2) the *runtime* must, with
+/// the create infos the context built (the runtime may add what its compositor
+/// needs), and the runtime picks the physical device its HMD is connected to. The
+/// context owns (and destroys) whatever the factory created either way: the spec
+/// leaves the instance and device to the application.
+pub trait VulkanFactory {
+    /// Create the instance from `info` (layers and extensions the context needs).
+    fn create_instance(&self, entry: &ash::Entry, info: &vk::InstanceCreateInfo<'_>) -> Result<vk::Instance, GpuError>;
+    /// The physical device to use, or None to let the context choose.
+    fn physical_device(&self, instance: &ash::Instance) -> Result<Option<vk::PhysicalDevice>, GpuError>;
+    /// Create the device on `physical` from `info`.
+    fn create_device(
+        &self,
+        entry: &ash::Entry,
+        instance: &ash::Instance,
+        physical: vk::PhysicalDevice,
+        info: &vk::DeviceCreateInfo<'_>,
+    ) -> Result<vk::Device, GpuError>;
+}
+
+/// Plain Vulkan: the context creates everything itself.
+pub struct DirectVulkan;
+
+impl VulkanFactory for DirectVulkan {
+    fn create_instance(&self, entry: &ash::Entry, info: &vk::InstanceCreateInfo<'_>) -> Result<vk::Instance, GpuError> {
+        // SAFETY: `info` and everything it points to live until the call returns.
+        unsafe { entry.create_instance(info, None) }.map(|i| i.handle()).map_err(vkr("vkCreateInstance"))
+    }
+
+    fn physical_device(&self, _instance: &ash::Instance) -> Result<Option<vk::PhysicalDevice>, GpuError> {
+        Ok(None)
+    }
+
+    fn create_device(
+        &self,
+        _entry: &ash::Entry,
+        instance: &ash::Instance,
+        physical: vk::PhysicalDevice,
+        info: &vk::DeviceCreateInfo<'_>,
+    ) -> Result<vk::Device, GpuError> {
+        // SAFETY: `physical` belongs to `instance`; `info` valid for the call.
+        unsafe { instance.create_device(physical, info, None) }.map(|d| d.handle()).map_err(vkr("vkCreateDevice"))
+    }
+}
+
 /// Severity-filtered validation and driver messages, kept for the caller to check.
 type Messages = Arc<Mutex<Vec<String>>>;
 
@@ -69,6 +115,7 @@ pub struct GpuContext {
     memory: vk::PhysicalDeviceMemoryProperties,
     pub(crate) device: ash::Device,
     pub(crate) queue: vk::Queue,
+    queue_family: u32,
     pub(crate) command_pool: vk::CommandPool,
     device_name: String,
     timestamp_period_ns: Option<f32>,
@@ -106,6 +153,11 @@ impl GpuContext {
     /// Load Vulkan, create an instance (validation if asked and installed), pick a
     /// device with a compute queue, create it.
     pub fn new(opts: &GpuOptions) -> Result<Self, GpuError> {
+        Self::with_factory(opts, &DirectVulkan)
+    }
+
+    /// As `new`, with the instance and device created by `factory` (OpenXR).
+    pub fn with_factory(opts: &GpuOptions, factory: &dyn VulkanFactory) -> Result<Self, GpuError> {
         // SAFETY: loading the system Vulkan loader library; no other Vulkan state
         // exists yet.
         let entry = unsafe { ash::Entry::load() }.map_err(|e| GpuError::Loader(e.to_string()))?;
@@ -129,8 +181,9 @@ impl GpuContext {
             .application_info(&app)
             .enabled_layer_names(&layer_ptrs)
             .enabled_extension_names(&ext_ptrs);
-        // SAFETY: `info` and everything it points to live until the call returns.
-        let instance = unsafe { entry.create_instance(&info, None) }.map_err(vkr("vkCreateInstance"))?;
+        let handle = factory.create_instance(&entry, &info)?;
+        // SAFETY: a live instance created from `entry`'s loader with `info`.
+        let instance = unsafe { ash::Instance::load(entry.static_fn(), handle) };
 
         let messages: Messages = Arc::new(Mutex::new(Vec::new()));
         let debug = if use_debug {
@@ -161,7 +214,7 @@ impl GpuContext {
             None
         };
 
-        match create_device(&instance, opts) {
+        match create_device(&entry, &instance, opts, factory) {
             Ok(parts) => {
                 let debug_device = debug.as_ref().map(|_| ash::ext::debug_utils::Device::new(&instance, &parts.device));
                 Ok(Self {
@@ -175,6 +228,7 @@ impl GpuContext {
                     memory: parts.memory,
                     device: parts.device,
                     queue: parts.queue,
+                    queue_family: parts.family,
                     command_pool: parts.command_pool,
                     device_name: parts.name,
                     timestamp_period_ns: parts.timestamp_period_ns,
@@ -208,6 +262,17 @@ impl GpuContext {
 
     pub fn physical_device(&self) -> vk::PhysicalDevice {
         self.physical
+    }
+
+    /// Raw handles for an OpenXR graphics binding (XrGraphicsBindingVulkan2KHR):
+    /// instance, physical device, device, queue family; queue index 0.
+    pub fn raw_handles(&self) -> (vk::Instance, vk::PhysicalDevice, vk::Device, u32) {
+        (self.instance.handle(), self.physical, self.device.handle(), self.queue_family)
+    }
+
+    /// The entry's `vkGetInstanceProcAddr` (OpenXR's Vulkan create infos need it).
+    pub fn get_instance_proc_addr(&self) -> vk::PFN_vkGetInstanceProcAddr {
+        self._entry.static_fn().get_instance_proc_addr
     }
 
     /// Validation/driver warnings and errors since the last call (tests fail on any).
@@ -435,6 +500,7 @@ pub fn record_full_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
 
 /// What `create_device` hands back to `GpuContext::new`.
 struct DeviceParts {
+    family: u32,
     timestamp_period_ns: Option<f32>,
     statistics: bool,
     physical: vk::PhysicalDevice,
@@ -448,9 +514,18 @@ struct DeviceParts {
 /// Pick a device with a compute queue (preferred name, else discrete > integrated >
 /// CPU) and create it with one queue and a command pool. Cleans up after itself on
 /// error; the caller owns the instance.
-fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DeviceParts, GpuError> {
-    // SAFETY: valid instance.
-    let devices = unsafe { instance.enumerate_physical_devices() }.map_err(vkr("enumerate devices"))?;
+fn create_device(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    opts: &GpuOptions,
+    factory: &dyn VulkanFactory,
+) -> Result<DeviceParts, GpuError> {
+    // The factory's device (the HMD's GPU) when it names one; else every device.
+    let devices = match factory.physical_device(instance)? {
+        Some(pd) => vec![pd],
+        // SAFETY: valid instance.
+        None => unsafe { instance.enumerate_physical_devices() }.map_err(vkr("enumerate devices"))?,
+    };
     let mut candidates = vec![];
     for pd in devices {
         // SAFETY: `pd` comes from this instance.
@@ -489,8 +564,9 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
         .queue_create_infos(std::slice::from_ref(&queue_info))
         .enabled_features(&features)
         .push_next(&mut multiview);
-    // SAFETY: `physical` belongs to `instance`; create info valid for the call.
-    let device = unsafe { instance.create_device(physical, &info, None) }.map_err(vkr("vkCreateDevice"))?;
+    let handle = factory.create_device(entry, instance, physical, &info)?;
+    // SAFETY: a live device created on `physical` with `info`.
+    let device = unsafe { ash::Device::load(instance.fp_v1_0(), handle) };
     // SAFETY: family/index 0 were requested at device creation.
     let queue = unsafe { device.get_device_queue(family, 0) };
     let pool_info = vk::CommandPoolCreateInfo::default()
@@ -518,7 +594,7 @@ fn create_device(instance: &ash::Instance, opts: &GpuOptions) -> Result<DevicePa
     let valid_bits = families.get(family as usize).map_or(0, |f| f.timestamp_valid_bits);
     let timestamp_period_ns =
         (valid_bits > 0 && props.limits.timestamp_period > 0.0).then_some(props.limits.timestamp_period);
-    Ok(DeviceParts { timestamp_period_ns, statistics, physical, memory, device, queue, command_pool, name })
+    Ok(DeviceParts { family, timestamp_period_ns, statistics, physical, memory, device, queue, command_pool, name })
 }
 
 impl Drop for GpuContext {

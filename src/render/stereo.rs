@@ -16,6 +16,15 @@ use glam::Vec3;
 
 pub const FRAMES_IN_FLIGHT: usize = 2;
 
+/// An image outside the renderer that receives each frame's composite (the
+/// OpenXR swapchain image array: same size, two layers, RGBA8), and the layout it
+/// is kept in.
+#[derive(Clone, Copy, Debug)]
+pub struct ExternalTarget {
+    pub image: vk::Image,
+    pub layout: vk::ImageLayout,
+}
+
 /// One frame's content: the G-buffer inputs and the world-space corners of the
 /// virtual content's bounds now and one render frame ago (for the work rectangles).
 pub struct FrameInput<'f> {
@@ -41,6 +50,15 @@ pub struct StereoRenderer<'a> {
     /// Where the last frame's G-buffer pass wrote (see `render`); stale outside.
     gbuffer_area: Rect,
     profile: Option<Profile<'a>>,
+}
+
+impl Drop for StereoRenderer<'_> {
+    fn drop(&mut self) {
+        // Frames may still be in flight (an error returned mid-loop): wait for them
+        // before the fields below free the images and buffers they use (the
+        // fields drop after this body; VUID-vkDestroyImage-image-01000).
+        let _ = self.ring.wait_all();
+    }
 }
 
 /// Per-frame GPU profile (benchmarks): timestamps per stage and pipeline
@@ -227,6 +245,26 @@ impl<'a> StereoRenderer<'a> {
         input: &FrameInput<'_>,
         matched: bool,
     ) -> Result<FrameEffects, GpuError> {
+        self.render_to(snapshot, input, matched, None)
+    }
+
+    /// The render frame interval (s) motion vectors are measured over: the
+    /// predicted display period under OpenXR, which changes with the refresh rate
+    /// and with space-warp throttling.
+    pub fn set_render_interval_s(&mut self, interval_s: f32) {
+        if interval_s.is_finite() && interval_s > 0.0 {
+            self.settings.render_interval_s = interval_s;
+        }
+    }
+
+    /// As `render`, then copy the composite into `target` in the same submission.
+    pub fn render_to(
+        &mut self,
+        snapshot: &Snapshot,
+        input: &FrameInput<'_>,
+        matched: bool,
+        target: Option<ExternalTarget>,
+    ) -> Result<FrameEffects, GpuError> {
         let model = &snapshot.model;
         let g = input.gbuffer;
         let depth = self.content_depth_m(&g.eyes, &g.prev_eyes, input.corners_now, input.corners_prev);
@@ -293,6 +331,9 @@ impl<'a> StereoRenderer<'a> {
             recorded.and_then(|_| self.effects.record_profiled(cmd, &self.ring.slot(slot).uniform, &fx, table, stamps));
         if let Some(s) = stats {
             s.record_end(cmd, 1);
+        }
+        if let (Ok(()), Some(t)) = (&recorded, target) {
+            self.output.record_copy_to_external(cmd, t.image, t.layout);
         }
         // Submit even after a recording error so the slot's fence is signalled again.
         let submitted = self.ring.submit(slot);

@@ -4,6 +4,7 @@
 mod demo;
 mod fit_cmd;
 mod render_cmd;
+mod xr_cmd;
 
 use anyhow::{Context, Result};
 use blind_augment::fit::{Effects, Tier};
@@ -156,6 +157,31 @@ pub struct RenderArgs {
     object_depth_m: f32,
 }
 
+#[derive(clap::Args)]
+pub struct XrArgs {
+    /// Request exit after this many rendered frames (default: run until the
+    /// runtime ends the session).
+    #[arg(long)]
+    frames: Option<u64>,
+    /// Camera model JSON (default: a placeholder Quest 3-like model until
+    /// calibration publishes one).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// glTF 2.0 binary scene (default: the bundled assets/toy.glb).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Distance from the start head pose to the object (m).
+    #[arg(long, default_value_t = 1.5)]
+    object_depth_m: f32,
+    /// Display refresh rate to request (XR_FB_display_refresh_rate), Hz.
+    #[arg(long, default_value_t = 90.0)]
+    display_hz: f32,
+    /// Enable the OpenXR core validation layer and the Vulkan validation layer
+    /// (where installed); any Vulkan validation message fails the run.
+    #[arg(long)]
+    validation: bool,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Fit a camera model to a frame (or a folder of frames).
@@ -168,6 +194,9 @@ enum Command {
     /// Render a glTF object over a background sequence, naive and matched to a
     /// camera model (stereo, Vulkan).
     Render(RenderArgs),
+    /// Run the OpenXR frame loop on the active runtime (a headset's, or on desktop
+    /// the test runtime: XR_RUNTIME_JSON from `cargo xtask xr-runtime`).
+    Xr(XrArgs),
 }
 
 pub fn effects(only: &Option<Vec<EffectArg>>) -> Effects {
@@ -235,6 +264,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Synth(a) => synth(a),
         Command::Demo(a) => demo::run(a),
         Command::Render(a) => render_cmd::run(a),
+        Command::Xr(a) => xr_cmd::run(a),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

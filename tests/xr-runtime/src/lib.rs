@@ -15,6 +15,7 @@
 
 mod config;
 mod frame;
+mod input;
 mod session;
 mod vulkan;
 
@@ -22,7 +23,7 @@ pub use config::{Command, Config, Head};
 
 use openxr_sys as xr;
 use xr::Handle as _;
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::ffi::{c_char, CStr};
 use std::io::Write;
 use std::sync::{Mutex, MutexGuard};
@@ -66,6 +67,8 @@ pub(crate) struct Runtime {
     pub swapchains: HashMap<u64, vulkan::Swapchain>,
     pub passthroughs: HashMap<u64, bool>,
     pub passthrough_layers: HashMap<u64, (u64, bool)>,
+    /// Action sets, actions and action spaces (input.rs: no controllers).
+    pub actions: HashSet<u64>,
     pub vk: Option<vulkan::VkState>,
     pub report: Option<std::fs::File>,
 }
@@ -253,6 +256,23 @@ unsafe extern "system" fn get_instance_proc_addr(
         "xrAcquireSwapchainImage" => pfn!(vulkan::acquire_swapchain_image),
         "xrWaitSwapchainImage" => pfn!(vulkan::wait_swapchain_image),
         "xrReleaseSwapchainImage" => pfn!(vulkan::release_swapchain_image),
+        "xrCreateActionSet" => pfn!(input::create_action_set),
+        "xrDestroyActionSet" => pfn!(input::destroy_action_set),
+        "xrCreateAction" => pfn!(input::create_action),
+        "xrDestroyAction" => pfn!(input::destroy_action),
+        "xrSuggestInteractionProfileBindings" => pfn!(input::suggest_interaction_profile_bindings),
+        "xrAttachSessionActionSets" => pfn!(input::attach_session_action_sets),
+        "xrGetCurrentInteractionProfile" => pfn!(input::get_current_interaction_profile),
+        "xrSyncActions" => pfn!(input::sync_actions),
+        "xrGetActionStateBoolean" => pfn!(input::get_action_state_boolean),
+        "xrGetActionStateFloat" => pfn!(input::get_action_state_float),
+        "xrGetActionStateVector2f" => pfn!(input::get_action_state_vector2f),
+        "xrGetActionStatePose" => pfn!(input::get_action_state_pose),
+        "xrEnumerateBoundSourcesForAction" => pfn!(input::enumerate_bound_sources_for_action),
+        "xrGetInputSourceLocalizedName" => pfn!(input::get_input_source_localized_name),
+        "xrCreateActionSpace" => pfn!(input::create_action_space),
+        "xrApplyHapticFeedback" => pfn!(input::apply_haptic_feedback),
+        "xrStopHapticFeedback" => pfn!(input::stop_haptic_feedback),
         "xrGetVulkanGraphicsRequirements2KHR" => pfn!(vulkan::get_graphics_requirements),
         "xrCreateVulkanInstanceKHR" => pfn!(vulkan::create_vulkan_instance),
         "xrGetVulkanGraphicsDevice2KHR" => pfn!(vulkan::get_graphics_device),
@@ -292,6 +312,9 @@ unsafe extern "system" fn get_instance_proc_addr(
     if f.is_some() {
         xr::Result::SUCCESS
     } else {
+        if std::env::var_os("BA_XR_DEBUG").is_some() {
+            eprintln!("ba-xr-runtime: xrGetInstanceProcAddr({name}): unsupported");
+        }
         xr::Result::ERROR_FUNCTION_UNSUPPORTED
     }
 }
@@ -404,6 +427,7 @@ unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, o
         swapchains: HashMap::new(),
         passthroughs: HashMap::new(),
         passthrough_layers: HashMap::new(),
+        actions: HashSet::new(),
         vk: None,
         report,
     };

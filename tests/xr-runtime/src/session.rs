@@ -357,9 +357,12 @@ pub(crate) unsafe extern "system" fn get_reference_space_bounds_rect(
 }
 
 pub(crate) unsafe extern "system" fn destroy_space(space: xr::Space) -> xr::Result {
-    with_runtime(|rt| match rt.spaces.remove(&space.into_raw()) {
-        Some(_) => xr::Result::SUCCESS,
-        None => xr::Result::ERROR_HANDLE_INVALID,
+    with_runtime(|rt| {
+        if rt.spaces.remove(&space.into_raw()).is_some() || rt.actions.remove(&space.into_raw()) {
+            xr::Result::SUCCESS
+        } else {
+            xr::Result::ERROR_HANDLE_INVALID
+        }
     })
 }
 
@@ -453,6 +456,12 @@ pub(crate) unsafe extern "system" fn locate_space(
     location: *mut xr::SpaceLocation,
 ) -> xr::Result {
     with_runtime(|rt| {
+        if rt.actions.contains(&space.into_raw()) || rt.actions.contains(&base.into_raw()) {
+            // An action space of a controller that is not there: not located.
+            // SAFETY: caller's output.
+            unsafe { (*location).location_flags = xr::SpaceLocationFlags::EMPTY };
+            return xr::Result::SUCCESS;
+        }
         let (Some(a), Some(b)) = (rt.spaces.get(&space.into_raw()), rt.spaces.get(&base.into_raw())) else {
             return xr::Result::ERROR_HANDLE_INVALID;
         };

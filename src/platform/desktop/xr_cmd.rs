@@ -1,0 +1,119 @@
+//! `blind-augment xr`: the OpenXR frame loop on the active runtime (a headset's,
+//! or the project's headless test runtime on desktop) with the bundled or a given
+//! scene and camera model, and a frame-timing summary.
+
+use super::XrArgs;
+use anyhow::{Context, Result};
+use blind_augment::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
+use blind_augment::render::LayerSettings;
+use blind_augment::scene::Scene;
+use blind_augment::worker::ModelChannel;
+use blind_augment::xr::{self, EndReason, XrOptions, XrSummary};
+use glam::{Mat4, Vec3};
+
+const TOY: &[u8] = include_bytes!("../../../assets/toy.glb");
+
+/// The camera model used until calibration publishes one: a Quest 3-like
+/// passthrough camera (1280×960 at 30 Hz, ≈ 100° horizontal field of view) with
+/// moderate sensor noise, exposure λ = 0.4 and mild defocus away from 1.5 m. A
+/// placeholder, stated as such in its diagnostics — not a measurement.
+pub fn default_camera() -> CameraModel {
+    let mut m = CameraModel::empty(1280, 960);
+    m.reference.frame_interval_s = Some(1.0 / 30.0);
+    m.reference.pixels_per_radian = Some(640.0 / 50.0f32.to_radians().tan());
+    m.noise = blind_augment::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
+    let placeholder = || Diagnostics::not_fitted("default model (no calibration yet)");
+    m.motion_blur = MotionBlur { present: true, exposure: Some(0.4), diagnostics: placeholder() };
+    m.depth_of_field = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 1.5, focus_depth: 1.5, c0: 0.2 }),
+        depth_range: [0.3, 10.0],
+        diagnostics: placeholder(),
+    };
+    m
+}
+
+fn percentile(v: &[f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * p).round() as usize]
+}
+
+/// The summary as printed (also what BENCHMARKS.md quotes).
+pub fn format_summary(s: &XrSummary) -> String {
+    let ms = |v: f64| v * 1e3;
+    let total: f64 = s.cpu_s.iter().sum::<f64>() + s.wait_s.iter().sum::<f64>();
+    let wait: f64 = s.wait_s.iter().sum();
+    let period_ms = percentile(&s.periods_ns.iter().map(|&p| p as f64).collect::<Vec<_>>(), 0.5) * 1e-6;
+    format!(
+        "runtime: {}\nsystem: {} on {}\neye: {}×{} (format {}), blend {:?}, passthrough {}, display {}\n\
+         frames: {} rendered, {} submitted empty (not yet visible), {} missed display slots\n\
+         CPU per frame (outside xrWaitFrame): median {:.2} ms, p95 {:.2} ms, max {:.2} ms\n\
+         waiting in xrWaitFrame: {:.0}% of the loop; predicted display period {:.2} ms\n\
+         session states: {}\nended: {:?}",
+        s.runtime,
+        s.system,
+        s.device,
+        s.eye_size.0,
+        s.eye_size.1,
+        s.swapchain_format,
+        s.blend_mode,
+        if s.passthrough { "on" } else { "off" },
+        s.display_hz.map_or("runtime default".into(), |h| format!("{h} Hz")),
+        s.frames_rendered,
+        s.frames_empty,
+        s.missed_frames,
+        ms(percentile(&s.cpu_s, 0.5)),
+        ms(percentile(&s.cpu_s, 0.95)),
+        ms(percentile(&s.cpu_s, 1.0)),
+        if total > 0.0 { 100.0 * wait / total } else { 0.0 },
+        period_ms,
+        s.states.iter().map(|st| format!("{st:?}")).collect::<Vec<_>>().join(" → "),
+        s.end,
+    )
+}
+
+pub fn run(args: XrArgs) -> Result<()> {
+    let scene = match &args.scene {
+        Some(p) => {
+            let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+            Scene::from_glb(&bytes, &p.display().to_string())?
+        }
+        None => Scene::from_glb(TOY, "assets/toy.glb")?,
+    };
+    let model = match &args.camera {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            CameraModel::from_json(&text).with_context(|| format!("camera model {}", p.display()))?
+        }
+        None => {
+            log::info!("no --camera: the default camera model until calibration publishes one");
+            default_camera()
+        }
+    };
+    anyhow::ensure!(args.object_depth_m > 0.1 && args.object_depth_m.is_finite(), "--object-depth-m must be > 0.1 m");
+    let models = ModelChannel::new(model).context("camera model")?;
+    let summary = xr::run(XrOptions {
+        frames: args.frames,
+        validation: args.validation,
+        scene: &scene,
+        local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -args.object_depth_m)),
+        models: &models,
+        settings: LayerSettings::default(),
+        display_hz: args.display_hz,
+        on_frame: None,
+    })?;
+    println!("{}", format_summary(&summary));
+    if !summary.vulkan_messages.is_empty() {
+        anyhow::bail!("Vulkan validation reported {} message(s): {:?}", summary.vulkan_messages.len(), summary.vulkan_messages);
+    }
+    match summary.end {
+        EndReason::Exited => Ok(()),
+        EndReason::SessionLost => anyhow::bail!("the OpenXR session was lost (the runtime reported LOSS_PENDING)"),
+        EndReason::InstanceLost => anyhow::bail!("the OpenXR instance was lost (XrEventDataInstanceLossPending)"),
+    }
+}

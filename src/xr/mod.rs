@@ -1,0 +1,631 @@
+//! The OpenXR application: instance (XR_KHR_vulkan_enable2, so the runtime creates
+//! the Vulkan instance and device the render core uses), session, a multiview
+//! swapchain (one image array, a layer per eye) the stereo renderer's composite is
+//! copied into, passthrough (XR_FB_passthrough under an alpha-blended projection
+//! layer, or the ALPHA_BLEND environment blend mode where offered), the display
+//! rate (XR_FB_display_refresh_rate), the session state machine and the frame
+//! loop. The same code runs on the headset and, on desktop, on the project's
+//! headless test runtime (`tests/xr-runtime`) through the Khronos loader.
+//!
+//! Teardown order (openxrs' `examples/vulkan.rs`, and the spec's parent/child
+//! rule: a handle is destroyed before its parent, Vulkan objects before the
+//! device the session was created with): the GPU is drained; the renderer (its
+//! Vulkan objects) goes; the passthrough layer and feature, the swapchain and the
+//! reference space (children of the session); the session; then the Vulkan device
+//! and instance (`GpuContext`, created through the XR instance but owned by the
+//! app); the XR instance last. `run` holds them as locals declared in the reverse
+//! of that order, so Rust's drop order (reverse declaration) is the teardown order.
+#![allow(unsafe_code)]
+
+mod lifecycle;
+mod views;
+
+pub use lifecycle::{Action, EndReason, Lifecycle};
+pub use views::{eye_from_view, View, ViewError};
+
+use crate::gpu::{GpuContext, GpuError, GpuOptions, VulkanFactory};
+use crate::render::{ExternalTarget, FrameInput, GBufferFrame, LayerSettings, StereoRenderer};
+use crate::scene::Scene;
+use crate::worker::ModelChannel;
+use ash::vk;
+use ash::vk::Handle as _;
+use glam::{Mat4, Quat, Vec3};
+use openxr as xr;
+use std::time::{Duration, Instant};
+
+#[derive(Debug, thiserror::Error)]
+pub enum XrError {
+    #[error("no OpenXR loader: {0} (Debian: apt-get install libopenxr-loader1; Android: the APK carries libopenxr_loader.so)")]
+    NoLoader(String),
+    #[error(
+        "no OpenXR runtime: {0} (on desktop, point XR_RUNTIME_JSON at a runtime manifest, e.g. the test runtime's printed by `cargo xtask xr-runtime`)"
+    )]
+    NoRuntime(String),
+    #[error("the OpenXR runtime does not offer {0}, which blind-augment needs")]
+    MissingExtension(&'static str),
+    #[error("OpenXR call {call} failed: {result}")]
+    Call { call: &'static str, result: xr::sys::Result },
+    #[error("the runtime's Vulkan requirements ({min}–{max}) exclude the Vulkan 1.1 the render core needs")]
+    VulkanVersion { min: String, max: String },
+    #[error("no swapchain format the render core can write: the runtime offers {0:?} (needs R8G8B8A8 sRGB or UNORM)")]
+    SwapchainFormat(Vec<u32>),
+    #[error("the runtime located an unusable view: {0}")]
+    View(#[from] ViewError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+fn call(name: &'static str) -> impl Fn(xr::sys::Result) -> XrError {
+    move |result| XrError::Call { call: name, result }
+}
+
+/// What the frame loop is asked to do.
+pub struct XrOptions<'a> {
+    /// Stop (request exit) after this many rendered frames; None = until the
+    /// runtime ends the session.
+    pub frames: Option<u64>,
+    /// Enable the Khronos core validation layer (XR_APILAYER_LUNARG_core_validation)
+    /// and Vulkan's validation layer when installed (tests do).
+    pub validation: bool,
+    pub scene: &'a Scene,
+    /// Where the virtual content stands, in the LOCAL reference space.
+    pub local_from_scene: Mat4,
+    /// Camera models: one snapshot is taken per frame (`ModelChannel::latest`).
+    pub models: &'a ModelChannel,
+    pub settings: LayerSettings,
+    /// Preferred display refresh rate (Hz) when XR_FB_display_refresh_rate is offered.
+    pub display_hz: f32,
+    /// Called after each rendered frame with its record (tests, the CLI's progress).
+    pub on_frame: Option<&'a mut dyn FnMut(&FrameRecord)>,
+}
+
+/// One rendered frame.
+#[derive(Clone, Debug)]
+pub struct FrameRecord {
+    pub index: u64,
+    pub predicted_display_time_ns: i64,
+    pub predicted_display_period_ns: i64,
+    /// The camera-model generation the whole frame used.
+    pub model_generation: u64,
+    /// CPU time of the frame outside xrWaitFrame (s).
+    pub cpu_s: f64,
+    /// Time blocked in xrWaitFrame (s).
+    pub wait_s: f64,
+    pub views: [View; 2],
+}
+
+/// The frame-timing summary `blind-augment xr` prints.
+#[derive(Clone, Debug)]
+pub struct XrSummary {
+    pub runtime: String,
+    pub system: String,
+    pub device: String,
+    pub eye_size: (u32, u32),
+    pub swapchain_format: u32,
+    pub blend_mode: xr::EnvironmentBlendMode,
+    pub passthrough: bool,
+    pub display_hz: Option<f32>,
+    pub frames_rendered: u64,
+    /// Frames submitted with no layers (session SYNCHRONIZED, not yet visible).
+    pub frames_empty: u64,
+    /// Rendered frames whose predicted display time skipped display periods.
+    pub missed_frames: u64,
+    pub cpu_s: Vec<f64>,
+    pub wait_s: Vec<f64>,
+    pub periods_ns: Vec<i64>,
+    pub states: Vec<xr::SessionState>,
+    pub end: EndReason,
+    /// Vulkan validation messages (empty when clean).
+    pub vulkan_messages: Vec<String>,
+}
+
+/// The Vulkan instance and device, created through the OpenXR runtime
+/// (XR_KHR_vulkan_enable2, spec 12.21).
+struct XrVulkan<'a> {
+    instance: &'a xr::Instance,
+    system: xr::SystemId,
+}
+
+fn runtime_err(call: &'static str, e: xr::sys::Result) -> GpuError {
+    GpuError::Input { input: call, problem: format!("OpenXR: {e}") }
+}
+
+impl VulkanFactory for XrVulkan<'_> {
+    fn create_instance(&self, entry: &ash::Entry, info: &vk::InstanceCreateInfo<'_>) -> Result<vk::Instance, GpuError> {
+        let gipa = entry.static_fn().get_instance_proc_addr;
+        // SAFETY: `gipa` is the loader's vkGetInstanceProcAddr (the same C signature
+        // openxr-sys declares); `info` is a valid VkInstanceCreateInfo for the call.
+        let r = unsafe {
+            self.instance.create_vulkan_instance(
+                self.system,
+                std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, xr::sys::platform::VkGetInstanceProcAddr>(gipa),
+                info as *const _ as *const _,
+            )
+        };
+        match r {
+            Ok(Ok(raw)) => Ok(vk::Instance::from_raw(raw as u64)),
+            Ok(Err(v)) => Err(GpuError::Vk { call: "xrCreateVulkanInstanceKHR", result: vk::Result::from_raw(v) }),
+            Err(e) => Err(runtime_err("xrCreateVulkanInstanceKHR", e)),
+        }
+    }
+
+    fn physical_device(&self, instance: &ash::Instance) -> Result<Option<vk::PhysicalDevice>, GpuError> {
+        // SAFETY: a live instance created through this XR instance.
+        let raw = unsafe { self.instance.vulkan_graphics_device(self.system, instance.handle().as_raw() as _) }
+            .map_err(|e| runtime_err("xrGetVulkanGraphicsDevice2KHR", e))?;
+        Ok(Some(vk::PhysicalDevice::from_raw(raw as u64)))
+    }
+
+    fn create_device(
+        &self,
+        entry: &ash::Entry,
+        _instance: &ash::Instance,
+        physical: vk::PhysicalDevice,
+        info: &vk::DeviceCreateInfo<'_>,
+    ) -> Result<vk::Device, GpuError> {
+        let gipa = entry.static_fn().get_instance_proc_addr;
+        // SAFETY: as in create_instance; `physical` came from xrGetVulkanGraphicsDevice2KHR.
+        let r = unsafe {
+            self.instance.create_vulkan_device(
+                self.system,
+                std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, xr::sys::platform::VkGetInstanceProcAddr>(gipa),
+                physical.as_raw() as _,
+                info as *const _ as *const _,
+            )
+        };
+        match r {
+            Ok(Ok(raw)) => Ok(vk::Device::from_raw(raw as u64)),
+            Ok(Err(v)) => Err(GpuError::Vk { call: "xrCreateVulkanDeviceKHR", result: vk::Result::from_raw(v) }),
+            Err(e) => Err(runtime_err("xrCreateVulkanDeviceKHR", e)),
+        }
+    }
+}
+
+const CORE_VALIDATION: &str = "XR_APILAYER_LUNARG_core_validation";
+
+/// Load the loader and create the instance with what the runtime offers.
+fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::ExtensionSet), XrError> {
+    // SAFETY: the Khronos loader (Debian's libopenxr_loader.so.1; the APK's
+    // libopenxr_loader.so) conforms to the spec.
+    let entry = unsafe { xr::Entry::load(&()) }.map_err(|e| XrError::NoLoader(e.to_string()))?;
+    let available = match entry.enumerate_extensions() {
+        Ok(a) => a,
+        Err(e) if e == xr::sys::Result::ERROR_RUNTIME_UNAVAILABLE || e == xr::sys::Result::ERROR_RUNTIME_FAILURE => {
+            return Err(XrError::NoRuntime(format!("the loader found none ({e})")))
+        }
+        Err(e) => return Err(call("xrEnumerateInstanceExtensionProperties")(e)),
+    };
+    if !available.khr_vulkan_enable2 {
+        return Err(XrError::MissingExtension("XR_KHR_vulkan_enable2"));
+    }
+    let mut want = xr::ExtensionSet::default();
+    want.khr_vulkan_enable2 = true;
+    for (offered, flag, name, consequence) in [
+        (available.fb_passthrough, &mut want.fb_passthrough, "XR_FB_passthrough", "no passthrough layer"),
+        (
+            available.fb_display_refresh_rate,
+            &mut want.fb_display_refresh_rate,
+            "XR_FB_display_refresh_rate",
+            "the display runs at the runtime's default rate",
+        ),
+        (
+            available.fb_space_warp,
+            &mut want.fb_space_warp,
+            "XR_FB_space_warp",
+            "every display frame is rendered",
+        ),
+    ] {
+        if offered {
+            *flag = true;
+        } else {
+            log::info!("OpenXR: {name} not offered: {consequence}");
+        }
+    }
+    if available.fb_space_warp {
+        // Space warp needs motion-vector and depth swapchains filled from the
+        // G-buffer; not built yet (ARCHITECTURE.md), so frames are not throttled.
+        want.fb_space_warp = false;
+        log::info!("OpenXR: XR_FB_space_warp offered but not used yet: every display frame is rendered");
+    }
+    let mut layers = vec![];
+    if validation {
+        match entry.enumerate_layers() {
+            Ok(l) if l.iter().any(|l| l.layer_name == CORE_VALIDATION) => layers.push(CORE_VALIDATION),
+            _ => log::warn!("OpenXR: {CORE_VALIDATION} not installed (Debian: openxr-layer-corevalidation)"),
+        }
+    }
+    let app = xr::ApplicationInfo {
+        application_name: "blind-augment",
+        application_version: 1,
+        engine_name: "blind-augment",
+        engine_version: 1,
+        api_version: xr::Version::new(1, 0, 0),
+    };
+    let instance = entry.create_instance(&app, &want, &layers, &()).map_err(|e| match e {
+        xr::sys::Result::ERROR_RUNTIME_UNAVAILABLE | xr::sys::Result::ERROR_RUNTIME_FAILURE => {
+            XrError::NoRuntime(format!("xrCreateInstance: {e}"))
+        }
+        e => call("xrCreateInstance")(e),
+    })?;
+    Ok((entry, instance, want))
+}
+
+fn view_of(v: &xr::View) -> View {
+    let q = v.pose.orientation;
+    let p = v.pose.position;
+    View {
+        orientation: Quat::from_xyzw(q.x, q.y, q.z, q.w),
+        position_m: Vec3::new(p.x, p.y, p.z),
+        fov_rad: [v.fov.angle_left, v.fov.angle_right, v.fov.angle_up, v.fov.angle_down],
+    }
+}
+
+/// Pick the display rate: `want` if offered, else the offered rate nearest it.
+pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
+    offered
+        .iter()
+        .copied()
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .min_by(|a, b| (a - want).abs().total_cmp(&(b - want).abs()))
+}
+
+/// Run the XR app until the runtime ends the session (or `frames` are rendered).
+pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
+    // Declared in the reverse of the teardown order (see the module doc).
+    let (_entry, instance, enabled) = create_instance(opts.validation)?;
+    let props = instance.properties().map_err(call("xrGetInstanceProperties"))?;
+    let system = instance.system(xr::FormFactor::HEAD_MOUNTED_DISPLAY).map_err(call("xrGetSystem"))?;
+    let sys_props = instance.system_properties(system).map_err(call("xrGetSystemProperties"))?;
+    log::info!("OpenXR runtime {} {}, system {}", props.runtime_name, props.runtime_version, sys_props.system_name);
+
+    let blend_modes = instance
+        .enumerate_environment_blend_modes(system, xr::ViewConfigurationType::PRIMARY_STEREO)
+        .map_err(call("xrEnumerateEnvironmentBlendModes"))?;
+    // Passthrough: ALPHA_BLEND where offered (the compositor blends the layer over
+    // the real world), else XR_FB_passthrough under an OPAQUE frame, else nothing.
+    let (blend_mode, use_fb_passthrough) = if blend_modes.contains(&xr::EnvironmentBlendMode::ALPHA_BLEND) {
+        (xr::EnvironmentBlendMode::ALPHA_BLEND, false)
+    } else if enabled.fb_passthrough {
+        (xr::EnvironmentBlendMode::OPAQUE, true)
+    } else {
+        log::warn!("OpenXR: no passthrough (neither ALPHA_BLEND nor XR_FB_passthrough): virtual content over black");
+        (blend_modes.first().copied().unwrap_or(xr::EnvironmentBlendMode::OPAQUE), false)
+    };
+
+    let req = instance.graphics_requirements::<xr::Vulkan>(system).map_err(call("xrGetVulkanGraphicsRequirements2KHR"))?;
+    let v11 = xr::Version::new(1, 1, 0);
+    if req.min_api_version_supported > v11 || req.max_api_version_supported.major() < 1 {
+        return Err(XrError::VulkanVersion {
+            min: req.min_api_version_supported.to_string(),
+            max: req.max_api_version_supported.to_string(),
+        });
+    }
+    let gpu_opts = GpuOptions { validation: opts.validation, prefer_device: None };
+    let ctx = GpuContext::with_factory(&gpu_opts, &XrVulkan { instance: &instance, system })?;
+    let (vk_instance, vk_physical, vk_device, family) = ctx.raw_handles();
+
+    // SAFETY: the handles are live (owned by `ctx`, which outlives the session: it
+    // is declared before it and so dropped after it), created through this instance.
+    let (session, mut frame_waiter, mut frame_stream) = unsafe {
+        instance.create_session::<xr::Vulkan>(
+            system,
+            &xr::vulkan::SessionCreateInfo {
+                instance: vk_instance.as_raw() as _,
+                physical_device: vk_physical.as_raw() as _,
+                device: vk_device.as_raw() as _,
+                queue_family_index: family,
+                queue_index: 0,
+            },
+        )
+    }
+    .map_err(call("xrCreateSession"))?;
+
+    let space = session
+        .create_reference_space(xr::ReferenceSpaceType::LOCAL, xr::Posef::IDENTITY)
+        .map_err(call("xrCreateReferenceSpace"))?;
+    let config_views = instance
+        .enumerate_view_configuration_views(system, xr::ViewConfigurationType::PRIMARY_STEREO)
+        .map_err(call("xrEnumerateViewConfigurationViews"))?;
+    let (w, h) = match config_views.as_slice() {
+        [l, r] => (
+            l.recommended_image_rect_width.max(r.recommended_image_rect_width),
+            l.recommended_image_rect_height.max(r.recommended_image_rect_height),
+        ),
+        other => return Err(XrError::Call { call: "primary stereo has two views", result: xr::sys::Result::ERROR_VALIDATION_FAILURE })
+            .inspect_err(|_| log::error!("runtime reported {} views", other.len())),
+    };
+    // RGBA8 only: the composite is copied bit for bit (sRGB-encoded values into an
+    // SRGB image read back as the same colours). sRGB first: the compositor then
+    // decodes to linear light as it must.
+    let formats = session.enumerate_swapchain_formats().map_err(call("xrEnumerateSwapchainFormats"))?;
+    let format = [vk::Format::R8G8B8A8_SRGB, vk::Format::R8G8B8A8_UNORM]
+        .into_iter()
+        .map(|f| f.as_raw() as u32)
+        .find(|f| formats.contains(f))
+        .ok_or_else(|| XrError::SwapchainFormat(formats.clone()))?;
+    if format == vk::Format::R8G8B8A8_UNORM.as_raw() as u32 {
+        log::warn!("OpenXR: no sRGB swapchain format; the compositor will treat encoded values as linear");
+    }
+    let mut swapchain = session
+        .create_swapchain(&xr::SwapchainCreateInfo {
+            create_flags: xr::SwapchainCreateFlags::EMPTY,
+            usage_flags: xr::SwapchainUsageFlags::COLOR_ATTACHMENT | xr::SwapchainUsageFlags::TRANSFER_DST,
+            format,
+            sample_count: 1,
+            width: w,
+            height: h,
+            face_count: 1,
+            array_size: 2,
+            mip_count: 1,
+        })
+        .map_err(call("xrCreateSwapchain"))?;
+    let images: Vec<vk::Image> = swapchain
+        .enumerate_images()
+        .map_err(call("xrEnumerateSwapchainImages"))?
+        .into_iter()
+        .map(vk::Image::from_raw)
+        .collect();
+
+    // Passthrough feature and layer, running from creation (openxr 0.22's
+    // `Passthrough::start` calls xrPassthroughPauseFB: never call it).
+    let passthrough = if use_fb_passthrough {
+        let pt = session
+            .create_passthrough(xr::PassthroughFlagsFB::IS_RUNNING_AT_CREATION)
+            .map_err(call("xrCreatePassthroughFB"))?;
+        let layer = session
+            .create_passthrough_layer(&pt, xr::PassthroughFlagsFB::IS_RUNNING_AT_CREATION, xr::PassthroughLayerPurposeFB::RECONSTRUCTION)
+            .map_err(call("xrCreatePassthroughLayerFB"))?;
+        Some((pt, layer))
+    } else {
+        None
+    };
+    let see_through = passthrough.is_some() || blend_mode == xr::EnvironmentBlendMode::ALPHA_BLEND;
+
+    let mut display_hz = None;
+    if enabled.fb_display_refresh_rate {
+        let rates = session.enumerate_display_refresh_rates().map_err(call("xrEnumerateDisplayRefreshRatesFB"))?;
+        if let Some(r) = pick_refresh_rate(&rates, opts.display_hz) {
+            session.request_display_refresh_rate(r).map_err(call("xrRequestDisplayRefreshRateFB"))?;
+            log::info!("OpenXR: display refresh rate {r} Hz requested (offered {rates:?})");
+            display_hz = Some(r);
+        }
+    }
+
+    let mut renderer: Option<StereoRenderer<'_>> = None;
+    let mut lifecycle = Lifecycle::default();
+    let mut summary = XrSummary {
+        runtime: format!("{} {}", props.runtime_name, props.runtime_version),
+        system: sys_props.system_name.clone(),
+        device: ctx.device_name().to_string(),
+        eye_size: (w, h),
+        swapchain_format: format,
+        blend_mode,
+        passthrough: see_through,
+        display_hz,
+        frames_rendered: 0,
+        frames_empty: 0,
+        missed_frames: 0,
+        cpu_s: vec![],
+        wait_s: vec![],
+        periods_ns: vec![],
+        states: vec![],
+        end: EndReason::Exited,
+        vulkan_messages: vec![],
+    };
+    let mut event_buffer = xr::EventDataBuffer::new();
+    let mut exit_requested = false;
+    let mut prev: Option<(i64, [crate::render::Eye; 2])> = None;
+    let mut last_display_ns: Option<i64> = None;
+    let transparent = vec![0u8; (w * h * 4 * 2) as usize];
+
+    'frames: loop {
+        // Drain the event queue every iteration (spec 2.20: an app that stops
+        // polling may lose events).
+        while let Some(event) = instance.poll_event(&mut event_buffer).map_err(call("xrPollEvent"))? {
+            use xr::Event;
+            match event {
+                Event::SessionStateChanged(e) => {
+                    log::info!("OpenXR: session state {:?}", e.state());
+                    match lifecycle.on_state(e.state()) {
+                        Action::Begin => {
+                            session.begin(xr::ViewConfigurationType::PRIMARY_STEREO).map_err(call("xrBeginSession"))?;
+                        }
+                        Action::End => {
+                            session.end().map_err(call("xrEndSession"))?;
+                        }
+                        Action::Exit => {
+                            summary.end = EndReason::Exited;
+                            break 'frames;
+                        }
+                        Action::Lost => {
+                            log::warn!("OpenXR: session lost; tearing down");
+                            summary.end = EndReason::SessionLost;
+                            break 'frames;
+                        }
+                        Action::None => {}
+                    }
+                }
+                Event::InstanceLossPending(_) => {
+                    log::warn!("OpenXR: instance loss pending; tearing down");
+                    summary.end = EndReason::InstanceLost;
+                    break 'frames;
+                }
+                Event::DisplayRefreshRateChangedFB(e) => {
+                    log::info!("OpenXR: display refresh rate {} → {} Hz", e.from_display_refresh_rate(), e.to_display_refresh_rate());
+                    summary.display_hz = Some(e.to_display_refresh_rate());
+                }
+                Event::EventsLost(e) => log::warn!("OpenXR: {} events lost", e.lost_event_count()),
+                _ => {}
+            }
+        }
+        if !lifecycle.running {
+            // IDLE/READY wait: poll without spinning (no frame loop yet or any more).
+            std::thread::sleep(Duration::from_millis(5));
+            continue;
+        }
+        if opts.frames.is_some_and(|n| summary.frames_rendered >= n) && !exit_requested {
+            session.request_exit().map_err(call("xrRequestExitSession"))?;
+            exit_requested = true;
+        }
+
+        let wait_start = Instant::now();
+        let state = match frame_waiter.wait() {
+            Ok(s) => s,
+            // Loss is reported by event too; the next poll ends the loop.
+            Err(xr::sys::Result::ERROR_SESSION_LOST) => continue,
+            Err(e) => return Err(call("xrWaitFrame")(e)),
+        };
+        let wait_s = wait_start.elapsed().as_secs_f64();
+        let cpu_start = Instant::now();
+        frame_stream.begin().map_err(call("xrBeginFrame"))?;
+        let display_ns = state.predicted_display_time.as_nanos();
+        let period_ns = state.predicted_display_period.as_nanos();
+        if !state.should_render || !lifecycle.visible() {
+            frame_stream.end(state.predicted_display_time, blend_mode, &[]).map_err(call("xrEndFrame"))?;
+            summary.frames_empty += 1;
+            prev = None;
+            continue;
+        }
+        // One camera-model snapshot for the whole frame (hot-swap contract).
+        let snapshot = opts.models.latest();
+        let (_flags, located) = session
+            .locate_views(xr::ViewConfigurationType::PRIMARY_STEREO, state.predicted_display_time, &space)
+            .map_err(call("xrLocateViews"))?;
+        let [lv, rv] = match located.as_slice() {
+            [l, r] => [view_of(l), view_of(r)],
+            _ => return Err(call("xrLocateViews")(xr::sys::Result::ERROR_VALIDATION_FAILURE)),
+        };
+        let (le, lfov) = eye_from_view(&lv, w, h)?;
+        let (re, rfov) = eye_from_view(&rv, w, h)?;
+        let eyes = [le, re];
+        // Motion vectors span one render frame: the previous frame's views and
+        // content (its predicted display time); the first frame has none.
+        let (prev_t_ns, prev_eyes) = prev.unwrap_or((display_ns - period_ns, eyes));
+        let render_interval_s = ((display_ns - prev_t_ns) as f64 * 1e-9) as f32;
+        let t_s = (display_ns as f64 * 1e-9) as f32;
+        let t_prev_s = (prev_t_ns as f64 * 1e-9) as f32;
+        if renderer.is_none() {
+            let r = StereoRenderer::new(&ctx, opts.scene, w, h, opts.settings, Some(le.focal_px))?;
+            r.set_background(&transparent)?;
+            renderer = Some(r);
+        }
+        let Some(r) = renderer.as_mut() else { unreachable!("created above") };
+        r.set_render_interval_s(render_interval_s);
+        let frame = GBufferFrame {
+            eyes,
+            prev_eyes,
+            world_from_nodes: opts.scene.world_from_nodes(t_s, opts.local_from_scene),
+            prev_world_from_nodes: opts.scene.world_from_nodes(t_prev_s, opts.local_from_scene),
+            light_dir: Vec3::new(0.4, 1.0, 0.6),
+            ambient: 0.35,
+        };
+        let now = opts.scene.world_corners(t_s, opts.local_from_scene);
+        let before = opts.scene.world_corners(t_prev_s, opts.local_from_scene);
+        let input = FrameInput { gbuffer: &frame, corners_now: &now, corners_prev: &before };
+
+        let index = swapchain.acquire_image().map_err(call("xrAcquireSwapchainImage"))?;
+        swapchain.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage"))?;
+        let target = ExternalTarget { image: images[index as usize], layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL };
+        let rendered = r.render_to(&snapshot, &input, true, Some(target));
+        // Release even after a failed render: the swapchain must not stay acquired.
+        swapchain.release_image().map_err(call("xrReleaseSwapchainImage"))?;
+        rendered?;
+
+        let rect = xr::Rect2Di { offset: xr::Offset2Di { x: 0, y: 0 }, extent: xr::Extent2Di { width: w as i32, height: h as i32 } };
+        let fovs = [lfov, rfov];
+        let proj_views: Vec<xr::CompositionLayerProjectionView<'_, xr::Vulkan>> = (0..2)
+            .map(|e| {
+                let f = fovs[e];
+                xr::CompositionLayerProjectionView::new()
+                    .pose(located[e].pose)
+                    .fov(xr::Fovf { angle_left: f[0], angle_right: f[1], angle_up: f[2], angle_down: f[3] })
+                    .sub_image(xr::SwapchainSubImage::new().swapchain(&swapchain).image_array_index(e as u32).image_rect(rect))
+            })
+            .collect();
+        // Over passthrough the layer's (blurred, premultiplied) alpha blends the
+        // virtual edges into the real image (spec 10.6.1: premultiplied unless
+        // UNPREMULTIPLIED_ALPHA is set).
+        let flags = if see_through {
+            xr::CompositionLayerFlags::BLEND_TEXTURE_SOURCE_ALPHA
+        } else {
+            xr::CompositionLayerFlags::EMPTY
+        };
+        let projection = xr::CompositionLayerProjection::new().space(&space).layer_flags(flags).views(&proj_views);
+        match &passthrough {
+            Some((_, layer)) => {
+                // openxr 0.22 does not export its XrCompositionLayerPassthroughFB
+                // builder: the raw struct, viewed as the layer base it begins with.
+                let raw = xr::sys::CompositionLayerPassthroughFB {
+                    ty: xr::sys::CompositionLayerPassthroughFB::TYPE,
+                    next: std::ptr::null(),
+                    flags: xr::CompositionLayerFlags::EMPTY,
+                    space: <xr::sys::Space as xr::sys::Handle>::NULL,
+                    layer_handle: layer.as_raw(),
+                };
+                // SAFETY: CompositionLayerBase is repr(transparent) over the layer
+                // header every layer struct starts with (spec 10.5); `raw` outlives
+                // the xrEndFrame call that reads it.
+                let pt = unsafe { &*(&raw as *const xr::sys::CompositionLayerPassthroughFB as *const xr::CompositionLayerBase<'_, xr::Vulkan>) };
+                frame_stream.end(state.predicted_display_time, blend_mode, &[pt, &projection])
+            }
+            None => frame_stream.end(state.predicted_display_time, blend_mode, &[&projection]),
+        }
+        .map_err(call("xrEndFrame"))?;
+
+        let cpu_s = cpu_start.elapsed().as_secs_f64();
+        if let Some(last) = last_display_ns {
+            // A display slot skipped: more than 1.5 periods since the last frame.
+            if (display_ns - last) as f64 > 1.5 * period_ns as f64 {
+                summary.missed_frames += 1;
+            }
+        }
+        last_display_ns = Some(display_ns);
+        let record = FrameRecord {
+            index: summary.frames_rendered,
+            predicted_display_time_ns: display_ns,
+            predicted_display_period_ns: period_ns,
+            model_generation: snapshot.generation,
+            cpu_s,
+            wait_s,
+            views: [lv, rv],
+        };
+        if let Some(f) = opts.on_frame.as_mut() {
+            f(&record);
+        }
+        summary.frames_rendered += 1;
+        summary.cpu_s.push(cpu_s);
+        summary.wait_s.push(wait_s);
+        summary.periods_ns.push(period_ns);
+        prev = Some((display_ns, eyes));
+    }
+
+    if let Some(r) = &renderer {
+        r.finish()?;
+    }
+    summary.states = lifecycle.history.clone();
+    summary.vulkan_messages = ctx.take_messages();
+    // Explicit teardown in the documented order (the drops would do the same).
+    drop(renderer);
+    drop(passthrough);
+    drop(swapchain);
+    drop(space);
+    drop(frame_stream);
+    drop(frame_waiter);
+    drop(session);
+    drop(ctx);
+    drop(instance);
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refresh_rate_nearest_offered() {
+        assert_eq!(pick_refresh_rate(&[72.0, 90.0, 120.0], 90.0), Some(90.0));
+        assert_eq!(pick_refresh_rate(&[72.0, 120.0], 90.0), Some(72.0));
+        assert_eq!(pick_refresh_rate(&[f32::NAN, 60.0], 90.0), Some(60.0));
+        assert_eq!(pick_refresh_rate(&[], 90.0), None);
+    }
+}
