@@ -250,6 +250,54 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
     Ok((entry, instance, want))
 }
 
+/// What the render core needs for one XR frame besides the snapshot: the
+/// G-buffer inputs (both eyes now and one render frame before, the scene's node
+/// transforms at both times) and the content's corners. Shared by the frame loop
+/// and by anything that must reproduce its frames (the tests' desktop replay).
+pub struct FrameGeometry {
+    pub gbuffer: GBufferFrame,
+    pub corners_now: Vec<Vec3>,
+    pub corners_prev: Vec<Vec3>,
+    /// Seconds between the previous rendered frame's display time and this one's:
+    /// what the motion vectors span.
+    pub render_interval_s: f32,
+}
+
+impl FrameGeometry {
+    /// `prev`: the previous rendered frame's display time (ns) and eyes, or None
+    /// for the first frame (then the eyes stand still over one display period).
+    pub fn new(
+        scene: &Scene,
+        local_from_scene: Mat4,
+        eyes: [crate::render::Eye; 2],
+        prev: Option<(i64, [crate::render::Eye; 2])>,
+        display_ns: i64,
+        period_ns: i64,
+    ) -> Self {
+        let (prev_t_ns, prev_eyes) = prev.unwrap_or((display_ns - period_ns, eyes));
+        // Scene animation time: seconds of XrTime (f64 first: XrTime is ns).
+        let t_s = (display_ns as f64 * 1e-9) as f32;
+        let t_prev_s = (prev_t_ns as f64 * 1e-9) as f32;
+        Self {
+            gbuffer: GBufferFrame {
+                eyes,
+                prev_eyes,
+                world_from_nodes: scene.world_from_nodes(t_s, local_from_scene),
+                prev_world_from_nodes: scene.world_from_nodes(t_prev_s, local_from_scene),
+                light_dir: Vec3::new(0.4, 1.0, 0.6),
+                ambient: 0.35,
+            },
+            corners_now: scene.world_corners(t_s, local_from_scene),
+            corners_prev: scene.world_corners(t_prev_s, local_from_scene),
+            render_interval_s: ((display_ns - prev_t_ns) as f64 * 1e-9) as f32,
+        }
+    }
+
+    pub fn input(&self) -> FrameInput<'_> {
+        FrameInput { gbuffer: &self.gbuffer, corners_now: &self.corners_now, corners_prev: &self.corners_prev }
+    }
+}
+
 fn view_of(v: &xr::View) -> View {
     let q = v.pose.orientation;
     let p = v.pose.position;
@@ -466,6 +514,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         if opts.frames.is_some_and(|n| summary.frames_rendered >= n) && !exit_requested {
             session.request_exit().map_err(call("xrRequestExitSession"))?;
             exit_requested = true;
+            // The state changes it causes arrive as events: handle them first.
+            continue;
         }
 
         let wait_start = Instant::now();
@@ -498,30 +548,15 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         let (le, lfov) = eye_from_view(&lv, w, h)?;
         let (re, rfov) = eye_from_view(&rv, w, h)?;
         let eyes = [le, re];
-        // Motion vectors span one render frame: the previous frame's views and
-        // content (its predicted display time); the first frame has none.
-        let (prev_t_ns, prev_eyes) = prev.unwrap_or((display_ns - period_ns, eyes));
-        let render_interval_s = ((display_ns - prev_t_ns) as f64 * 1e-9) as f32;
-        let t_s = (display_ns as f64 * 1e-9) as f32;
-        let t_prev_s = (prev_t_ns as f64 * 1e-9) as f32;
+        let geometry = FrameGeometry::new(opts.scene, opts.local_from_scene, eyes, prev, display_ns, period_ns);
         if renderer.is_none() {
             let r = StereoRenderer::new(&ctx, opts.scene, w, h, opts.settings, Some(le.focal_px))?;
             r.set_background(&transparent)?;
             renderer = Some(r);
         }
         let Some(r) = renderer.as_mut() else { unreachable!("created above") };
-        r.set_render_interval_s(render_interval_s);
-        let frame = GBufferFrame {
-            eyes,
-            prev_eyes,
-            world_from_nodes: opts.scene.world_from_nodes(t_s, opts.local_from_scene),
-            prev_world_from_nodes: opts.scene.world_from_nodes(t_prev_s, opts.local_from_scene),
-            light_dir: Vec3::new(0.4, 1.0, 0.6),
-            ambient: 0.35,
-        };
-        let now = opts.scene.world_corners(t_s, opts.local_from_scene);
-        let before = opts.scene.world_corners(t_prev_s, opts.local_from_scene);
-        let input = FrameInput { gbuffer: &frame, corners_now: &now, corners_prev: &before };
+        r.set_render_interval_s(geometry.render_interval_s);
+        let input = geometry.input();
 
         let index = swapchain.acquire_image().map_err(call("xrAcquireSwapchainImage"))?;
         swapchain.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage"))?;

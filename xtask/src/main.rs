@@ -1,7 +1,8 @@
 //! Project automation in Rust (`cargo xtask <command>`), so developers need nothing
 //! but cargo: `bench` runs every benchmark (fit speed, speed/accuracy trade, GPU
 //! passes) and keeps the raw output for BENCHMARKS.md; `assets` regenerates the
-//! bundled glTF object. CI is `.ci/run` alone, the
+//! bundled glTF object; `xr-runtime` builds the headless OpenXR test runtime and
+//! prints its manifest's path (for `XR_RUNTIME_JSON`). CI is `.ci/run` alone, the
 //! one definition of the checks.
 
 mod assets;
@@ -45,10 +46,35 @@ fn bench() -> Result<()> {
     Ok(())
 }
 
+/// Build `tests/xr-runtime` and write its loader manifest next to the library
+/// (the Khronos loader reads `library_path` from it; an absolute path, so the
+/// manifest works from any directory). Prints the manifest's path on stdout.
+fn xr_runtime(release: bool) -> Result<()> {
+    let mut args = vec!["build", "-p", "ba-xr-runtime"];
+    if release {
+        args.push("--release");
+    }
+    cargo(&args)?;
+    let dir = root().join("target").join(if release { "release" } else { "debug" });
+    let lib = dir.join("libba_xr_runtime.so");
+    anyhow::ensure!(lib.exists(), "{} was not built", lib.display());
+    let template = std::fs::read_to_string(root().join("tests/xr-runtime/runtime.json.in"))
+        .context("reading tests/xr-runtime/runtime.json.in")?;
+    let lib_json = serde_json::to_string(&lib.display().to_string()).context("encoding the library path")?;
+    let manifest = dir.join("ba_xr_runtime.json");
+    std::fs::write(&manifest, template.replace("\"@LIB@\"", &lib_json))
+        .with_context(|| format!("writing {}", manifest.display()))?;
+    println!("{}", manifest.display());
+    eprintln!("use it with: export XR_RUNTIME_JSON={}", manifest.display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
-    match std::env::args().nth(1).as_deref() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
         Some("bench") => bench(),
         Some("assets") => assets::generate(&root()),
-        other => bail!("usage: cargo xtask bench | assets (got {other:?})"),
+        Some("xr-runtime") => xr_runtime(args.iter().any(|a| a == "--release")),
+        other => bail!("usage: cargo xtask bench | assets | xr-runtime [--release] (got {other:?})"),
     }
 }

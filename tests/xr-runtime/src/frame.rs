@@ -338,14 +338,15 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
 
 /// The synthetic "camera" image the test runtime shows as passthrough: a smooth
 /// gradient with a coarse checker, so a blend with it is visible in a PNG.
-pub fn passthrough_texel(x: u32, y: u32, w: u32, h: u32) -> [f32; 3] {
+fn passthrough_texel(x: u32, y: u32, w: u32, h: u32) -> [f32; 3] {
     let (u, v) = (x as f32 / w.max(1) as f32, y as f32 / h.max(1) as f32);
     let check = if ((x / 32) + (y / 32)) % 2 == 0 { 0.08 } else { 0.0 };
     [0.25 + 0.4 * u + check, 0.35 + check, 0.25 + 0.4 * v + check]
 }
 
-/// Write, per eye, the projection layer as submitted (`frame_NNNN_eyeE.png`, RGBA)
-/// and the composition of all layers in order (`frame_NNNN_eyeE_composited.png`):
+/// Write, per eye, the projection layer as submitted (`frame_NNNN_eyeE.png`, RGBA),
+/// the passthrough image where a passthrough layer was submitted
+/// (`frame_NNNN_eyeE_passthrough.png`) and the composition of all layers in order (`frame_NNNN_eyeE_composited.png`):
 /// passthrough where a running passthrough layer stands, then each projection
 /// layer blended by its flags (premultiplied by default, spec 10.6.1). Blending is
 /// on the encoded values, as the desktop composite does; a headset compositor blends
@@ -359,9 +360,14 @@ fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer]) -> Result<(), String> 
         let mut canvas = vec![[0.0f32; 3]; (w * h) as usize];
         for layer in layers {
             if layer.passthrough {
+                let mut pt = image::RgbImage::new(w, h);
                 for (i, c) in canvas.iter_mut().enumerate() {
-                    *c = passthrough_texel(i as u32 % w, i as u32 / w, w, h);
+                    let (x, y) = (i as u32 % w, i as u32 / w);
+                    *c = passthrough_texel(x, y, w, h);
+                    pt.put_pixel(x, y, image::Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)));
                 }
+                let p = dir.join(format!("frame_{frame:04}_eye{eye}_passthrough.png"));
+                pt.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
             }
             let Some(view) = layer.views.get(eye) else { continue };
             let sc = rt.swapchains.get(&view.swapchain).ok_or("swapchain gone")?;
