@@ -104,7 +104,8 @@ fn model(exposure: f32) -> CameraModel {
     let mut m = CameraModel::empty(1280, 960);
     m.reference.frame_interval_s = Some(1.0 / 30.0);
     m.reference.pixels_per_radian = Some(60.0);
-    m.motion_blur = MotionBlur { present: true, exposure: Some(exposure), diagnostics: Diagnostics::not_fitted("test") };
+    m.motion_blur =
+        MotionBlur { present: true, exposure: Some(exposure), diagnostics: Diagnostics::not_fitted("test") };
     m.depth_of_field = DepthOfField {
         present: true,
         units: DepthUnits::MetricM,
@@ -261,9 +262,17 @@ fn desktop_replay(records: &[FrameRecord], models: &ModelChannel, k: usize) -> V
     let mut prev = None;
     for r in &records[..=k] {
         let eyes = [eye_from_view(&r.views[0], w, h).unwrap().0, eye_from_view(&r.views[1], w, h).unwrap().0];
-        let g = FrameGeometry::new(&scene, local_from_scene, eyes, prev, r.predicted_display_time_ns, r.predicted_display_period_ns);
+        let g = FrameGeometry::new(
+            &scene,
+            local_from_scene,
+            eyes,
+            prev,
+            r.predicted_display_time_ns,
+            r.predicted_display_period_ns,
+        );
         let ren = renderer.get_or_insert_with(|| {
-            let ren = StereoRenderer::new(&ctx, &scene, w, h, LayerSettings::default(), Some(eyes[0].focal_px)).unwrap();
+            let ren =
+                StereoRenderer::new(&ctx, &scene, w, h, LayerSettings::default(), Some(eyes[0].focal_px)).unwrap();
             ren.set_background(&vec![0u8; (w * h * 8) as usize]).unwrap();
             ren
         });
@@ -312,7 +321,10 @@ fn fb_passthrough_frames_match_the_desktop_render() {
         assert!(max <= 1, "eye {eye}: runtime PNG differs from the desktop render by up to {max}/255");
         // Non-vacuity: there is virtual content, with partial (blurred) alpha.
         let alphas: Vec<u8> = got.chunks(4).map(|p| p[3]).collect();
-        assert!(alphas.iter().any(|&a| a == 255) && alphas.iter().any(|&a| a > 0 && a < 255), "eye {eye}: no blurred edge");
+        assert!(
+            alphas.contains(&255) && alphas.iter().any(|&a| a > 0 && a < 255),
+            "eye {eye}: no blurred edge"
+        );
         // The runtime's composition: passthrough where the layer is empty, the
         // layer where it is opaque, premultiplied "over" between (±1 level: 8-bit
         // rounding of the blend).
@@ -364,7 +376,9 @@ fn session_loss_tears_down_cleanly() {
 #[test]
 fn instance_loss_tears_down_cleanly() {
     let models = ModelChannel::new(model(0.4)).expect("model");
-    let Some(run) = run_xr("instance_loss", &[("BA_XR_SCRIPT", "instance_loss@15")], 1000, true, &models) else { return };
+    let Some(run) = run_xr("instance_loss", &[("BA_XR_SCRIPT", "instance_loss@15")], 1000, true, &models) else {
+        return;
+    };
     assert_eq!(run.summary.end, EndReason::InstanceLost);
     assert!(run.summary.vulkan_messages.is_empty());
 }
@@ -484,7 +498,13 @@ fn xr_command_prints_a_timing_summary() {
         return;
     }
     assert!(out.status.success(), "{text}");
-    for want in ["frames: 30 rendered", "CPU per frame", "waiting in xrWaitFrame", "predicted display period 11.11 ms", "ended: Exited"] {
+    for want in [
+        "frames: 30 rendered",
+        "CPU per frame",
+        "waiting in xrWaitFrame",
+        "predicted display period 11.11 ms",
+        "ended: Exited",
+    ] {
         assert!(text.contains(want), "missing {want:?} in:\n{text}");
     }
     let log = std::fs::read_to_string(dir.join("core_validation.txt")).unwrap_or_default();

@@ -181,7 +181,13 @@ impl<'a> Image<'a> {
                 vk::AccessFlags::SHADER_WRITE,
                 vk::AccessFlags::TRANSFER_READ,
             ),
-            barrier(dst, dst_layout, vk::ImageLayout::TRANSFER_DST_OPTIMAL, vk::AccessFlags::empty(), vk::AccessFlags::TRANSFER_WRITE),
+            barrier(
+                dst,
+                dst_layout,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                vk::AccessFlags::empty(),
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
         ];
         let after = [
             barrier(
@@ -210,9 +216,32 @@ impl<'a> Image<'a> {
         unsafe {
             let d = &self.ctx.device;
             let stages = vk::PipelineStageFlags::ALL_COMMANDS;
-            d.cmd_pipeline_barrier(cmd, stages, vk::PipelineStageFlags::TRANSFER, vk::DependencyFlags::empty(), &[], &[], &before);
-            d.cmd_copy_image(cmd, self.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, dst, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &[region]);
-            d.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, stages, vk::DependencyFlags::empty(), &[], &[], &after);
+            d.cmd_pipeline_barrier(
+                cmd,
+                stages,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &before,
+            );
+            d.cmd_copy_image(
+                cmd,
+                self.image,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                dst,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &[region],
+            );
+            d.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                stages,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &after,
+            );
         }
     }
 

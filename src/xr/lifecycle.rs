@@ -94,7 +94,18 @@ mod tests {
 
     #[test]
     fn full_lifecycle_begin_end_exit() {
-        let (a, l) = run(&[S::IDLE, S::READY, S::SYNCHRONIZED, S::VISIBLE, S::FOCUSED, S::VISIBLE, S::SYNCHRONIZED, S::STOPPING, S::IDLE, S::EXITING]);
+        let (a, l) = run(&[
+            S::IDLE,
+            S::READY,
+            S::SYNCHRONIZED,
+            S::VISIBLE,
+            S::FOCUSED,
+            S::VISIBLE,
+            S::SYNCHRONIZED,
+            S::STOPPING,
+            S::IDLE,
+            S::EXITING,
+        ]);
         use Action::*;
         assert_eq!(a, vec![None, Begin, None, None, None, None, None, End, None, Exit]);
         assert!(!l.running);

@@ -208,12 +208,7 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
             "XR_FB_display_refresh_rate",
             "the display runs at the runtime's default rate",
         ),
-        (
-            available.fb_space_warp,
-            &mut want.fb_space_warp,
-            "XR_FB_space_warp",
-            "every display frame is rendered",
-        ),
+        (available.fb_space_warp, &mut want.fb_space_warp, "XR_FB_space_warp", "every display frame is rendered"),
     ] {
         if offered {
             *flag = true;
@@ -340,7 +335,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         (blend_modes.first().copied().unwrap_or(xr::EnvironmentBlendMode::OPAQUE), false)
     };
 
-    let req = instance.graphics_requirements::<xr::Vulkan>(system).map_err(call("xrGetVulkanGraphicsRequirements2KHR"))?;
+    let req =
+        instance.graphics_requirements::<xr::Vulkan>(system).map_err(call("xrGetVulkanGraphicsRequirements2KHR"))?;
     let v11 = xr::Version::new(1, 1, 0);
     if req.min_api_version_supported > v11 || req.max_api_version_supported.major() < 1 {
         return Err(XrError::VulkanVersion {
@@ -379,8 +375,13 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             l.recommended_image_rect_width.max(r.recommended_image_rect_width),
             l.recommended_image_rect_height.max(r.recommended_image_rect_height),
         ),
-        other => return Err(XrError::Call { call: "primary stereo has two views", result: xr::sys::Result::ERROR_VALIDATION_FAILURE })
-            .inspect_err(|_| log::error!("runtime reported {} views", other.len())),
+        other => {
+            return Err(XrError::Call {
+                call: "primary stereo has two views",
+                result: xr::sys::Result::ERROR_VALIDATION_FAILURE,
+            })
+            .inspect_err(|_| log::error!("runtime reported {} views", other.len()))
+        }
     };
     // RGBA8 only: the composite is copied bit for bit (sRGB-encoded values into an
     // SRGB image read back as the same colours). sRGB first: the compositor then
@@ -421,7 +422,11 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             .create_passthrough(xr::PassthroughFlagsFB::IS_RUNNING_AT_CREATION)
             .map_err(call("xrCreatePassthroughFB"))?;
         let layer = session
-            .create_passthrough_layer(&pt, xr::PassthroughFlagsFB::IS_RUNNING_AT_CREATION, xr::PassthroughLayerPurposeFB::RECONSTRUCTION)
+            .create_passthrough_layer(
+                &pt,
+                xr::PassthroughFlagsFB::IS_RUNNING_AT_CREATION,
+                xr::PassthroughLayerPurposeFB::RECONSTRUCTION,
+            )
             .map_err(call("xrCreatePassthroughLayerFB"))?;
         Some((pt, layer))
     } else {
@@ -499,7 +504,11 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
                     break 'frames;
                 }
                 Event::DisplayRefreshRateChangedFB(e) => {
-                    log::info!("OpenXR: display refresh rate {} → {} Hz", e.from_display_refresh_rate(), e.to_display_refresh_rate());
+                    log::info!(
+                        "OpenXR: display refresh rate {} → {} Hz",
+                        e.from_display_refresh_rate(),
+                        e.to_display_refresh_rate()
+                    );
                     summary.display_hz = Some(e.to_display_refresh_rate());
                 }
                 Event::EventsLost(e) => log::warn!("OpenXR: {} events lost", e.lost_event_count()),
@@ -560,13 +569,17 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
 
         let index = swapchain.acquire_image().map_err(call("xrAcquireSwapchainImage"))?;
         swapchain.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage"))?;
-        let target = ExternalTarget { image: images[index as usize], layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL };
+        let target =
+            ExternalTarget { image: images[index as usize], layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL };
         let rendered = r.render_to(&snapshot, &input, true, Some(target));
         // Release even after a failed render: the swapchain must not stay acquired.
         swapchain.release_image().map_err(call("xrReleaseSwapchainImage"))?;
         rendered?;
 
-        let rect = xr::Rect2Di { offset: xr::Offset2Di { x: 0, y: 0 }, extent: xr::Extent2Di { width: w as i32, height: h as i32 } };
+        let rect = xr::Rect2Di {
+            offset: xr::Offset2Di { x: 0, y: 0 },
+            extent: xr::Extent2Di { width: w as i32, height: h as i32 },
+        };
         let fovs = [lfov, rfov];
         let proj_views: Vec<xr::CompositionLayerProjectionView<'_, xr::Vulkan>> = (0..2)
             .map(|e| {
@@ -574,7 +587,9 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
                 xr::CompositionLayerProjectionView::new()
                     .pose(located[e].pose)
                     .fov(xr::Fovf { angle_left: f[0], angle_right: f[1], angle_up: f[2], angle_down: f[3] })
-                    .sub_image(xr::SwapchainSubImage::new().swapchain(&swapchain).image_array_index(e as u32).image_rect(rect))
+                    .sub_image(
+                        xr::SwapchainSubImage::new().swapchain(&swapchain).image_array_index(e as u32).image_rect(rect),
+                    )
             })
             .collect();
         // Over passthrough the layer's (blurred, premultiplied) alpha blends the
@@ -600,7 +615,10 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
                 // SAFETY: CompositionLayerBase is repr(transparent) over the layer
                 // header every layer struct starts with (spec 10.5); `raw` outlives
                 // the xrEndFrame call that reads it.
-                let pt = unsafe { &*(&raw as *const xr::sys::CompositionLayerPassthroughFB as *const xr::CompositionLayerBase<'_, xr::Vulkan>) };
+                let pt = unsafe {
+                    &*(&raw as *const xr::sys::CompositionLayerPassthroughFB
+                        as *const xr::CompositionLayerBase<'_, xr::Vulkan>)
+                };
                 frame_stream.end(state.predicted_display_time, blend_mode, &[pt, &projection])
             }
             None => frame_stream.end(state.predicted_display_time, blend_mode, &[&projection]),

@@ -66,10 +66,9 @@ mod tests {
         let (w, h) = (1680, 1760);
         let (eye, fov) = eye_from_view(&view, w, h).unwrap();
         let m = clip_from_view(eye.focal_px, eye.centre_px, w, h, 0.05, 100.0);
-        for (tx, ty, px, py) in [
-            (fov[0].tan(), fov[2].tan(), 0.0, 0.0),
-            (fov[1].tan(), fov[3].tan(), w as f32, h as f32),
-        ] {
+        for (tx, ty, px, py) in
+            [(fov[0].tan(), fov[2].tan(), 0.0, 0.0), (fov[1].tan(), fov[3].tan(), w as f32, h as f32)]
+        {
             let c = m * glam::Vec4::new(tx, ty, -1.0, 1.0);
             let (x, y) = ((c.x / c.w + 1.0) * 0.5 * w as f32, (c.y / c.w + 1.0) * 0.5 * h as f32);
             assert!((x - px).abs() < 1e-3 && (y - py).abs() < 1e-3, "({x}, {y}) vs ({px}, {py})");

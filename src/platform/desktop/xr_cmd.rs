@@ -109,7 +109,11 @@ pub fn run(args: XrArgs) -> Result<()> {
     })?;
     println!("{}", format_summary(&summary));
     if !summary.vulkan_messages.is_empty() {
-        anyhow::bail!("Vulkan validation reported {} message(s): {:?}", summary.vulkan_messages.len(), summary.vulkan_messages);
+        anyhow::bail!(
+            "Vulkan validation reported {} message(s): {:?}",
+            summary.vulkan_messages.len(),
+            summary.vulkan_messages
+        );
     }
     match summary.end {
         EndReason::Exited => Ok(()),

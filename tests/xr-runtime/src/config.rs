@@ -59,9 +59,12 @@ impl Config {
     /// Read the environment; a malformed value is an error naming the variable.
     pub fn from_env() -> Result<Self, String> {
         let display_hz = match var("BA_XR_DISPLAY_HZ") {
-            Some(s) => s.trim().parse::<f32>().ok().filter(|v| v.is_finite() && *v > 0.0 && *v <= 1000.0).ok_or(
-                format!("BA_XR_DISPLAY_HZ={s:?}: expected a refresh rate in Hz, e.g. 90"),
-            )?,
+            Some(s) => s
+                .trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|v| v.is_finite() && *v > 0.0 && *v <= 1000.0)
+                .ok_or(format!("BA_XR_DISPLAY_HZ={s:?}: expected a refresh rate in Hz, e.g. 90"))?,
             None => 90.0,
         };
         let refresh_rates = match var("BA_XR_REFRESH_RATES") {
@@ -74,7 +77,8 @@ impl Config {
         };
         let eye_size = match var("BA_XR_EYE_SIZE") {
             Some(s) => {
-                let parsed = s.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
+                let parsed =
+                    s.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
                 parsed
                     .filter(|&(w, h): &(u32, u32)| (8..=8192).contains(&w) && (8..=8192).contains(&h))
                     .ok_or(format!("BA_XR_EYE_SIZE={s:?}: expected WxH between 8 and 8192"))?
@@ -104,8 +108,7 @@ impl Config {
         let mut script = vec![];
         if let Some(s) = var("BA_XR_SCRIPT") {
             for item in s.split(',').map(str::trim) {
-                let (what, at) =
-                    item.split_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
+                let (what, at) = item.split_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
                 let at: u64 = at.parse().map_err(|_| format!("BA_XR_SCRIPT: {item:?}: frame is not a number"))?;
                 let cmd = match what {
                     "exit" => Command::Exit,

@@ -4,8 +4,8 @@
 
 use crate::{lock, Runtime};
 use openxr_sys as xr;
-use xr::Handle as _;
 use serde_json::json;
+use xr::Handle as _;
 
 #[derive(Default)]
 pub(crate) struct Pacing {
@@ -83,7 +83,14 @@ pub(crate) unsafe extern "system" fn wait_frame(
             rt.set_state(xr::SessionState::SYNCHRONIZED);
         }
         let lost = rt.session.as_ref().is_some_and(|s| s.lost);
-        (target - period, target, period, should_render, rt.epoch, if lost { xr::Result::SESSION_LOSS_PENDING } else { xr::Result::SUCCESS })
+        (
+            target - period,
+            target,
+            period,
+            should_render,
+            rt.epoch,
+            if lost { xr::Result::SESSION_LOSS_PENDING } else { xr::Result::SUCCESS },
+        )
     };
     // Sleep until the wake time (XrTime is 1 s + time since the epoch, see now_ns).
     let wake = epoch + std::time::Duration::from_nanos((wake_ns - 1_000_000_000).max(0) as u64);
@@ -340,7 +347,7 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
 /// gradient with a coarse checker, so a blend with it is visible in a PNG.
 fn passthrough_texel(x: u32, y: u32, w: u32, h: u32) -> [f32; 3] {
     let (u, v) = (x as f32 / w.max(1) as f32, y as f32 / h.max(1) as f32);
-    let check = if ((x / 32) + (y / 32)) % 2 == 0 { 0.08 } else { 0.0 };
+    let check = if ((x / 32) + (y / 32)).is_multiple_of(2) { 0.08 } else { 0.0 };
     [0.25 + 0.4 * u + check, 0.35 + check, 0.25 + 0.4 * v + check]
 }
 

@@ -28,7 +28,13 @@ pub(crate) unsafe extern "system" fn create_action_set(
 }
 
 pub(crate) unsafe extern "system" fn destroy_action_set(set: xr::ActionSet) -> xr::Result {
-    with_runtime(|rt| if rt.actions.remove(&set.into_raw()) { xr::Result::SUCCESS } else { xr::Result::ERROR_HANDLE_INVALID })
+    with_runtime(|rt| {
+        if rt.actions.remove(&set.into_raw()) {
+            xr::Result::SUCCESS
+        } else {
+            xr::Result::ERROR_HANDLE_INVALID
+        }
+    })
 }
 
 pub(crate) unsafe extern "system" fn create_action(
@@ -49,7 +55,13 @@ pub(crate) unsafe extern "system" fn create_action(
 }
 
 pub(crate) unsafe extern "system" fn destroy_action(action: xr::Action) -> xr::Result {
-    with_runtime(|rt| if rt.actions.remove(&action.into_raw()) { xr::Result::SUCCESS } else { xr::Result::ERROR_HANDLE_INVALID })
+    with_runtime(|rt| {
+        if rt.actions.remove(&action.into_raw()) {
+            xr::Result::SUCCESS
+        } else {
+            xr::Result::ERROR_HANDLE_INVALID
+        }
+    })
 }
 
 pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
@@ -81,8 +93,17 @@ pub(crate) unsafe extern "system" fn get_current_interaction_profile(
     })
 }
 
-pub(crate) unsafe extern "system" fn sync_actions(session: xr::Session, _info: *const xr::ActionsSyncInfo) -> xr::Result {
-    with_runtime(|rt| if session_ok(rt, session) { xr::Result::SESSION_NOT_FOCUSED } else { xr::Result::ERROR_HANDLE_INVALID })
+pub(crate) unsafe extern "system" fn sync_actions(
+    session: xr::Session,
+    _info: *const xr::ActionsSyncInfo,
+) -> xr::Result {
+    with_runtime(|rt| {
+        if session_ok(rt, session) {
+            xr::Result::SESSION_NOT_FOCUSED
+        } else {
+            xr::Result::ERROR_HANDLE_INVALID
+        }
+    })
 }
 
 macro_rules! inactive_state {
@@ -165,6 +186,9 @@ pub(crate) unsafe extern "system" fn apply_haptic_feedback(
     with_runtime(|rt| if session_ok(rt, session) { xr::Result::SUCCESS } else { xr::Result::ERROR_HANDLE_INVALID })
 }
 
-pub(crate) unsafe extern "system" fn stop_haptic_feedback(session: xr::Session, _info: *const xr::HapticActionInfo) -> xr::Result {
+pub(crate) unsafe extern "system" fn stop_haptic_feedback(
+    session: xr::Session,
+    _info: *const xr::HapticActionInfo,
+) -> xr::Result {
     with_runtime(|rt| if session_ok(rt, session) { xr::Result::SUCCESS } else { xr::Result::ERROR_HANDLE_INVALID })
 }

@@ -22,12 +22,12 @@ mod vulkan;
 pub use config::{Command, Config, Head};
 
 use openxr_sys as xr;
-use xr::Handle as _;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::ffi::{c_char, CStr};
 use std::io::Write;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
+use xr::Handle as _;
 
 /// What this runtime reports as its API version (the Debian loader is 1.0.20).
 const API_VERSION: xr::Version = xr::Version::new(1, 0, 20);

@@ -5,8 +5,8 @@
 use crate::config::{Command, Head};
 use crate::{lock, two_call, vulkan, with_instance, with_runtime, Event, Runtime, SpaceKind};
 use openxr_sys as xr;
-use xr::Handle as _;
 use std::f32::consts::PI;
+use xr::Handle as _;
 
 pub(crate) struct Session {
     pub handle: u64,
@@ -50,7 +50,9 @@ impl Runtime {
         if self.state() == Some(S::VISIBLE) {
             self.set_state(S::SYNCHRONIZED);
         }
-        if matches!(self.state(), Some(S::SYNCHRONIZED) | Some(S::READY)) && self.session.as_ref().is_some_and(|s| s.running) {
+        if matches!(self.state(), Some(S::SYNCHRONIZED) | Some(S::READY))
+            && self.session.as_ref().is_some_and(|s| s.running)
+        {
             self.set_state(S::STOPPING);
         }
     }
@@ -189,7 +191,10 @@ pub(crate) unsafe extern "system" fn destroy_session(session: xr::Session) -> xr
     xr::Result::SUCCESS
 }
 
-pub(crate) unsafe extern "system" fn begin_session(session: xr::Session, info: *const xr::SessionBeginInfo) -> xr::Result {
+pub(crate) unsafe extern "system" fn begin_session(
+    session: xr::Session,
+    info: *const xr::SessionBeginInfo,
+) -> xr::Result {
     with_session(session, |rt| {
         let s = rt.session.as_mut().expect("checked by with_session");
         if s.lost {
@@ -202,7 +207,8 @@ pub(crate) unsafe extern "system" fn begin_session(session: xr::Session, info: *
             return xr::Result::ERROR_SESSION_NOT_READY;
         }
         // SAFETY: non-null begin info (the validation layer checks; we read one enum).
-        if info.is_null() || unsafe { (*info).primary_view_configuration_type } != xr::ViewConfigurationType::PRIMARY_STEREO
+        if info.is_null()
+            || unsafe { (*info).primary_view_configuration_type } != xr::ViewConfigurationType::PRIMARY_STEREO
         {
             return xr::Result::ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
         }
@@ -379,7 +385,10 @@ impl Pose {
     pub const IDENTITY: Pose = Pose { q: [0.0, 0.0, 0.0, 1.0], t: [0.0; 3] };
 
     pub fn from_xr(p: &xr::Posef) -> Self {
-        Pose { q: [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w], t: [p.position.x, p.position.y, p.position.z] }
+        Pose {
+            q: [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w],
+            t: [p.position.x, p.position.y, p.position.z],
+        }
     }
 
     pub fn to_xr(self) -> xr::Posef {
@@ -392,7 +401,9 @@ impl Pose {
     fn rotate(&self, v: [f32; 3]) -> [f32; 3] {
         let [x, y, z, w] = self.q;
         let u = [x, y, z];
-        let cross = |a: [f32; 3], b: [f32; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+        let cross = |a: [f32; 3], b: [f32; 3]| {
+            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        };
         let uv = cross(u, v);
         let uuv = cross(u, uv);
         [v[0] + 2.0 * (w * uv[0] + uuv[0]), v[1] + 2.0 * (w * uv[1] + uuv[1]), v[2] + 2.0 * (w * uv[2] + uuv[2])]
@@ -529,7 +540,8 @@ pub(crate) unsafe extern "system" fn locate_views(
         let local_from_space = local_from_space(rt, space.1, &space.2, t);
         let space_from_head = local_from_space.inverse().mul(&local_from_head);
         for e in 0..2 {
-            let head_from_eye = Pose { q: Pose::IDENTITY.q, t: [if e == 0 { -IPD_M / 2.0 } else { IPD_M / 2.0 }, 0.0, 0.0] };
+            let head_from_eye =
+                Pose { q: Pose::IDENTITY.q, t: [if e == 0 { -IPD_M / 2.0 } else { IPD_M / 2.0 }, 0.0, 0.0] };
             // SAFETY: two views at `views` (capacity ≥ 2); `ty`/`next` are the caller's.
             unsafe {
                 (*views.add(e)).pose = space_from_head.mul(&head_from_eye).to_xr();
@@ -647,7 +659,13 @@ pub(crate) unsafe extern "system" fn passthrough_layer_set_style(
     l: xr::PassthroughLayerFB,
     _style: *const xr::PassthroughStyleFB,
 ) -> xr::Result {
-    with_runtime(|rt| if rt.passthrough_layers.contains_key(&l.into_raw()) { xr::Result::SUCCESS } else { xr::Result::ERROR_HANDLE_INVALID })
+    with_runtime(|rt| {
+        if rt.passthrough_layers.contains_key(&l.into_raw()) {
+            xr::Result::SUCCESS
+        } else {
+            xr::Result::ERROR_HANDLE_INVALID
+        }
+    })
 }
 
 /// Projected-surface passthrough (geometry instances) is not offered: the app uses

@@ -8,9 +8,9 @@ use crate::{two_call, with_instance, with_runtime, SYSTEM_ID};
 use ash::vk;
 use ash::vk::Handle as _;
 use openxr_sys as xr;
-use xr::Handle as _;
 use std::collections::VecDeque;
 use std::sync::Mutex;
+use xr::Handle as _;
 
 /// Swapchain images per swapchain (triple buffering, as Quest's compositor).
 const IMAGES: u32 = 3;
@@ -118,11 +118,15 @@ impl VkState {
     fn submit(&self, f: impl FnOnce(vk::CommandBuffer)) -> Result<(), String> {
         let alloc = vk::CommandBufferAllocateInfo::default().command_pool(self.pool).command_buffer_count(1);
         // SAFETY: valid pool of this device.
-        let cmd = unsafe { self.device.allocate_command_buffers(&alloc) }.map_err(vk_err("vkAllocateCommandBuffers"))?[0];
+        let cmd =
+            unsafe { self.device.allocate_command_buffers(&alloc) }.map_err(vk_err("vkAllocateCommandBuffers"))?[0];
         // SAFETY: fresh command buffer, recorded, submitted and waited for; freed after.
         let r = unsafe {
             self.device
-                .begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))
+                .begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
                 .map_err(vk_err("vkBeginCommandBuffer"))
                 .and_then(|_| {
                     f(cmd);
@@ -139,7 +143,14 @@ impl VkState {
         r
     }
 
-    fn barrier(&self, cmd: vk::CommandBuffer, image: vk::Image, depth: bool, from: vk::ImageLayout, to: vk::ImageLayout) {
+    fn barrier(
+        &self,
+        cmd: vk::CommandBuffer,
+        image: vk::Image,
+        depth: bool,
+        from: vk::ImageLayout,
+        to: vk::ImageLayout,
+    ) {
         let aspect = if depth { vk::ImageAspectFlags::DEPTH } else { vk::ImageAspectFlags::COLOR };
         let b = vk::ImageMemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::MEMORY_WRITE | vk::AccessFlags::MEMORY_READ)
@@ -198,7 +209,8 @@ impl VkState {
             }
         }
         // The runtime's layout transitions and read-back need one of these anyway.
-        usage |= if depth { vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT } else { vk::ImageUsageFlags::COLOR_ATTACHMENT };
+        usage |=
+            if depth { vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT } else { vk::ImageUsageFlags::COLOR_ATTACHMENT };
         let mut images = vec![];
         let fail = |images: &mut Vec<(vk::Image, vk::DeviceMemory)>| {
             for (i, m) in images.drain(..) {
@@ -228,7 +240,9 @@ impl VkState {
             let req = unsafe { self.device.get_image_memory_requirements(image) };
             let Some(ty) = (0..self.memory.memory_type_count).find(|&i| {
                 req.memory_type_bits & (1 << i) != 0
-                    && self.memory.memory_types[i as usize].property_flags.contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
+                    && self.memory.memory_types[i as usize]
+                        .property_flags
+                        .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
             }) else {
                 // SAFETY: unbound image of ours.
                 unsafe { self.device.destroy_image(image, None) };
@@ -291,8 +305,9 @@ impl VkState {
         // SAFETY: just created.
         let req = unsafe { self.device.get_buffer_memory_requirements(buffer) };
         let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
-        let ty = (0..self.memory.memory_type_count)
-            .find(|&i| req.memory_type_bits & (1 << i) != 0 && self.memory.memory_types[i as usize].property_flags.contains(want));
+        let ty = (0..self.memory.memory_type_count).find(|&i| {
+            req.memory_type_bits & (1 << i) != 0 && self.memory.memory_types[i as usize].property_flags.contains(want)
+        });
         let result = (|| {
             let ty = ty.ok_or("no host-visible memory")?;
             let alloc = vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(ty);
@@ -316,14 +331,23 @@ impl VkState {
                         .image_extent(vk::Extent3D { width: sc.width, height: sc.height, depth: 1 });
                     // SAFETY: recording; image in TRANSFER_SRC_OPTIMAL, buffer large enough.
                     unsafe {
-                        self.device.cmd_copy_image_to_buffer(cmd, image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, buffer, &[region])
+                        self.device.cmd_copy_image_to_buffer(
+                            cmd,
+                            image,
+                            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                            buffer,
+                            &[region],
+                        )
                     };
                     self.barrier(cmd, image, false, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, steady);
                 })?;
                 let mut out = vec![0u8; size as usize];
                 // SAFETY: host-visible coherent memory, the copy finished (queue idle).
                 unsafe {
-                    let p = self.device.map_memory(mem, 0, size, vk::MemoryMapFlags::empty()).map_err(vk_err("vkMapMemory"))?;
+                    let p = self
+                        .device
+                        .map_memory(mem, 0, size, vk::MemoryMapFlags::empty())
+                        .map_err(vk_err("vkMapMemory"))?;
                     std::ptr::copy_nonoverlapping(p as *const u8, out.as_mut_ptr(), out.len());
                     self.device.unmap_memory(mem);
                 }
@@ -357,7 +381,8 @@ pub(crate) unsafe extern "system" fn enumerate_swapchain_formats(
         if rt.session.as_ref().map(|s| s.handle) != Some(session.into_raw()) {
             return xr::Result::ERROR_HANDLE_INVALID;
         }
-        let formats: Vec<i64> = rt.vk.as_ref().map_or(vec![], |v| v.formats.iter().map(|f| f.as_raw() as i64).collect());
+        let formats: Vec<i64> =
+            rt.vk.as_ref().map_or(vec![], |v| v.formats.iter().map(|f| f.as_raw() as i64).collect());
         // SAFETY: the caller's two-call arguments.
         unsafe { two_call(&formats, capacity, count, out) }
     })
@@ -537,7 +562,13 @@ pub(crate) unsafe extern "system" fn create_vulkan_instance(
         let mut handle = vk::Instance::null();
         // SAFETY: the app's create info and allocator, passed through unchanged (the
         // runtime needs no extra instance extensions).
-        let r = unsafe { create(info.vulkan_create_info as *const vk::InstanceCreateInfo, info.vulkan_allocator as *const _, &mut handle) };
+        let r = unsafe {
+            create(
+                info.vulkan_create_info as *const vk::InstanceCreateInfo,
+                info.vulkan_allocator as *const _,
+                &mut handle,
+            )
+        };
         // SAFETY: caller's outputs.
         unsafe {
             *vk_result = r.as_raw();
@@ -567,7 +598,9 @@ pub(crate) unsafe extern "system" fn get_graphics_device(
         // SAFETY: the app's live instance.
         let inst = unsafe { ash::Instance::load(entry.static_fn(), vk_instance) };
         // SAFETY: valid instance.
-        let Ok(devices) = (unsafe { inst.enumerate_physical_devices() }) else { return xr::Result::ERROR_RUNTIME_FAILURE };
+        let Ok(devices) = (unsafe { inst.enumerate_physical_devices() }) else {
+            return xr::Result::ERROR_RUNTIME_FAILURE;
+        };
         // The "HMD's" GPU: the first with a graphics + compute queue.
         let chosen = devices.into_iter().find(|&pd| {
             // SAFETY: `pd` belongs to `inst`.
