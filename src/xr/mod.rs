@@ -49,6 +49,8 @@ pub enum XrError {
     VulkanVersion { min: String, max: String },
     #[error("no swapchain format the render core can write: the runtime offers {0:?} (needs R8G8B8A8 sRGB or UNORM)")]
     SwapchainFormat(Vec<u32>),
+    #[error("the primary stereo view configuration has {0} views, not 2")]
+    ViewCount(usize),
     #[error("the runtime located an unusable view: {0}")]
     View(#[from] ViewError),
     #[error(transparent)]
@@ -208,7 +210,6 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
             "XR_FB_display_refresh_rate",
             "the display runs at the runtime's default rate",
         ),
-        (available.fb_space_warp, &mut want.fb_space_warp, "XR_FB_space_warp", "every display frame is rendered"),
     ] {
         if offered {
             *flag = true;
@@ -216,10 +217,16 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
             log::info!("OpenXR: {name} not offered: {consequence}");
         }
     }
+    if available.meta_environment_depth {
+        // The headset's depth feeds calibration (the worker), not the renderer.
+        log::info!("OpenXR: XR_META_environment_depth offered; not used until live calibration exists");
+    } else {
+        log::info!("OpenXR: XR_META_environment_depth not offered: calibration will need depth from elsewhere");
+    }
     if available.fb_space_warp {
         // Space warp needs motion-vector and depth swapchains filled from the
-        // G-buffer; not built yet (ARCHITECTURE.md), so frames are not throttled.
-        want.fb_space_warp = false;
+        // G-buffer; not built yet (ARCHITECTURE.md): not enabled, so the runtime
+        // does not throttle and every display frame is rendered.
         log::info!("OpenXR: XR_FB_space_warp offered but not used yet: every display frame is rendered");
     }
     let mut layers = vec![];
@@ -375,13 +382,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             l.recommended_image_rect_width.max(r.recommended_image_rect_width),
             l.recommended_image_rect_height.max(r.recommended_image_rect_height),
         ),
-        other => {
-            return Err(XrError::Call {
-                call: "primary stereo has two views",
-                result: xr::sys::Result::ERROR_VALIDATION_FAILURE,
-            })
-            .inspect_err(|_| log::error!("runtime reported {} views", other.len()))
-        }
+        other => return Err(XrError::ViewCount(other.len())),
     };
     // RGBA8 only: the composite is copied bit for bit (sRGB-encoded values into an
     // SRGB image read back as the same colours). sRGB first: the compositor then

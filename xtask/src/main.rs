@@ -42,6 +42,7 @@ fn bench() -> Result<()> {
     std::fs::write(dir.join("gpu.md"), gpu).context("writing target/bench/gpu.md")?;
     let frame = cargo(&["bench", "--bench", "frame"])?;
     std::fs::write(dir.join("frame.md"), frame).context("writing target/bench/frame.md")?;
+    std::fs::write(dir.join("xr.txt"), xr_bench()?).context("writing target/bench/xr.txt")?;
     eprintln!("raw results in {}; copy the figures into BENCHMARKS.md", dir.display());
     Ok(())
 }
@@ -69,12 +70,43 @@ fn xr_runtime(release: bool) -> Result<()> {
     Ok(())
 }
 
+/// CPU time per XR frame and the share of the loop spent in xrWaitFrame: the
+/// release binary's `xr` command on the release test runtime (90 Hz display,
+/// passthrough by ALPHA_BLEND), at a small eye buffer (the loop's own cost) and at
+/// Quest 3's recommended eye size (the loop with the render core's GPU work; on
+/// lavapipe that work runs on the same CPU cores).
+fn xr_bench() -> Result<String> {
+    xr_runtime(true)?;
+    cargo(&["build", "--release", "--bin", "blind-augment"])?;
+    let manifest = root().join("target/release/ba_xr_runtime.json");
+    let bin = root().join("target/release/blind-augment");
+    let mut out = String::new();
+    for eye in ["256x256", "1680x1760"] {
+        eprintln!("$ blind-augment xr --frames 300 (eye {eye})");
+        let run = Command::new(&bin)
+            .args(["xr", "--frames", "300"])
+            .env("XR_RUNTIME_JSON", &manifest)
+            .env("BA_XR_EYE_SIZE", eye)
+            .env("BA_XR_BLEND_MODES", "opaque,alpha_blend")
+            .output()
+            .context("running blind-augment xr")?;
+        let text = String::from_utf8_lossy(&run.stdout);
+        if !run.status.success() {
+            bail!("blind-augment xr failed at {eye}: {}{}", text, String::from_utf8_lossy(&run.stderr));
+        }
+        out.push_str(&format!("## eye {eye}, 300 frames\n{text}\n"));
+    }
+    print!("{out}");
+    Ok(out)
+}
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("bench") => bench(),
         Some("assets") => assets::generate(&root()),
         Some("xr-runtime") => xr_runtime(args.iter().any(|a| a == "--release")),
-        other => bail!("usage: cargo xtask bench | assets | xr-runtime [--release] (got {other:?})"),
+        Some("bench-xr") => xr_bench().map(|_| ()),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }

@@ -344,35 +344,26 @@ unsafe extern "system" fn enumerate_instance_extension_properties(
             return xr::Result::ERROR_RUNTIME_FAILURE;
         }
     };
-    let props: Vec<xr::ExtensionProperties> = offered(&config)
-        .into_iter()
-        .map(|(name, version)| {
-            let mut p = xr::ExtensionProperties {
-                ty: xr::ExtensionProperties::TYPE,
-                next: std::ptr::null_mut(),
-                extension_name: [0; xr::MAX_EXTENSION_NAME_SIZE],
-                extension_version: version,
-            };
-            write_cstr(&mut p.extension_name, name);
-            p
-        })
-        .collect();
-    if capacity > 0 && !out.is_null() {
-        // Keep the caller's `ty`/`next` (it owns the chain); fill the rest.
-        for (i, p) in props.iter().enumerate().take(capacity as usize) {
-            // SAFETY: the caller provides `capacity` elements at `out`.
-            unsafe {
-                (*out.add(i)).extension_name = p.extension_name;
-                (*out.add(i)).extension_version = p.extension_version;
-            }
-        }
+    let offered = offered(&config);
+    if count.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
     }
-    // SAFETY: `count` is checked inside; copying is done above.
-    let r = unsafe { two_call(&props, 0, count, out) };
-    if r == xr::Result::SUCCESS && capacity > 0 && (capacity as usize) < props.len() {
+    // SAFETY: non-null count of the caller.
+    unsafe { *count = offered.len() as u32 };
+    if capacity == 0 {
+        return xr::Result::SUCCESS;
+    }
+    if (capacity as usize) < offered.len() || out.is_null() {
         return xr::Result::ERROR_SIZE_INSUFFICIENT;
     }
-    r
+    for (i, (name, version)) in offered.into_iter().enumerate() {
+        // SAFETY: the caller provides `capacity` elements at `out`; their `ty` and
+        // `next` are the caller's (two-call idiom with structs, spec 2.11).
+        let p = unsafe { &mut *out.add(i) };
+        write_cstr(&mut p.extension_name, name);
+        p.extension_version = version;
+    }
+    xr::Result::SUCCESS
 }
 
 unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, out: *mut xr::Instance) -> xr::Result {
