@@ -321,10 +321,7 @@ fn fb_passthrough_frames_match_the_desktop_render() {
         assert!(max <= 1, "eye {eye}: runtime PNG differs from the desktop render by up to {max}/255");
         // Non-vacuity: there is virtual content, with partial (blurred) alpha.
         let alphas: Vec<u8> = got.chunks(4).map(|p| p[3]).collect();
-        assert!(
-            alphas.contains(&255) && alphas.iter().any(|&a| a > 0 && a < 255),
-            "eye {eye}: no blurred edge"
-        );
+        assert!(alphas.contains(&255) && alphas.iter().any(|&a| a > 0 && a < 255), "eye {eye}: no blurred edge");
         // The runtime's composition: passthrough where the layer is empty, the
         // layer where it is opaque, premultiplied "over" between (±1 level: 8-bit
         // rounding of the blend).

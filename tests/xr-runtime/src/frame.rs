@@ -27,6 +27,18 @@ pub(crate) struct Pacing {
     pub throttled: bool,
 }
 
+/// The session `session` names, if it is running (frame calls need that, spec 10.4).
+fn running_session(rt: &mut Runtime, session: xr::Session) -> Result<&mut crate::session::Session, xr::Result> {
+    let s = rt.session.as_mut().filter(|s| s.handle == session.into_raw()).ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+    if s.lost {
+        return Err(xr::Result::ERROR_SESSION_LOST);
+    }
+    if !s.running {
+        return Err(xr::Result::ERROR_SESSION_NOT_RUNNING);
+    }
+    Ok(s)
+}
+
 fn period_ns(hz: f32) -> i64 {
     (1e9 / hz as f64).round() as i64
 }
@@ -48,15 +60,10 @@ pub(crate) unsafe extern "system" fn wait_frame(
             return xr::Result::ERROR_INSTANCE_LOST;
         }
         let now = rt.now_ns();
-        let Some(s) = rt.session.as_mut().filter(|s| s.handle == session.into_raw()) else {
-            return xr::Result::ERROR_HANDLE_INVALID;
+        let s = match running_session(rt, session) {
+            Ok(s) => s,
+            Err(r) => return r,
         };
-        if s.lost {
-            return xr::Result::ERROR_SESSION_LOST;
-        }
-        if !s.running {
-            return xr::Result::ERROR_SESSION_NOT_RUNNING;
-        }
         let display = period_ns(s.display_hz);
         let period = if s.frame.throttled { 2 * display } else { display };
         let p = &mut s.frame;
@@ -109,15 +116,10 @@ pub(crate) unsafe extern "system" fn wait_frame(
 
 pub(crate) unsafe extern "system" fn begin_frame(session: xr::Session, _info: *const xr::FrameBeginInfo) -> xr::Result {
     crate::with_runtime(|rt| {
-        let Some(s) = rt.session.as_mut().filter(|s| s.handle == session.into_raw()) else {
-            return xr::Result::ERROR_HANDLE_INVALID;
+        let s = match running_session(rt, session) {
+            Ok(s) => s,
+            Err(r) => return r,
         };
-        if s.lost {
-            return xr::Result::ERROR_SESSION_LOST;
-        }
-        if !s.running {
-            return xr::Result::ERROR_SESSION_NOT_RUNNING;
-        }
         if s.frame.waited == 0 {
             return xr::Result::ERROR_CALL_ORDER_INVALID;
         }
@@ -146,15 +148,10 @@ pub(crate) unsafe extern "system" fn end_frame(session: xr::Session, info: *cons
         }
         // SAFETY: non-null frame end info of the caller.
         let info = unsafe { &*info };
-        let Some(s) = rt.session.as_mut().filter(|s| s.handle == session.into_raw()) else {
-            return xr::Result::ERROR_HANDLE_INVALID;
+        let s = match running_session(rt, session) {
+            Ok(s) => s,
+            Err(r) => return r,
         };
-        if s.lost {
-            return xr::Result::ERROR_SESSION_LOST;
-        }
-        if !s.running {
-            return xr::Result::ERROR_SESSION_NOT_RUNNING;
-        }
         if !s.frame.in_frame {
             return xr::Result::ERROR_CALL_ORDER_INVALID;
         }
