@@ -378,3 +378,65 @@ fn layer_grain_follows_the_model() {
     let msgs = ctx.take_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }
+
+/// XR_FB_space_warp's conversion (render::SpaceWarpPass) against its CPU twin
+/// (synth::layer::space_warp): NDC motion vectors and NDC depth at a quarter of the
+/// eye size, from a G-buffer motion image with covered, uncovered and stale (outside
+/// the G-buffer area) texels. Tolerances: vectors are stored as f16 (relative
+/// rounding ≤ 2⁻¹¹ ≈ 4.9e-4, plus 1e-6 absolute near 0); depth is f32 from the same
+/// f32 formula (1e-6).
+#[test]
+fn space_warp_pass_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("space_warp_pass_matches_cpu_twin") else { return };
+    use blind_augment::render::spacewarp::{SpaceWarpPass, PLANES_M};
+    use blind_augment::synth::layer::space_warp;
+    let motion_img = Image::new(
+        &ctx,
+        W as u32,
+        H as u32,
+        EYES,
+        vk::Format::R16G16B16A16_SFLOAT,
+        vk::ImageUsageFlags::STORAGE,
+        vk::ImageLayout::GENERAL,
+        "test motion",
+    )
+    .expect("image");
+    // Per eye: a moving near square, a far disc, empty elsewhere (test_layer), with
+    // motion rounded to f16 as the image stores it.
+    let eyes: Vec<Vec<[f32; 4]>> = (0..2).map(|e| test_layer(e).motion.iter().map(|m| m.map(f16r)).collect()).collect();
+    let bytes: Vec<u8> = eyes
+        .iter()
+        .flat_map(|eye| eye.iter().flat_map(|m| m.iter().flat_map(|v| half::f16::from_f32(*v).to_le_bytes())))
+        .collect();
+    motion_img.upload(&bytes).expect("upload");
+    let (mw, mh) = (W / 4, H / 4);
+    let pass = SpaceWarpPass::new(&ctx, &motion_img, mw as u32, mh as u32).expect("pass");
+    // The G-buffer area leaves the left quarter stale: it must read as empty.
+    let area = Rect { x: W as i32 / 4, y: 0, w: W as i32 * 3 / 4, h: H as i32 };
+    ctx.submit_and_wait(|cmd| pass.record(cmd, area)).expect("dispatch");
+    let vectors = pass.vectors.download().expect("vectors");
+    let vectors: Vec<f32> = vectors.chunks(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect();
+    let depth_bytes = ctx.download(&pass.depth).expect("depth");
+    let depth: &[f32] = bytemuck::cast_slice(&depth_bytes[..mw * mh * 2 * 4]);
+    let mut covered = 0;
+    for (e, eye) in eyes.iter().enumerate() {
+        let (want_v, want_d) = space_warp(eye, W, H, area, mw, mh, PLANES_M.0, PLANES_M.1);
+        for i in 0..mw * mh {
+            let got_d = depth[e * mw * mh + i];
+            assert!((got_d - want_d[i]).abs() <= 1e-6, "eye {e} texel {i}: depth {got_d} vs {}", want_d[i]);
+            for k in 0..4 {
+                let (g, w) = (vectors[(e * mw * mh + i) * 4 + k], want_v[i][k]);
+                assert!((g - w).abs() <= 4.9e-4 * w.abs() + 1e-6, "eye {e} texel {i}.{k}: {g} vs {w}");
+            }
+            if want_d[i] < 1.0 {
+                covered += 1;
+                assert!(i % mw >= mw / 4, "stale G-buffer texels must read as empty");
+            }
+        }
+    }
+    // Non-vacuity: content was converted, and some of it moves.
+    assert!(covered > 20, "{covered} covered texels");
+    assert!(vectors.iter().any(|v| v.abs() > 1e-3));
+    let msgs = ctx.take_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}

@@ -208,13 +208,17 @@ const FULL: [S; 10] = [
     S::EXITING,
 ];
 
-/// 120 frames on a 90 Hz display (the app asked for 90 from 72), passthrough
-/// by ALPHA_BLEND, every session state from IDLE to EXITING, under both
-/// validation layers.
+/// 120 frames on a 90 Hz display (the app asked for 90 from 72) without space
+/// warp (every display frame rendered), passthrough by ALPHA_BLEND, every session
+/// state from IDLE to EXITING, under both validation layers.
 #[test]
 fn lifecycle_120_frames_alpha_blend_validated() {
     let models = ModelChannel::new(model(0.4)).expect("model");
-    let env = [("BA_XR_DISPLAY_HZ", "72"), ("BA_XR_BLEND_MODES", "opaque,alpha_blend")];
+    let env = [
+        ("BA_XR_DISPLAY_HZ", "72"),
+        ("BA_XR_BLEND_MODES", "opaque,alpha_blend"),
+        ("BA_XR_EXTENSIONS", "passthrough,refresh_rate"),
+    ];
     let Some(run) = run_xr("lifecycle", &env, 120, true, &models) else { return };
     assert_clean(&run, true);
     let s = &run.summary;
@@ -224,6 +228,7 @@ fn lifecycle_120_frames_alpha_blend_validated() {
     assert_eq!(s.blend_mode, openxr::EnvironmentBlendMode::ALPHA_BLEND);
     assert!(s.passthrough);
     assert_eq!(s.display_hz, Some(90.0));
+    assert!(!s.space_warp);
     // Every rendered frame paced at the 90 Hz display (1 ns rounding).
     assert!(s.periods_ns.iter().all(|&p| (p - 11_111_111).abs() <= 1), "{:?}", &s.periods_ns[..5]);
     let refresh: Vec<_> = run.report.iter().filter(|v| v["event"] == "refresh_rate").collect();
@@ -249,6 +254,42 @@ fn lifecycle_120_frames_alpha_blend_validated() {
         assert_eq!((views[0]["array_index"].as_u64(), views[1]["array_index"].as_u64()), (Some(0), Some(1)));
         assert!(views.iter().all(|v| v["swapchain_array_size"] == 2 && v["format"] == 43), "sRGB RGBA8 array");
     }
+}
+
+/// 120 frames on a 90 Hz display with XR_FB_space_warp: the app submits motion
+/// vectors and depth with every projection view, the runtime throttles it to 45 Hz
+/// (predicted display period 22.2 ms) from the first such frame on, under both
+/// validation layers.
+#[test]
+fn space_warp_renders_at_half_the_display_rate() {
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let Some(run) = run_xr("space_warp", &[], 120, true, &models) else { return };
+    assert_clean(&run, true);
+    let s = &run.summary;
+    assert_eq!(s.end, EndReason::Exited);
+    assert!(s.space_warp);
+    assert_eq!(s.frames_rendered, 120);
+    assert_eq!(s.display_hz, Some(90.0));
+    // The first frame is requested before any space-warp data was submitted.
+    assert_eq!(s.periods_ns[0], 11_111_111);
+    assert!(s.periods_ns[1..].iter().all(|&p| (p - 22_222_222).abs() <= 2), "{:?}", &s.periods_ns[..5]);
+    let t: Vec<i64> = run.records.iter().map(|r| r.predicted_display_time_ns).collect();
+    assert!(t.windows(2).skip(1).all(|w| w[1] - w[0] >= 22_222_220), "45 Hz display times {t:?}");
+    let mut chains = std::collections::BTreeSet::new();
+    for f in frames_of(&run.report).iter().filter(|f| !f["layers"].as_array().unwrap().is_empty()) {
+        let views = f["layers"][0]["views"].as_array().unwrap();
+        assert!(views.iter().all(|v| v["space_warp"] == true), "{f}");
+    }
+    for v in run.report.iter().filter(|v| v["event"] == "swapchain") {
+        chains.insert((
+            v["format"].as_i64().unwrap(),
+            v["depth"].as_bool().unwrap(),
+            v["array_size"].as_i64().unwrap(),
+        ));
+    }
+    // Colour (sRGB RGBA8), motion vectors (RGBA16F) and depth (D32), two layers each.
+    let want: std::collections::BTreeSet<_> = [(43, false, 2), (97, false, 2), (126, true, 2)].into();
+    assert_eq!(chains, want);
 }
 
 /// Replay `records` on a desktop Vulkan context (same scene, model and views)
@@ -293,7 +334,8 @@ fn desktop_replay(records: &[FrameRecord], models: &ModelChannel, k: usize) -> V
 #[test]
 fn fb_passthrough_frames_match_the_desktop_render() {
     let models = ModelChannel::new(model(0.4)).expect("model");
-    let env = [("BA_XR_PNG_DIR", "{dir}"), ("BA_XR_PNG_FRAMES", "12")];
+    let env =
+        [("BA_XR_PNG_DIR", "{dir}"), ("BA_XR_PNG_FRAMES", "12"), ("BA_XR_EXTENSIONS", "passthrough,refresh_rate")];
     let Some(run) = run_xr("passthrough", &env, 20, false, &models) else { return };
     assert_clean(&run, false);
     assert_eq!(run.summary.blend_mode, openxr::EnvironmentBlendMode::OPAQUE);
@@ -499,7 +541,8 @@ fn xr_command_prints_a_timing_summary() {
         "frames: 30 rendered",
         "CPU per frame",
         "waiting in xrWaitFrame",
-        "predicted display period 11.11 ms",
+        "space warp on",
+        "predicted display period 22.22 ms",
         "ended: Exited",
     ] {
         assert!(text.contains(want), "missing {want:?} in:\n{text}");

@@ -365,3 +365,85 @@ impl Drop for Texture<'_> {
         unsafe { self.ctx.device.destroy_sampler(self.sampler, None) };
     }
 }
+
+/// Record a copy of `src` (f32 depth texels, tightly packed, layer-major) into the
+/// depth aspect of `dst`, a D32_SFLOAT image this context does not own (the
+/// OpenXR depth swapchain image for XR_FB_space_warp), kept in `dst_layout` before
+/// and after. Depth images cannot be storage images, so a compute pass writes the
+/// buffer and this copy fills the image (buffer→image copies of the depth aspect of
+/// D32_SFLOAT are allowed: Vulkan spec, "Copying Data Between Buffers and Images").
+pub fn record_copy_to_external_depth(
+    ctx: &GpuContext,
+    cmd: vk::CommandBuffer,
+    src: &Buffer<'_>,
+    dst: vk::Image,
+    dst_layout: vk::ImageLayout,
+    size: [u32; 3],
+) {
+    let range = vk::ImageSubresourceRange::default()
+        .aspect_mask(vk::ImageAspectFlags::DEPTH)
+        .level_count(1)
+        .layer_count(size[2]);
+    let barrier = |from, to, src_access, dst_access| {
+        vk::ImageMemoryBarrier::default()
+            .src_access_mask(src_access)
+            .dst_access_mask(dst_access)
+            .old_layout(from)
+            .new_layout(to)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(dst)
+            .subresource_range(range)
+    };
+    let to_dst = barrier(
+        dst_layout,
+        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        vk::AccessFlags::empty(),
+        vk::AccessFlags::TRANSFER_WRITE,
+    );
+    let back = barrier(
+        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        dst_layout,
+        vk::AccessFlags::TRANSFER_WRITE,
+        vk::AccessFlags::MEMORY_READ,
+    );
+    let written = vk::BufferMemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+        .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .buffer(src.buffer)
+        .size(vk::WHOLE_SIZE);
+    let region = vk::BufferImageCopy::default()
+        .image_subresource(
+            vk::ImageSubresourceLayers::default().aspect_mask(vk::ImageAspectFlags::DEPTH).layer_count(size[2]),
+        )
+        .image_extent(vk::Extent3D { width: size[0], height: size[1], depth: 1 });
+    // SAFETY: `cmd` is recording outside a render pass; `dst` is a live D32_SFLOAT
+    // image of this device with at least `size` texels and layers, `src` holds them
+    // (the caller's contract); the barriers order the shader's writes, the copy and
+    // the compositor's read.
+    unsafe {
+        let d = &ctx.device;
+        let all = vk::PipelineStageFlags::ALL_COMMANDS;
+        d.cmd_pipeline_barrier(
+            cmd,
+            all,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[written],
+            &[to_dst],
+        );
+        d.cmd_copy_buffer_to_image(cmd, src.buffer, dst, vk::ImageLayout::TRANSFER_DST_OPTIMAL, &[region]);
+        d.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            all,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            &[back],
+        );
+    }
+}

@@ -17,7 +17,7 @@ mod query;
 
 pub use frames::{FrameRing, FrameSlot};
 pub use graphics::{GraphicsDesc, GraphicsPipeline, MultiviewTarget, VertexAttribute, EYES};
-pub use image::{texel_bytes, Image, Texture};
+pub use image::{record_copy_to_external_depth, texel_bytes, Image, Texture};
 pub use pipeline::{ComputePipeline, Resource};
 pub use query::{QueryPool, Statistics};
 

@@ -8,6 +8,7 @@ pub mod grain;
 pub mod layer;
 pub mod motion_blur;
 pub mod params;
+pub mod spacewarp;
 pub mod stereo;
 
 pub use dof::DofPass;
@@ -16,6 +17,7 @@ pub use grain::{planar_rgb, GrainPass, GrainRecorder, GrainTable, GRAIN_TEXEL_FL
 pub use layer::{FrameEffects, LayerEffects, LayerSettings};
 pub use motion_blur::MotionBlurPass;
 pub use params::EffectParams;
+pub use spacewarp::{SpaceWarpPass, SpaceWarpTarget};
 pub use stereo::{ExternalTarget, FrameInput, StereoRenderer};
 
 /// SPIR-V of the uniform-block probe used by the hot-swap test.

@@ -7,6 +7,7 @@
 use super::gbuffer::{clip_from_view, Eye, GBufferFrame, GBufferPass, FAR_M, NEAR_M};
 use super::layer::{FrameEffects, LayerEffects, LayerSettings};
 use super::params::EffectParams;
+use super::spacewarp::{SpaceWarpPass, SpaceWarpTarget};
 use crate::gpu::{Buffer, FrameRing, GpuContext, GpuError, Image, QueryPool, Statistics, EYES};
 use crate::model::{covering_rect, Rect, GRAIN_TABLE_NODES};
 use crate::scene::Scene;
@@ -38,6 +39,8 @@ pub struct StereoRenderer<'a> {
     // Drop order: the chain (borrows nothing but the context, but binds the images
     // below) first, then the G-buffer, then the images it binds.
     effects: LayerEffects<'a>,
+    /// XR_FB_space_warp's conversion (binds the G-buffer's motion image).
+    space_warp: Option<SpaceWarpPass<'a>>,
     gbuffer: GBufferPass<'a>,
     pub background: Image<'a>,
     pub output: Image<'a>,
@@ -113,6 +116,7 @@ impl<'a> StereoRenderer<'a> {
         Ok(Self {
             ctx,
             effects,
+            space_warp: None,
             gbuffer,
             background,
             output,
@@ -245,7 +249,7 @@ impl<'a> StereoRenderer<'a> {
         input: &FrameInput<'_>,
         matched: bool,
     ) -> Result<FrameEffects, GpuError> {
-        self.render_to(snapshot, input, matched, None)
+        self.render_to(snapshot, input, matched, None, None)
     }
 
     /// The render frame interval (s) motion vectors are measured over: the
@@ -257,13 +261,28 @@ impl<'a> StereoRenderer<'a> {
         }
     }
 
-    /// As `render`, then copy the composite into `target` in the same submission.
+    /// Produce XR_FB_space_warp's motion vectors and depth (`width × height` per
+    /// eye) with every frame from now on (see `render_to`).
+    pub fn enable_space_warp(&mut self, width: u32, height: u32) -> Result<(), GpuError> {
+        self.ring.wait_all()?;
+        self.space_warp = Some(SpaceWarpPass::new(self.ctx, self.gbuffer.motion(), width, height)?);
+        Ok(())
+    }
+
+    pub fn space_warp(&self) -> Option<&SpaceWarpPass<'a>> {
+        self.space_warp.as_ref()
+    }
+
+    /// As `render`, then copy the composite into `target` and, when space warp is
+    /// enabled and `space_warp` given, the frame's motion vectors and depth into
+    /// its images, in the same submission.
     pub fn render_to(
         &mut self,
         snapshot: &Snapshot,
         input: &FrameInput<'_>,
         matched: bool,
         target: Option<ExternalTarget>,
+        space_warp: Option<SpaceWarpTarget>,
     ) -> Result<FrameEffects, GpuError> {
         let model = &snapshot.model;
         let g = input.gbuffer;
@@ -334,6 +353,12 @@ impl<'a> StereoRenderer<'a> {
         }
         if let (Ok(()), Some(t)) = (&recorded, target) {
             self.output.record_copy_to_external(cmd, t.image, t.layout);
+        }
+        if let (Ok(()), Some(pass)) = (&recorded, &self.space_warp) {
+            match space_warp {
+                Some(t) => pass.record_to(cmd, area, &t),
+                None => pass.record(cmd, area),
+            }
         }
         // Submit even after a recording error so the slot's fence is signalled again.
         let submitted = self.ring.submit(slot);

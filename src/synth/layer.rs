@@ -481,3 +481,40 @@ pub fn composite(
         })
         .collect()
 }
+
+/// `spacewarp.comp` for one eye: XR_FB_space_warp's motion vectors (NDC per render
+/// frame; the G-buffer's pixel motion × 2 / eye size, z = 0) and NDC depth
+/// (f·(d − n) / ((f − n)·d), clamped to [0, 1]) at `mv_w × mv_h`, each texel from the
+/// G-buffer texel under its centre. `motion`: the eye's G-buffer motion texels
+/// (x, y px; view depth m; coverage), `eye_w` wide; outside `area` (where the
+/// G-buffer pass wrote) or uncovered: vector 0, depth 1.
+#[allow(clippy::too_many_arguments)]
+pub fn space_warp(
+    motion: &[[f32; 4]],
+    eye_w: usize,
+    eye_h: usize,
+    area: Rect,
+    mv_w: usize,
+    mv_h: usize,
+    near_m: f32,
+    far_m: f32,
+) -> (Vec<[f32; 4]>, Vec<f32>) {
+    let mut vectors = Vec::with_capacity(mv_w * mv_h);
+    let mut depth = Vec::with_capacity(mv_w * mv_h);
+    for y in 0..mv_h {
+        for x in 0..mv_w {
+            // The texel centre's source pixel, as the shader computes it in f32.
+            let sx = (((x as f32 + 0.5) * eye_w as f32 / mv_w as f32) as usize).min(eye_w - 1);
+            let sy = (((y as f32 + 0.5) * eye_h as f32 / mv_h as f32) as usize).min(eye_h - 1);
+            let m = if area.contains(sx as i32, sy as i32) { motion[sy * eye_w + sx] } else { [0.0; 4] };
+            if m[3] > 0.5 && m[2] > 0.0 {
+                vectors.push([m[0] * 2.0 / eye_w as f32, m[1] * 2.0 / eye_h as f32, 0.0, 0.0]);
+                depth.push((far_m * (m[2] - near_m) / ((far_m - near_m) * m[2])).clamp(0.0, 1.0));
+            } else {
+                vectors.push([0.0; 4]);
+                depth.push(1.0);
+            }
+        }
+    }
+    (vectors, depth)
+}

@@ -106,6 +106,8 @@ pub struct XrSummary {
     pub swapchain_format: u32,
     pub blend_mode: xr::EnvironmentBlendMode,
     pub passthrough: bool,
+    /// XR_FB_space_warp in use (the compositor synthesises every other frame).
+    pub space_warp: bool,
     pub display_hz: Option<f32>,
     pub frames_rendered: u64,
     /// Frames submitted with no layers (session SYNCHRONIZED, not yet visible).
@@ -210,6 +212,7 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
             "XR_FB_display_refresh_rate",
             "the display runs at the runtime's default rate",
         ),
+        (available.fb_space_warp, &mut want.fb_space_warp, "XR_FB_space_warp", "every display frame is rendered"),
     ] {
         if offered {
             *flag = true;
@@ -222,12 +225,6 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
         log::info!("OpenXR: XR_META_environment_depth offered; not used until live calibration exists");
     } else {
         log::info!("OpenXR: XR_META_environment_depth not offered: calibration will need depth from elsewhere");
-    }
-    if available.fb_space_warp {
-        // Space warp needs motion-vector and depth swapchains filled from the
-        // G-buffer; not built yet (ARCHITECTURE.md): not enabled, so the runtime
-        // does not throttle and every display frame is rendered.
-        log::info!("OpenXR: XR_FB_space_warp offered but not used yet: every display frame is rendered");
     }
     let mut layers = vec![];
     if validation {
@@ -308,6 +305,113 @@ fn view_of(v: &xr::View) -> View {
         position_m: Vec3::new(p.x, p.y, p.z),
         fov_rad: [v.fov.angle_left, v.fov.angle_right, v.fov.angle_up, v.fov.angle_down],
     }
+}
+
+/// The motion-vector and depth swapchains of XR_FB_space_warp (two layers each,
+/// at the runtime's recommended motion-vector size).
+struct SpaceWarpChains {
+    vectors: xr::Swapchain<xr::Vulkan>,
+    vector_images: Vec<vk::Image>,
+    depth: xr::Swapchain<xr::Vulkan>,
+    depth_images: Vec<vk::Image>,
+    size: (u32, u32),
+}
+
+impl SpaceWarpChains {
+    fn acquire(&mut self) -> Result<crate::render::SpaceWarpTarget, XrError> {
+        let v = self.vectors.acquire_image().map_err(call("xrAcquireSwapchainImage (motion vectors)"))?;
+        self.vectors.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage (motion vectors)"))?;
+        let d = self.depth.acquire_image().map_err(call("xrAcquireSwapchainImage (depth)"))?;
+        self.depth.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage (depth)"))?;
+        Ok(crate::render::SpaceWarpTarget {
+            vectors: self.vector_images[v as usize],
+            vectors_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+            depth: self.depth_images[d as usize],
+            depth_layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+        })
+    }
+
+    fn release(&mut self) -> Result<(), XrError> {
+        self.vectors.release_image().map_err(call("xrReleaseSwapchainImage (motion vectors)"))?;
+        self.depth.release_image().map_err(call("xrReleaseSwapchainImage (depth)"))
+    }
+}
+
+/// Create the space-warp swapchains, or None (logged) when the runtime's formats
+/// or sizes do not allow them: then every display frame is rendered.
+fn space_warp_swapchains(
+    instance: &xr::Instance,
+    system: xr::SystemId,
+    session: &xr::Session<xr::Vulkan>,
+    formats: &[u32],
+    eye: (u32, u32),
+) -> Result<Option<SpaceWarpChains>, XrError> {
+    use crate::render::spacewarp::{DEPTH_FORMAT, VECTOR_FORMAT};
+    let mut sw = xr::sys::SystemSpaceWarpPropertiesFB {
+        ty: xr::sys::SystemSpaceWarpPropertiesFB::TYPE,
+        next: std::ptr::null_mut(),
+        recommended_motion_vector_image_rect_width: 0,
+        recommended_motion_vector_image_rect_height: 0,
+    };
+    let mut props = xr::sys::SystemProperties {
+        ty: xr::sys::SystemProperties::TYPE,
+        next: &mut sw as *mut _ as *mut _,
+        // SAFETY: plain data (ids, arrays, flags); zero is a valid bit pattern.
+        ..unsafe { std::mem::zeroed() }
+    };
+    // SAFETY: a live instance and system; `props` chains a struct the enabled
+    // extension defines, both live for the call.
+    let r = unsafe { (instance.fp().get_system_properties)(instance.as_raw(), system, &mut props) };
+    if r.into_raw() < 0 {
+        return Err(call("xrGetSystemProperties (space warp)")(r));
+    }
+    let size = (sw.recommended_motion_vector_image_rect_width, sw.recommended_motion_vector_image_rect_height);
+    let (vf, df) = (VECTOR_FORMAT.as_raw() as u32, DEPTH_FORMAT.as_raw() as u32);
+    if size.0 == 0
+        || size.1 == 0
+        || size.0 > eye.0
+        || size.1 > eye.1
+        || !formats.contains(&vf)
+        || !formats.contains(&df)
+    {
+        log::warn!(
+            "OpenXR: XR_FB_space_warp unusable (motion vectors {}×{}, formats {formats:?}): every display frame is rendered",
+            size.0,
+            size.1
+        );
+        return Ok(None);
+    }
+    let create = |format: u32, usage: xr::SwapchainUsageFlags| {
+        session.create_swapchain(&xr::SwapchainCreateInfo {
+            create_flags: xr::SwapchainCreateFlags::EMPTY,
+            usage_flags: usage | xr::SwapchainUsageFlags::TRANSFER_DST,
+            format,
+            sample_count: 1,
+            width: size.0,
+            height: size.1,
+            face_count: 1,
+            array_size: 2,
+            mip_count: 1,
+        })
+    };
+    let vectors =
+        create(vf, xr::SwapchainUsageFlags::COLOR_ATTACHMENT).map_err(call("xrCreateSwapchain (motion vectors)"))?;
+    let depth =
+        create(df, xr::SwapchainUsageFlags::DEPTH_STENCIL_ATTACHMENT).map_err(call("xrCreateSwapchain (depth)"))?;
+    let images = |s: &xr::Swapchain<xr::Vulkan>| -> Result<Vec<vk::Image>, XrError> {
+        Ok(s.enumerate_images()
+            .map_err(call("xrEnumerateSwapchainImages"))?
+            .into_iter()
+            .map(vk::Image::from_raw)
+            .collect())
+    };
+    let (vector_images, depth_images) = (images(&vectors)?, images(&depth)?);
+    log::info!(
+        "OpenXR: XR_FB_space_warp on: motion vectors and depth {}×{} per eye; rendering at half the display rate",
+        size.0,
+        size.1
+    );
+    Ok(Some(SpaceWarpChains { vectors, vector_images, depth, depth_images, size }))
 }
 
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
@@ -416,6 +520,14 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         .map(vk::Image::from_raw)
         .collect();
 
+    // XR_FB_space_warp: motion vectors and depth for the compositor, which then
+    // synthesises every other display frame; the runtime halves the app's rate.
+    let mut space_warp = if enabled.fb_space_warp {
+        space_warp_swapchains(&instance, system, &session, &formats, (w, h))?
+    } else {
+        None
+    };
+
     // Passthrough feature and layer, running from creation (openxr 0.22's
     // `Passthrough::start` calls xrPassthroughPauseFB: never call it).
     let passthrough = if use_fb_passthrough {
@@ -455,6 +567,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         swapchain_format: format,
         blend_mode,
         passthrough: see_through,
+        space_warp: space_warp.is_some(),
         display_hz,
         frames_rendered: 0,
         frames_empty: 0,
@@ -560,8 +673,11 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         let eyes = [le, re];
         let geometry = FrameGeometry::new(opts.scene, opts.local_from_scene, eyes, prev, display_ns, period_ns);
         if renderer.is_none() {
-            let r = StereoRenderer::new(&ctx, opts.scene, w, h, opts.settings, Some(le.focal_px))?;
+            let mut r = StereoRenderer::new(&ctx, opts.scene, w, h, opts.settings, Some(le.focal_px))?;
             r.set_background(&transparent)?;
+            if let Some(sw) = &space_warp {
+                r.enable_space_warp(sw.size.0, sw.size.1)?;
+            }
             renderer = Some(r);
         }
         let Some(r) = renderer.as_mut() else { unreachable!("created above") };
@@ -572,25 +688,57 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         swapchain.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage"))?;
         let target =
             ExternalTarget { image: images[index as usize], layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL };
-        let rendered = r.render_to(&snapshot, &input, true, Some(target));
-        // Release even after a failed render: the swapchain must not stay acquired.
+        let warp_target = match space_warp.as_mut() {
+            Some(sw) => Some(sw.acquire()?),
+            None => None,
+        };
+        let rendered = r.render_to(&snapshot, &input, true, Some(target), warp_target);
+        // Release even after a failed render: no swapchain may stay acquired.
         swapchain.release_image().map_err(call("xrReleaseSwapchainImage"))?;
+        if let Some(sw) = space_warp.as_mut() {
+            sw.release()?;
+        }
         rendered?;
 
-        let rect = xr::Rect2Di {
+        let full = |(w, h): (u32, u32)| xr::Rect2Di {
             offset: xr::Offset2Di { x: 0, y: 0 },
             extent: xr::Extent2Di { width: w as i32, height: h as i32 },
         };
+        let sub_image = |chain: xr::sys::Swapchain, size, e: usize| xr::sys::SwapchainSubImage {
+            swapchain: chain,
+            image_rect: full(size),
+            image_array_index: e as u32,
+        };
+        // Per eye: the space-warp info (motion vectors and depth of this frame; the
+        // LOCAL space does not move between frames, so its delta pose is identity).
+        let warp_info: Vec<xr::sys::CompositionLayerSpaceWarpInfoFB> = match &space_warp {
+            Some(sw) => (0..2)
+                .map(|e| xr::sys::CompositionLayerSpaceWarpInfoFB {
+                    ty: xr::sys::CompositionLayerSpaceWarpInfoFB::TYPE,
+                    next: std::ptr::null(),
+                    layer_flags: xr::sys::CompositionLayerSpaceWarpInfoFlagsFB::EMPTY,
+                    motion_vector_sub_image: sub_image(sw.vectors.as_raw(), sw.size, e),
+                    app_space_delta_pose: xr::Posef::IDENTITY,
+                    depth_sub_image: sub_image(sw.depth.as_raw(), sw.size, e),
+                    min_depth: 0.0,
+                    max_depth: 1.0,
+                    near_z: crate::render::spacewarp::PLANES_M.0,
+                    far_z: crate::render::spacewarp::PLANES_M.1,
+                })
+                .collect(),
+            None => vec![],
+        };
         let fovs = [lfov, rfov];
-        let proj_views: Vec<xr::CompositionLayerProjectionView<'_, xr::Vulkan>> = (0..2)
+        let proj_views: Vec<xr::sys::CompositionLayerProjectionView> = (0..2)
             .map(|e| {
                 let f = fovs[e];
-                xr::CompositionLayerProjectionView::new()
-                    .pose(located[e].pose)
-                    .fov(xr::Fovf { angle_left: f[0], angle_right: f[1], angle_up: f[2], angle_down: f[3] })
-                    .sub_image(
-                        xr::SwapchainSubImage::new().swapchain(&swapchain).image_array_index(e as u32).image_rect(rect),
-                    )
+                xr::sys::CompositionLayerProjectionView {
+                    ty: xr::sys::CompositionLayerProjectionView::TYPE,
+                    next: warp_info.get(e).map_or(std::ptr::null(), |i| i as *const _ as *const _),
+                    pose: located[e].pose,
+                    fov: xr::Fovf { angle_left: f[0], angle_right: f[1], angle_up: f[2], angle_down: f[3] },
+                    sub_image: sub_image(swapchain.as_raw(), (w, h), e),
+                }
             })
             .collect();
         // Over passthrough the layer's (blurred, premultiplied) alpha blends the
@@ -601,30 +749,39 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         } else {
             xr::CompositionLayerFlags::EMPTY
         };
-        let projection = xr::CompositionLayerProjection::new().space(&space).layer_flags(flags).views(&proj_views);
-        match &passthrough {
-            Some((_, layer)) => {
-                // openxr 0.22 does not export its XrCompositionLayerPassthroughFB
-                // builder: the raw struct, viewed as the layer base it begins with.
-                let raw = xr::sys::CompositionLayerPassthroughFB {
-                    ty: xr::sys::CompositionLayerPassthroughFB::TYPE,
-                    next: std::ptr::null(),
-                    flags: xr::CompositionLayerFlags::EMPTY,
-                    space: <xr::sys::Space as xr::sys::Handle>::NULL,
-                    layer_handle: layer.as_raw(),
-                };
-                // SAFETY: CompositionLayerBase is repr(transparent) over the layer
-                // header every layer struct starts with (spec 10.5); `raw` outlives
-                // the xrEndFrame call that reads it.
-                let pt = unsafe {
-                    &*(&raw as *const xr::sys::CompositionLayerPassthroughFB
+        // Raw layer structs: openxr 0.22's builders can neither chain the space-warp
+        // info nor build XrCompositionLayerPassthroughFB.
+        let projection = xr::sys::CompositionLayerProjection {
+            ty: xr::sys::CompositionLayerProjection::TYPE,
+            next: std::ptr::null(),
+            layer_flags: flags,
+            space: space.as_raw(),
+            view_count: 2,
+            views: proj_views.as_ptr(),
+        };
+        let passthrough_layer = passthrough.as_ref().map(|(_, layer)| xr::sys::CompositionLayerPassthroughFB {
+            ty: xr::sys::CompositionLayerPassthroughFB::TYPE,
+            next: std::ptr::null(),
+            flags: xr::CompositionLayerFlags::EMPTY,
+            space: <xr::sys::Space as xr::sys::Handle>::NULL,
+            layer_handle: layer.as_raw(),
+        });
+        // SAFETY: CompositionLayerBase is repr(transparent) over the layer header
+        // every layer struct begins with (spec 10.5); the structs, the views and the
+        // space-warp infos they point to outlive the xrEndFrame call that reads them.
+        let layers: Vec<&xr::CompositionLayerBase<'_, xr::Vulkan>> = unsafe {
+            passthrough_layer
+                .as_ref()
+                .map(|p| {
+                    &*(p as *const xr::sys::CompositionLayerPassthroughFB
                         as *const xr::CompositionLayerBase<'_, xr::Vulkan>)
-                };
-                frame_stream.end(state.predicted_display_time, blend_mode, &[pt, &projection])
-            }
-            None => frame_stream.end(state.predicted_display_time, blend_mode, &[&projection]),
-        }
-        .map_err(call("xrEndFrame"))?;
+                })
+                .into_iter()
+                .chain([&*(&projection as *const xr::sys::CompositionLayerProjection
+                    as *const xr::CompositionLayerBase<'_, xr::Vulkan>)])
+                .collect()
+        };
+        frame_stream.end(state.predicted_display_time, blend_mode, &layers).map_err(call("xrEndFrame"))?;
 
         let cpu_s = cpu_start.elapsed().as_secs_f64();
         if let Some(last) = last_display_ns {
@@ -661,6 +818,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // Explicit teardown in the documented order (the drops would do the same).
     drop(renderer);
     drop(passthrough);
+    drop(space_warp);
     drop(swapchain);
     drop(space);
     drop(frame_stream);

@@ -50,7 +50,7 @@ pub fn format_summary(s: &XrSummary) -> String {
     let wait: f64 = s.wait_s.iter().sum();
     let period_ms = percentile(&s.periods_ns.iter().map(|&p| p as f64).collect::<Vec<_>>(), 0.5) * 1e-6;
     format!(
-        "runtime: {}\nsystem: {} on {}\neye: {}×{} (format {}), blend {:?}, passthrough {}, display {}\n\
+        "runtime: {}\nsystem: {} on {}\neye: {}×{} (format {}), blend {:?}, passthrough {}, space warp {}, display {}\n\
          frames: {} rendered, {} submitted empty (not yet visible), {} missed display slots\n\
          CPU per frame (outside xrWaitFrame): median {:.2} ms, p95 {:.2} ms, max {:.2} ms\n\
          waiting in xrWaitFrame: {:.0}% of the loop; predicted display period {:.2} ms\n\
@@ -63,6 +63,7 @@ pub fn format_summary(s: &XrSummary) -> String {
         s.swapchain_format,
         s.blend_mode,
         if s.passthrough { "on" } else { "off" },
+        if s.space_warp { "on (app at half the display rate)" } else { "off" },
         s.display_hz.map_or("runtime default".into(), |h| format!("{h} Hz")),
         s.frames_rendered,
         s.frames_empty,

@@ -277,6 +277,28 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                         // SAFETY: chained structs begin with a BaseInStructure header.
                         let b = unsafe { &*(next as *const xr::BaseInStructure) };
                         if b.ty == xr::StructureType::COMPOSITION_LAYER_SPACE_WARP_INFO_FB {
+                            // SAFETY: the type tag says what the struct is.
+                            let info = unsafe { &*(next as *const xr::CompositionLayerSpaceWarpInfoFB) };
+                            // Motion vectors and depth must be released images of
+                            // live swapchains, inside them (XR_FB_space_warp).
+                            for sub in [info.motion_vector_sub_image, info.depth_sub_image] {
+                                let Some(c) = rt.swapchains.get(&sub.swapchain.into_raw()) else {
+                                    return Err(xr::Result::ERROR_HANDLE_INVALID);
+                                };
+                                let r = sub.image_rect;
+                                if c.last_released.is_none()
+                                    || sub.image_array_index >= c.array_size
+                                    || r.offset.x < 0
+                                    || r.offset.y < 0
+                                    || (r.offset.x + r.extent.width) as u32 > c.width
+                                    || (r.offset.y + r.extent.height) as u32 > c.height
+                                {
+                                    return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+                                }
+                            }
+                            if !(info.near_z > 0.0 && info.far_z > info.near_z) {
+                                return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+                            }
                             sw = true;
                         }
                         next = b.next as *const _;
