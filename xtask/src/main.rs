@@ -72,7 +72,7 @@ fn xr_runtime(release: bool) -> Result<()> {
 
 /// CPU time per XR frame and the share of the loop spent in xrWaitFrame: the
 /// release binary's `xr` command on the release test runtime (90 Hz display,
-/// passthrough by ALPHA_BLEND), at a small eye buffer (the loop's own cost) and at
+/// passthrough by ALPHA_BLEND; without and with space warp), at a small eye buffer (the loop's own cost) and at
 /// Quest 3's recommended eye size (the loop with the render core's GPU work; on
 /// lavapipe that work runs on the same CPU cores).
 fn xr_bench() -> Result<String> {
@@ -81,20 +81,26 @@ fn xr_bench() -> Result<String> {
     let manifest = root().join("target/release/ba_xr_runtime.json");
     let bin = root().join("target/release/blind-augment");
     let mut out = String::new();
-    for eye in ["256x256", "1680x1760"] {
-        eprintln!("$ blind-augment xr --frames 300 (eye {eye})");
+    for (eye, extensions) in [
+        ("256x256", "passthrough,refresh_rate"),
+        ("256x256", "passthrough,refresh_rate,space_warp"),
+        ("1680x1760", "passthrough,refresh_rate"),
+        ("1680x1760", "passthrough,refresh_rate,space_warp"),
+    ] {
+        eprintln!("$ blind-augment xr --frames 300 (eye {eye}, runtime offers {extensions})");
         let run = Command::new(&bin)
             .args(["xr", "--frames", "300"])
             .env("XR_RUNTIME_JSON", &manifest)
             .env("BA_XR_EYE_SIZE", eye)
             .env("BA_XR_BLEND_MODES", "opaque,alpha_blend")
+            .env("BA_XR_EXTENSIONS", extensions)
             .output()
             .context("running blind-augment xr")?;
         let text = String::from_utf8_lossy(&run.stdout);
         if !run.status.success() {
             bail!("blind-augment xr failed at {eye}: {}{}", text, String::from_utf8_lossy(&run.stderr));
         }
-        out.push_str(&format!("## eye {eye}, 300 frames\n{text}\n"));
+        out.push_str(&format!("## eye {eye}, runtime offers {extensions}, 300 frames\n{text}\n"));
     }
     print!("{out}");
     Ok(out)
