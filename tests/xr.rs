@@ -126,6 +126,19 @@ struct Run {
 
 /// Run the XR loop in-process on the test runtime configured by `env`.
 fn run_xr(name: &str, env: &[(&str, &str)], frames: u64, validation: bool, models: &ModelChannel) -> Option<Run> {
+    run_xr_until(name, env, Some(frames), None, validation, models)
+}
+
+/// As `run_xr`, ending after `frames` or when another thread sets the stop flag
+/// `stop_after` into the run.
+fn run_xr_until(
+    name: &str,
+    env: &[(&str, &str)],
+    frames: Option<u64>,
+    stop_after: Option<std::time::Duration>,
+    validation: bool,
+    models: &ModelChannel,
+) -> Option<Run> {
     let manifest = manifest()?;
     let _guard = serial();
     let dir = tmp(name);
@@ -150,10 +163,18 @@ fn run_xr(name: &str, env: &[(&str, &str)], frames: u64, validation: bool, model
         std::env::set_var(k, v.replace("{dir}", &dir.display().to_string()));
     }
     let scene = Scene::from_glb(TOY, "assets/toy.glb").expect("bundled scene");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let stopper = stop_after.map(|after| {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(after);
+            stop.store(true, std::sync::atomic::Ordering::SeqCst);
+        })
+    });
     let mut records = vec![];
     let mut on_frame = |r: &FrameRecord| records.push(r.clone());
     let result = xr::run(XrOptions {
-        frames: Some(frames),
+        frames,
         validation,
         scene: &scene,
         // Close enough to fill a good part of the small eye buffers.
@@ -162,7 +183,11 @@ fn run_xr(name: &str, env: &[(&str, &str)], frames: u64, validation: bool, model
         settings: LayerSettings::default(),
         display_hz: 90.0,
         on_frame: Some(&mut on_frame),
+        stop: Some(&stop),
     });
+    if let Some(t) = stopper {
+        t.join().expect("stopper thread");
+    }
     let summary = match result {
         Ok(s) => s,
         Err(xr::XrError::Gpu(e)) if !required() => {
@@ -495,6 +520,20 @@ fn cli() -> std::process::Command {
         cmd.env_remove(v);
     }
     cmd
+}
+
+/// Shutdown from another thread (Ctrl-C, Android's onDestroy): the app asks the
+/// runtime to exit and ends only when the session has walked down to EXITING.
+#[test]
+fn stop_flag_requests_exit_and_ends_cleanly() {
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let run = run_xr_until("stop", &[], None, Some(std::time::Duration::from_secs(3)), true, &models);
+    let Some(run) = run else { return };
+    assert_clean(&run, true);
+    assert_eq!(run.summary.end, EndReason::Exited);
+    assert_eq!(run.summary.states, FULL);
+    assert!(run.summary.frames_rendered > 0);
+    assert!(run.report.iter().any(|v| v["event"] == "request_exit"), "the app asked for the exit");
 }
 
 /// `blind-augment xr` without a runtime: a clear error, non-zero exit, no panic.

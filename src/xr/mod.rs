@@ -18,12 +18,14 @@
 #![allow(unsafe_code)]
 
 mod lifecycle;
+mod spacewarp;
 mod views;
+mod vulkan;
 
 pub use lifecycle::{Action, EndReason, Lifecycle};
 pub use views::{eye_from_view, View, ViewError};
 
-use crate::gpu::{GpuContext, GpuError, GpuOptions, VulkanFactory};
+use crate::gpu::{GpuContext, GpuError, GpuOptions};
 use crate::render::{ExternalTarget, FrameInput, GBufferFrame, LayerSettings, StereoRenderer};
 use crate::scene::Scene;
 use crate::worker::ModelChannel;
@@ -31,7 +33,9 @@ use ash::vk;
 use ash::vk::Handle as _;
 use glam::{Mat4, Quat, Vec3};
 use openxr as xr;
+use spacewarp::space_warp_swapchains;
 use std::time::{Duration, Instant};
+use vulkan::XrVulkan;
 
 #[derive(Debug, thiserror::Error)]
 pub enum XrError {
@@ -79,6 +83,9 @@ pub struct XrOptions<'a> {
     pub display_hz: f32,
     /// Called after each rendered frame with its record (tests, the CLI's progress).
     pub on_frame: Option<&'a mut dyn FnMut(&FrameRecord)>,
+    /// Set from any thread to shut down (Ctrl-C, Android's onDestroy): the loop
+    /// calls xrRequestExitSession and ends when the runtime reaches EXITING.
+    pub stop: Option<&'a std::sync::atomic::AtomicBool>,
 }
 
 /// One rendered frame.
@@ -121,68 +128,6 @@ pub struct XrSummary {
     pub end: EndReason,
     /// Vulkan validation messages (empty when clean).
     pub vulkan_messages: Vec<String>,
-}
-
-/// The Vulkan instance and device, created through the OpenXR runtime
-/// (XR_KHR_vulkan_enable2, spec 12.21).
-struct XrVulkan<'a> {
-    instance: &'a xr::Instance,
-    system: xr::SystemId,
-}
-
-fn runtime_err(call: &'static str, e: xr::sys::Result) -> GpuError {
-    GpuError::Input { input: call, problem: format!("OpenXR: {e}") }
-}
-
-impl VulkanFactory for XrVulkan<'_> {
-    fn create_instance(&self, entry: &ash::Entry, info: &vk::InstanceCreateInfo<'_>) -> Result<vk::Instance, GpuError> {
-        let gipa = entry.static_fn().get_instance_proc_addr;
-        // SAFETY: `gipa` is the loader's vkGetInstanceProcAddr (the same C signature
-        // openxr-sys declares); `info` is a valid VkInstanceCreateInfo for the call.
-        let r = unsafe {
-            self.instance.create_vulkan_instance(
-                self.system,
-                std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, xr::sys::platform::VkGetInstanceProcAddr>(gipa),
-                info as *const _ as *const _,
-            )
-        };
-        match r {
-            Ok(Ok(raw)) => Ok(vk::Instance::from_raw(raw as u64)),
-            Ok(Err(v)) => Err(GpuError::Vk { call: "xrCreateVulkanInstanceKHR", result: vk::Result::from_raw(v) }),
-            Err(e) => Err(runtime_err("xrCreateVulkanInstanceKHR", e)),
-        }
-    }
-
-    fn physical_device(&self, instance: &ash::Instance) -> Result<Option<vk::PhysicalDevice>, GpuError> {
-        // SAFETY: a live instance created through this XR instance.
-        let raw = unsafe { self.instance.vulkan_graphics_device(self.system, instance.handle().as_raw() as _) }
-            .map_err(|e| runtime_err("xrGetVulkanGraphicsDevice2KHR", e))?;
-        Ok(Some(vk::PhysicalDevice::from_raw(raw as u64)))
-    }
-
-    fn create_device(
-        &self,
-        entry: &ash::Entry,
-        _instance: &ash::Instance,
-        physical: vk::PhysicalDevice,
-        info: &vk::DeviceCreateInfo<'_>,
-    ) -> Result<vk::Device, GpuError> {
-        let gipa = entry.static_fn().get_instance_proc_addr;
-        // SAFETY: as in create_instance; `physical` came from xrGetVulkanGraphicsDevice2KHR.
-        let r = unsafe {
-            self.instance.create_vulkan_device(
-                self.system,
-                std::mem::transmute::<vk::PFN_vkGetInstanceProcAddr, xr::sys::platform::VkGetInstanceProcAddr>(gipa),
-                physical.as_raw() as _,
-                info as *const _ as *const _,
-            )
-        };
-        match r {
-            Ok(Ok(raw)) => Ok(vk::Device::from_raw(raw as u64)),
-            Ok(Err(v)) => Err(GpuError::Vk { call: "xrCreateVulkanDeviceKHR", result: vk::Result::from_raw(v) }),
-            Err(e) => Err(runtime_err("xrCreateVulkanDeviceKHR", e)),
-        }
-    }
 }
 
 const CORE_VALIDATION: &str = "XR_APILAYER_LUNARG_core_validation";
@@ -305,113 +250,6 @@ fn view_of(v: &xr::View) -> View {
         position_m: Vec3::new(p.x, p.y, p.z),
         fov_rad: [v.fov.angle_left, v.fov.angle_right, v.fov.angle_up, v.fov.angle_down],
     }
-}
-
-/// The motion-vector and depth swapchains of XR_FB_space_warp (two layers each,
-/// at the runtime's recommended motion-vector size).
-struct SpaceWarpChains {
-    vectors: xr::Swapchain<xr::Vulkan>,
-    vector_images: Vec<vk::Image>,
-    depth: xr::Swapchain<xr::Vulkan>,
-    depth_images: Vec<vk::Image>,
-    size: (u32, u32),
-}
-
-impl SpaceWarpChains {
-    fn acquire(&mut self) -> Result<crate::render::SpaceWarpTarget, XrError> {
-        let v = self.vectors.acquire_image().map_err(call("xrAcquireSwapchainImage (motion vectors)"))?;
-        self.vectors.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage (motion vectors)"))?;
-        let d = self.depth.acquire_image().map_err(call("xrAcquireSwapchainImage (depth)"))?;
-        self.depth.wait_image(xr::Duration::INFINITE).map_err(call("xrWaitSwapchainImage (depth)"))?;
-        Ok(crate::render::SpaceWarpTarget {
-            vectors: self.vector_images[v as usize],
-            vectors_layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-            depth: self.depth_images[d as usize],
-            depth_layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
-        })
-    }
-
-    fn release(&mut self) -> Result<(), XrError> {
-        self.vectors.release_image().map_err(call("xrReleaseSwapchainImage (motion vectors)"))?;
-        self.depth.release_image().map_err(call("xrReleaseSwapchainImage (depth)"))
-    }
-}
-
-/// Create the space-warp swapchains, or None (logged) when the runtime's formats
-/// or sizes do not allow them: then every display frame is rendered.
-fn space_warp_swapchains(
-    instance: &xr::Instance,
-    system: xr::SystemId,
-    session: &xr::Session<xr::Vulkan>,
-    formats: &[u32],
-    eye: (u32, u32),
-) -> Result<Option<SpaceWarpChains>, XrError> {
-    use crate::render::spacewarp::{DEPTH_FORMAT, VECTOR_FORMAT};
-    let mut sw = xr::sys::SystemSpaceWarpPropertiesFB {
-        ty: xr::sys::SystemSpaceWarpPropertiesFB::TYPE,
-        next: std::ptr::null_mut(),
-        recommended_motion_vector_image_rect_width: 0,
-        recommended_motion_vector_image_rect_height: 0,
-    };
-    let mut props = xr::sys::SystemProperties {
-        ty: xr::sys::SystemProperties::TYPE,
-        next: &mut sw as *mut _ as *mut _,
-        // SAFETY: plain data (ids, arrays, flags); zero is a valid bit pattern.
-        ..unsafe { std::mem::zeroed() }
-    };
-    // SAFETY: a live instance and system; `props` chains a struct the enabled
-    // extension defines, both live for the call.
-    let r = unsafe { (instance.fp().get_system_properties)(instance.as_raw(), system, &mut props) };
-    if r.into_raw() < 0 {
-        return Err(call("xrGetSystemProperties (space warp)")(r));
-    }
-    let size = (sw.recommended_motion_vector_image_rect_width, sw.recommended_motion_vector_image_rect_height);
-    let (vf, df) = (VECTOR_FORMAT.as_raw() as u32, DEPTH_FORMAT.as_raw() as u32);
-    if size.0 == 0
-        || size.1 == 0
-        || size.0 > eye.0
-        || size.1 > eye.1
-        || !formats.contains(&vf)
-        || !formats.contains(&df)
-    {
-        log::warn!(
-            "OpenXR: XR_FB_space_warp unusable (motion vectors {}×{}, formats {formats:?}): every display frame is rendered",
-            size.0,
-            size.1
-        );
-        return Ok(None);
-    }
-    let create = |format: u32, usage: xr::SwapchainUsageFlags| {
-        session.create_swapchain(&xr::SwapchainCreateInfo {
-            create_flags: xr::SwapchainCreateFlags::EMPTY,
-            usage_flags: usage | xr::SwapchainUsageFlags::TRANSFER_DST,
-            format,
-            sample_count: 1,
-            width: size.0,
-            height: size.1,
-            face_count: 1,
-            array_size: 2,
-            mip_count: 1,
-        })
-    };
-    let vectors =
-        create(vf, xr::SwapchainUsageFlags::COLOR_ATTACHMENT).map_err(call("xrCreateSwapchain (motion vectors)"))?;
-    let depth =
-        create(df, xr::SwapchainUsageFlags::DEPTH_STENCIL_ATTACHMENT).map_err(call("xrCreateSwapchain (depth)"))?;
-    let images = |s: &xr::Swapchain<xr::Vulkan>| -> Result<Vec<vk::Image>, XrError> {
-        Ok(s.enumerate_images()
-            .map_err(call("xrEnumerateSwapchainImages"))?
-            .into_iter()
-            .map(vk::Image::from_raw)
-            .collect())
-    };
-    let (vector_images, depth_images) = (images(&vectors)?, images(&depth)?);
-    log::info!(
-        "OpenXR: XR_FB_space_warp on: motion vectors and depth {}×{} per eye; rendering at half the display rate",
-        size.0,
-        size.1
-    );
-    Ok(Some(SpaceWarpChains { vectors, vector_images, depth, depth_images, size }))
 }
 
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
@@ -634,7 +472,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             std::thread::sleep(Duration::from_millis(5));
             continue;
         }
-        if opts.frames.is_some_and(|n| summary.frames_rendered >= n) && !exit_requested {
+        let stop = opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed));
+        if (stop || opts.frames.is_some_and(|n| summary.frames_rendered >= n)) && !exit_requested {
             session.request_exit().map_err(call("xrRequestExitSession"))?;
             exit_requested = true;
             // The state changes it causes arrive as events: handle them first.

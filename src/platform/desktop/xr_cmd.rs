@@ -107,6 +107,7 @@ pub fn run(args: XrArgs) -> Result<()> {
         settings: LayerSettings::default(),
         display_hz: args.display_hz,
         on_frame: None,
+        stop: None,
     })?;
     println!("{}", format_summary(&summary));
     if !summary.vulkan_messages.is_empty() {
