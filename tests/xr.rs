@@ -359,8 +359,13 @@ fn desktop_replay(records: &[FrameRecord], models: &ModelChannel, k: usize) -> V
 #[test]
 fn fb_passthrough_frames_match_the_desktop_render() {
     let models = ModelChannel::new(model(0.4)).expect("model");
-    let env =
-        [("BA_XR_PNG_DIR", "{dir}"), ("BA_XR_PNG_FRAMES", "12"), ("BA_XR_EXTENSIONS", "passthrough,refresh_rate")];
+    let env = [
+        ("BA_XR_PNG_DIR", "{dir}"),
+        ("BA_XR_PNG_FRAMES", "12"),
+        ("BA_XR_EXTENSIONS", "passthrough,refresh_rate"),
+        // Quest-like: passthrough only through the FB layer.
+        ("BA_XR_BLEND_MODES", "opaque"),
+    ];
     let Some(run) = run_xr("passthrough", &env, 20, false, &models) else { return };
     assert_clean(&run, false);
     assert_eq!(run.summary.blend_mode, openxr::EnvironmentBlendMode::OPAQUE);

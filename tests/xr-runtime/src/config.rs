@@ -7,7 +7,7 @@
 //! | `BA_XR_REFRESH_RATES` | rates XR_FB_display_refresh_rate offers | 72,90,120 |
 //! | `BA_XR_EYE_SIZE` | recommended image rect per eye, `WxH` | 1680x1760 |
 //! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, or `none` | passthrough,refresh_rate,space_warp |
-//! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` | opaque |
+//! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
 //! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N` | none |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
@@ -97,7 +97,10 @@ impl Config {
             }
         }
         let mut blend_modes = vec![];
-        for b in var("BA_XR_BLEND_MODES").unwrap_or_else(|| "opaque".into()).split(',').map(str::trim) {
+        // Default: both, so the app takes ALPHA_BLEND — the passthrough path that
+        // Debian's core validation layer (1.0.20) accepts (it rejects the FB
+        // passthrough layer type).
+        for b in var("BA_XR_BLEND_MODES").unwrap_or_else(|| "opaque,alpha_blend".into()).split(',').map(str::trim) {
             blend_modes.push(match b {
                 "opaque" => openxr_sys::EnvironmentBlendMode::OPAQUE,
                 "alpha_blend" => openxr_sys::EnvironmentBlendMode::ALPHA_BLEND,
