@@ -12,6 +12,7 @@
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
 //! | `BA_XR_HEAD` | head path: `sway` (±4 cm at 0.5 Hz, ±3° yaw) or `still` | sway |
+//! | `BA_XR_DEBUG` | set: log every function name xrGetInstanceProcAddr cannot resolve | unset |
 
 use std::path::PathBuf;
 
