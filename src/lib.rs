@@ -18,3 +18,11 @@ pub mod scene;
 pub mod synth;
 pub mod worker;
 pub mod xr;
+
+/// The Quest app's entry point (the cdylib `cargo xtask apk` packages).
+#[cfg(target_os = "android")]
+#[path = "platform/android.rs"]
+mod android;
+// Links the pure-Rust unwinder's _Unwind_* (no NDK libunwind; see Cargo.toml).
+#[cfg(target_os = "android")]
+extern crate unwinding;

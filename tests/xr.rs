@@ -184,6 +184,7 @@ fn run_xr_until(
         display_hz: 90.0,
         on_frame: Some(&mut on_frame),
         stop: Some(&stop),
+        platform: &(),
     });
     if let Some(t) = stopper {
         t.join().expect("stopper thread");

@@ -26,6 +26,7 @@ pub use lifecycle::{Action, EndReason, Lifecycle};
 pub use views::{eye_from_view, View, ViewError};
 
 use crate::gpu::{GpuContext, GpuError, GpuOptions};
+use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
 use crate::render::{ExternalTarget, FrameInput, GBufferFrame, LayerSettings, StereoRenderer};
 use crate::scene::Scene;
 use crate::worker::ModelChannel;
@@ -86,6 +87,9 @@ pub struct XrOptions<'a> {
     /// Set from any thread to shut down (Ctrl-C, Android's onDestroy): the loop
     /// calls xrRequestExitSession and ends when the runtime reaches EXITING.
     pub stop: Option<&'a std::sync::atomic::AtomicBool>,
+    /// How the loader is initialised and the instance created: `&()` on desktop,
+    /// `openxr::AndroidPlatformInfo` (JavaVM + activity) on Android.
+    pub platform: &'a dyn xr::PlatformInfo,
 }
 
 /// One rendered frame.
@@ -133,10 +137,13 @@ pub struct XrSummary {
 const CORE_VALIDATION: &str = "XR_APILAYER_LUNARG_core_validation";
 
 /// Load the loader and create the instance with what the runtime offers.
-fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::ExtensionSet), XrError> {
+fn create_instance(
+    validation: bool,
+    platform: &dyn xr::PlatformInfo,
+) -> Result<(xr::Entry, xr::Instance, xr::ExtensionSet), XrError> {
     // SAFETY: the Khronos loader (Debian's libopenxr_loader.so.1; the APK's
     // libopenxr_loader.so) conforms to the spec.
-    let entry = unsafe { xr::Entry::load(&()) }.map_err(|e| XrError::NoLoader(e.to_string()))?;
+    let entry = unsafe { xr::Entry::load(platform) }.map_err(|e| XrError::NoLoader(e.to_string()))?;
     let available = match entry.enumerate_extensions() {
         Ok(a) => a,
         Err(e) if e == xr::sys::Result::ERROR_RUNTIME_UNAVAILABLE || e == xr::sys::Result::ERROR_RUNTIME_FAILURE => {
@@ -149,6 +156,12 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
     }
     let mut want = xr::ExtensionSet::default();
     want.khr_vulkan_enable2 = true;
+    // Android: the instance is created with the JavaVM and activity (required there;
+    // the field exists only in Android builds of the openxr crate).
+    #[cfg(target_os = "android")]
+    {
+        want.khr_android_create_instance = true;
+    }
     for (offered, flag, name, consequence) in [
         (available.fb_passthrough, &mut want.fb_passthrough, "XR_FB_passthrough", "no passthrough layer"),
         (
@@ -185,7 +198,7 @@ fn create_instance(validation: bool) -> Result<(xr::Entry, xr::Instance, xr::Ext
         engine_version: 1,
         api_version: xr::Version::new(1, 0, 0),
     };
-    let instance = entry.create_instance(&app, &want, &layers, &()).map_err(|e| match e {
+    let instance = entry.create_instance(&app, &want, &layers, platform).map_err(|e| match e {
         xr::sys::Result::ERROR_RUNTIME_UNAVAILABLE | xr::sys::Result::ERROR_RUNTIME_FAILURE => {
             XrError::NoRuntime(format!("xrCreateInstance: {e}"))
         }
@@ -252,6 +265,27 @@ fn view_of(v: &xr::View) -> View {
     }
 }
 
+/// The camera model used until calibration publishes one: a Quest 3-like
+/// passthrough camera (1280×960 at 30 Hz, ≈ 100° horizontal field of view) with
+/// moderate sensor noise, exposure λ = 0.4 and mild defocus away from 1.5 m. A
+/// placeholder, stated as such in its diagnostics — not a measurement.
+pub fn default_camera() -> CameraModel {
+    let mut m = CameraModel::empty(1280, 960);
+    m.reference.frame_interval_s = Some(1.0 / 30.0);
+    m.reference.pixels_per_radian = Some(640.0 / 50.0f32.to_radians().tan());
+    m.noise = crate::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
+    let placeholder = || Diagnostics::not_fitted("default model (no calibration yet)");
+    m.motion_blur = MotionBlur { present: true, exposure: Some(0.4), diagnostics: placeholder() };
+    m.depth_of_field = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 1.5, focus_depth: 1.5, c0: 0.2 }),
+        depth_range: [0.3, 10.0],
+        diagnostics: placeholder(),
+    };
+    m
+}
+
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
 pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
     offered
@@ -264,7 +298,7 @@ pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
 /// Run the XR app until the runtime ends the session (or `frames` are rendered).
 pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // Declared in the reverse of the teardown order (see the module doc).
-    let (_entry, instance, enabled) = create_instance(opts.validation)?;
+    let (_entry, instance, enabled) = create_instance(opts.validation, opts.platform)?;
     let props = instance.properties().map_err(call("xrGetInstanceProperties"))?;
     let system = instance.system(xr::FormFactor::HEAD_MOUNTED_DISPLAY).map_err(call("xrGetSystem"))?;
     let sys_props = instance.system_properties(system).map_err(call("xrGetSystemProperties"))?;

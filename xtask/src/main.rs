@@ -2,9 +2,11 @@
 //! but cargo: `bench` runs every benchmark (fit speed, speed/accuracy trade, GPU
 //! passes) and keeps the raw output for BENCHMARKS.md; `assets` regenerates the
 //! bundled glTF object; `xr-runtime` builds the headless OpenXR test runtime and
-//! prints its manifest's path (for `XR_RUNTIME_JSON`). CI is `.ci/run` alone, the
+//! prints its manifest's path (for `XR_RUNTIME_JSON`); `apk` builds, signs and
+//! checks the Quest APK without the NDK (apk.rs), `install` puts it on a headset. CI is `.ci/run` alone, the
 //! one definition of the checks.
 
+mod apk;
 mod assets;
 
 use anyhow::{bail, Context, Result};
@@ -113,6 +115,8 @@ fn main() -> Result<()> {
         Some("assets") => assets::generate(&root()),
         Some("xr-runtime") => xr_runtime(args.iter().any(|a| a == "--release")),
         Some("bench-xr") => xr_bench().map(|_| ()),
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        Some("apk") => apk::apk(&root(), args.iter().any(|a| a == "--release")).map(|_| ()),
+        Some("install") => apk::install(&root(), args.iter().any(|a| a == "--release")),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }

@@ -4,35 +4,14 @@
 
 use super::XrArgs;
 use anyhow::{Context, Result};
-use blind_augment::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
+use blind_augment::model::CameraModel;
 use blind_augment::render::LayerSettings;
 use blind_augment::scene::Scene;
 use blind_augment::worker::ModelChannel;
-use blind_augment::xr::{self, EndReason, XrOptions, XrSummary};
+use blind_augment::xr::{self, default_camera, EndReason, XrOptions, XrSummary};
 use glam::{Mat4, Vec3};
 
 const TOY: &[u8] = include_bytes!("../../../assets/toy.glb");
-
-/// The camera model used until calibration publishes one: a Quest 3-like
-/// passthrough camera (1280×960 at 30 Hz, ≈ 100° horizontal field of view) with
-/// moderate sensor noise, exposure λ = 0.4 and mild defocus away from 1.5 m. A
-/// placeholder, stated as such in its diagnostics — not a measurement.
-pub fn default_camera() -> CameraModel {
-    let mut m = CameraModel::empty(1280, 960);
-    m.reference.frame_interval_s = Some(1.0 / 30.0);
-    m.reference.pixels_per_radian = Some(640.0 / 50.0f32.to_radians().tan());
-    m.noise = blind_augment::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
-    let placeholder = || Diagnostics::not_fitted("default model (no calibration yet)");
-    m.motion_blur = MotionBlur { present: true, exposure: Some(0.4), diagnostics: placeholder() };
-    m.depth_of_field = DepthOfField {
-        present: true,
-        units: DepthUnits::MetricM,
-        curve: Some(DofCurve::ThinLens { k: 1.5, focus_depth: 1.5, c0: 0.2 }),
-        depth_range: [0.3, 10.0],
-        diagnostics: placeholder(),
-    };
-    m
-}
 
 fn percentile(v: &[f64], p: f64) -> f64 {
     if v.is_empty() {
@@ -108,6 +87,7 @@ pub fn run(args: XrArgs) -> Result<()> {
         display_hz: args.display_hz,
         on_frame: None,
         stop: None,
+        platform: &(),
     })?;
     println!("{}", format_summary(&summary));
     if !summary.vulkan_messages.is_empty() {
