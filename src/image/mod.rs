@@ -7,6 +7,7 @@
 
 mod blur;
 mod pyramid;
+pub mod yuv;
 
 pub use blur::{blur_separable, discrete_gaussian_kernel};
 pub use pyramid::{expand, gaussian_pyramid, laplacian_pyramid, reduce, LaplacianPyramid};
