@@ -7,6 +7,7 @@
 // index; iterator zips of four slices read worse than the index they replace.
 #![allow(clippy::needless_range_loop)]
 
+pub mod analysis;
 pub mod fit;
 pub mod gpu;
 pub mod image;
