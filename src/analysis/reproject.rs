@@ -109,7 +109,7 @@ pub fn reproject_depth(
             let p_view = Vec3::new(tx * z, ty * z, -z);
             // Into the camera's own (OpenCV) axes: `world_from_camera` maps them.
             let p = camera_from_view.transform_point3(p_view);
-            if !(p.z > 1e-3) {
+            if p.z.is_nan() || p.z <= 1e-3 {
                 continue;
             }
             let (pu, pv) = (c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy);
