@@ -1,5 +1,6 @@
 //! CPU image operations shared by `synth` and `fit`: planar float images, luma,
-//! Burt–Adelson pyramids, discrete-Gaussian blurs and bilinear sampling.
+//! Burt–Adelson pyramids, discrete-Gaussian blurs and bilinear sampling; camera
+//! YUV_420_888 frames to RGB (`yuv`).
 //!
 //! Conventions: values are linear floats (nominally [0,1] for colour), row-major,
 //! `(x, y)` with `x` along a row. Borders are clamp-to-edge everywhere, so every
