@@ -160,17 +160,8 @@ impl<'a> Image<'a> {
     /// release). Bits are copied unchanged: sRGB-encoded values written to an
     /// RGBA8 UNORM image read as the same colours from an RGBA8 SRGB image.
     pub fn record_copy_to_external(&self, cmd: vk::CommandBuffer, dst: vk::Image, dst_layout: vk::ImageLayout) {
-        let barrier = |image, from, to, src, dst_access| {
-            vk::ImageMemoryBarrier::default()
-                .src_access_mask(src)
-                .dst_access_mask(dst_access)
-                .old_layout(from)
-                .new_layout(to)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(image)
-                .subresource_range(self.range())
-        };
+        let range = self.range();
+        let barrier = |image, from, to, src, dst_access| image_barrier(image, range, from, to, src, dst_access);
         let before = [
             // The effect chain's writes to the output, before the copy reads them
             // (in TRANSFER_SRC_OPTIMAL for the copy, then back to its own layout).
@@ -366,6 +357,26 @@ impl Drop for Texture<'_> {
     }
 }
 
+/// A layout transition / memory dependency on `range` of `image` (same queue family).
+fn image_barrier(
+    image: vk::Image,
+    range: vk::ImageSubresourceRange,
+    from: vk::ImageLayout,
+    to: vk::ImageLayout,
+    src_access: vk::AccessFlags,
+    dst_access: vk::AccessFlags,
+) -> vk::ImageMemoryBarrier<'static> {
+    vk::ImageMemoryBarrier::default()
+        .src_access_mask(src_access)
+        .dst_access_mask(dst_access)
+        .old_layout(from)
+        .new_layout(to)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .image(image)
+        .subresource_range(range)
+}
+
 /// Record a copy of `src` (f32 depth texels, tightly packed, layer-major) into the
 /// depth aspect of `dst`, a D32_SFLOAT image this context does not own (the
 /// OpenXR depth swapchain image for XR_FB_space_warp), kept in `dst_layout` before
@@ -384,17 +395,7 @@ pub fn record_copy_to_external_depth(
         .aspect_mask(vk::ImageAspectFlags::DEPTH)
         .level_count(1)
         .layer_count(size[2]);
-    let barrier = |from, to, src_access, dst_access| {
-        vk::ImageMemoryBarrier::default()
-            .src_access_mask(src_access)
-            .dst_access_mask(dst_access)
-            .old_layout(from)
-            .new_layout(to)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(dst)
-            .subresource_range(range)
-    };
+    let barrier = |from, to, src_access, dst_access| image_barrier(dst, range, from, to, src_access, dst_access);
     let to_dst = barrier(
         dst_layout,
         vk::ImageLayout::TRANSFER_DST_OPTIMAL,

@@ -270,11 +270,6 @@ impl GpuContext {
         (self.instance.handle(), self.physical, self.device.handle(), self.queue_family)
     }
 
-    /// The entry's `vkGetInstanceProcAddr` (OpenXR's Vulkan create infos need it).
-    pub fn get_instance_proc_addr(&self) -> vk::PFN_vkGetInstanceProcAddr {
-        self._entry.static_fn().get_instance_proc_addr
-    }
-
     /// Validation/driver warnings and errors since the last call (tests fail on any).
     pub fn take_messages(&self) -> Vec<String> {
         self.messages.lock().map(|mut v| std::mem::take(&mut *v)).unwrap_or_default()

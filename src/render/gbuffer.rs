@@ -64,6 +64,12 @@ pub fn clip_from_view(focal_px: f32, centre_px: [f32; 2], width: u32, height: u3
 }
 
 pub const NEAR_M: f32 = 0.05;
+
+/// How the app lights virtual content (towards the light, world space; ambient
+/// fraction): one definition for the desktop renders, the XR loop and benchmarks,
+/// so their frames are comparable.
+pub const SCENE_LIGHT_DIR: glam::Vec3 = glam::Vec3::new(0.4, 1.0, 0.6);
+pub const SCENE_AMBIENT: f32 = 0.35;
 pub const FAR_M: f32 = 100.0;
 
 /// Everything one frame of the G-buffer needs: both eyes now and one render frame

@@ -269,10 +269,6 @@ impl<'a> StereoRenderer<'a> {
         Ok(())
     }
 
-    pub fn space_warp(&self) -> Option<&SpaceWarpPass<'a>> {
-        self.space_warp.as_ref()
-    }
-
     /// As `render`, then copy the composite into `target` and, when space warp is
     /// enabled and `space_warp` given, the frame's motion vectors and depth into
     /// its images, in the same submission.

@@ -49,8 +49,7 @@ fn run(cmd: &mut Command) -> Result<String> {
 }
 
 fn check_tools() -> Result<()> {
-    let missing: Vec<&str> = PACKAGES.iter().filter(|(_, c)| !have(c)).map(|(p, _)| *p).collect();
-    let mut missing: Vec<&str> = missing;
+    let mut missing: Vec<&str> = PACKAGES.iter().filter(|(_, c)| !have(c)).map(|(p, _)| *p).collect();
     if !Path::new(FRAMEWORK_RES).exists() {
         missing.push("android-framework-res");
     }

@@ -129,8 +129,8 @@ pub fn render_sequence(
             prev_eyes: eyes((motion.head)(t_prev), eye_focal_px, w, h),
             world_from_nodes: scene.world_from_nodes(t, motion.world_from_scene),
             prev_world_from_nodes: scene.world_from_nodes(t_prev, motion.world_from_scene),
-            light_dir: Vec3::new(0.4, 1.0, 0.6),
-            ambient: 0.35,
+            light_dir: blind_augment::render::gbuffer::SCENE_LIGHT_DIR,
+            ambient: blind_augment::render::gbuffer::SCENE_AMBIENT,
         };
         let now = scene.world_corners(t, motion.world_from_scene);
         let before = scene.world_corners(t_prev, motion.world_from_scene);
