@@ -20,6 +20,7 @@ fn main() {
         depth: Some(&depth),
         depth_units: DepthUnits::MetricM,
         flow: Some(&flow),
+        reference_valid: None,
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
     for _ in 0..3 {

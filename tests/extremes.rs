@@ -22,6 +22,7 @@ fn all_refs<'a>(image: &'a Rgb, clean: &'a Rgb, depth: &'a Plane, flow: &'a Flow
         depth: Some(depth),
         depth_units: DepthUnits::MetricM,
         flow: Some(flow),
+        reference_valid: None,
     }
 }
 

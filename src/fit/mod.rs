@@ -56,6 +56,12 @@ pub struct FitInputs<'a> {
     pub depth: Option<&'a Plane>,
     pub depth_units: DepthUnits,
     pub flow: Option<&'a Flow>,
+    /// Where the reference images hold (> 0.5) and where they do not (≤ 0.5 or
+    /// non-finite). References made from video (`analysis::temporal`: other frames
+    /// aligned by pose and depth) are undefined where the scene left the view or was
+    /// occluded; the accurate noise and motion-blur fits skip samples whose
+    /// footprint touches such pixels. `None`: valid everywhere.
+    pub reference_valid: Option<&'a Plane>,
 }
 
 impl<'a> FitInputs<'a> {
@@ -70,6 +76,7 @@ impl<'a> FitInputs<'a> {
             depth: None,
             depth_units: DepthUnits::MetricM,
             flow: None,
+            reference_valid: None,
         }
     }
 }
@@ -174,6 +181,17 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
                 want_h: h,
                 got_w: z.width,
                 got_h: z.height,
+            });
+        }
+    }
+    if let Some(v) = inp.reference_valid {
+        if v.width != w || v.height != h {
+            return Err(FitError::SizeMismatch {
+                input: "reference-valid",
+                want_w: w,
+                want_h: h,
+                got_w: v.width,
+                got_h: v.height,
             });
         }
     }
@@ -315,7 +333,7 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
         return (Noise::absent(Diagnostics::not_fitted("not requested (--only)")), None);
     }
     let (noise, data) = match (tier, inp.denoised) {
-        (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, opts),
+        (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, inp.reference_valid, opts),
         _ => noise::fit_fast(inp.image),
     };
     (noise, Some(data))
@@ -333,7 +351,7 @@ fn fit_motion_blur(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (MotionBlu
             None,
         ),
         (Some(flow), Tier::Accurate, Some(sharp)) => {
-            motion_blur::fit_accurate(inp.image, sharp, flow, opts.mb_max_samples)
+            motion_blur::fit_accurate(inp.image, sharp, flow, inp.reference_valid, opts.mb_max_samples)
         }
         (Some(flow), _, _) => motion_blur::fit_fast(inp.image, flow),
     }

@@ -83,7 +83,7 @@ impl Profiles {
     }
 }
 
-fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, max_samples: usize) -> Profiles {
+fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, valid: Option<&Plane>, max_samples: usize) -> Profiles {
     let (w, h) = (image.width, image.height);
     // Cheap pre-filter: the sharp luma must change along the flow within one frame
     // interval (|∇Y·F| ≥ 2e-3, half an 8-bit step), then thin deterministically to
@@ -95,6 +95,15 @@ fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, max_samples: usize)
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
             if fx * fx + fy * fy < 0.05 * 0.05 {
                 continue;
+            }
+            // The reference must hold along the whole streak (its ends and middle).
+            if let Some(v) = valid {
+                let ok = |t: f32| {
+                    v.get_clamped((x as f32 + t * fx).round() as isize, (y as f32 + t * fy).round() as isize) > 0.5
+                };
+                if !(ok(-0.5) && ok(0.0) && ok(0.5)) {
+                    continue;
+                }
             }
             let (xi, yi) = (x as isize, y as isize);
             let gx = 0.5 * (sharp.get_clamped(xi + 1, yi) - sharp.get_clamped(xi - 1, yi));
@@ -188,10 +197,16 @@ fn decide(
 }
 
 /// Accurate tier: I, I_noMB and F.
-pub fn fit_accurate(image: &Rgb, sharp: &Rgb, flow: &Flow, max_samples: usize) -> (MotionBlur, Option<MbPlotData>) {
+pub fn fit_accurate(
+    image: &Rgb,
+    sharp: &Rgb,
+    flow: &Flow,
+    valid: Option<&Plane>,
+    max_samples: usize,
+) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let prof = build_profiles(&image.luma(), &sharp.luma(), flow, max_samples);
+    let prof = build_profiles(&image.luma(), &sharp.luma(), flow, valid, max_samples);
     st.lap("blur");
     let n = prof.len();
     if n < MIN_SAMPLES {

@@ -325,7 +325,7 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
 /// (dark, ≤ 0.1). This finds 8-bit 255s, 16-bit 65535s and float frames clipped at
 /// any white level, while unclipped float frames (over- and undershoot included)
 /// have no repeated extreme and lose nothing.
-fn clip_mask(img: &Rgb, block: usize) -> ClipMask {
+fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
     let n = img.len();
     let min_count = (n / 2000).max(2);
     // One pass per channel: extremes and how often each occurs.
@@ -349,7 +349,11 @@ fn clip_mask(img: &Rgb, block: usize) -> ClipMask {
             ((lo <= 0.1 && nlo >= min_count).then_some(lo), (hi >= 0.6 && nhi >= min_count).then_some(hi))
         })
         .collect();
-    if limits.iter().all(|l| l.0.is_none() && l.1.is_none()) {
+    // Pixels where the reference does not hold count as clipped: the same
+    // footprint exclusion keeps them out of every level's samples.
+    let invalid = |i: usize| valid.is_some_and(|v| !(v.data[i] > 0.5));
+    let any_invalid = valid.is_some_and(|v| v.data.iter().any(|x| !(*x > 0.5)));
+    if limits.iter().all(|l| l.0.is_none() && l.1.is_none()) && !any_invalid {
         return ClipMask(None);
     }
     // Mark block×block tiles holding any clipped pixel; footprint tests then run on
@@ -358,10 +362,11 @@ fn clip_mask(img: &Rgb, block: usize) -> ClipMask {
     let (bw, bh) = (img.width.div_ceil(block), img.height.div_ceil(block));
     let mut blocks = Plane::new(bw, bh, 0.0);
     for i in 0..n {
-        let clipped = (0..3).any(|c| {
-            let v = img.channels[c][i];
-            limits[c].0 == Some(v) || limits[c].1 == Some(v)
-        });
+        let clipped = invalid(i)
+            || (0..3).any(|c| {
+                let v = img.channels[c][i];
+                limits[c].0 == Some(v) || limits[c].1 == Some(v)
+            });
         if clipped {
             let (x, y) = (i % img.width, i / img.width);
             blocks.data[(y / block) * bw + x / block] = 1.0;
@@ -503,7 +508,12 @@ fn luma_range(samples: &LevelSamples) -> [f32; 2] {
 }
 
 /// Accurate tier: I and I_noNoise.
-pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (Noise, NoisePlotData) {
+pub fn fit_accurate(
+    image: &Rgb,
+    denoised: &Rgb,
+    valid: Option<&Plane>,
+    opts: &super::FitOptions,
+) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let mut st = super::Stages::start();
     let residual = Rgb {
@@ -517,7 +527,7 @@ pub fn fit_accurate(image: &Rgb, denoised: &Rgb, opts: &super::FitOptions) -> (N
     let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
     st.lap("blur");
     let stride = effective_stride(image.len(), opts.noise_stride_px);
-    let samples = collect_samples(&bands, &luma, &clip_mask(image, 1), stride);
+    let samples = collect_samples(&bands, &luma, &clip_mask(image, 1, valid), stride);
     st.lap("search");
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).
@@ -590,7 +600,7 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     st.lap("blur");
     // About 20 000 grid points whatever the frame size (4 px at 512², 8 px at 1280×960).
     let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as usize).max(BLIND_STRIDE_PX);
-    let clip = clip_mask(image, 8);
+    let clip = clip_mask(image, 8, None);
     let win0 = window(0);
     let win2 = window(2);
     // Phase 1, cheap: (B(Y), B(Y²), structure) at level-0 grid points with

@@ -122,6 +122,7 @@ fn fit_one(image: &Rgb, reference: &Rgb, effects: Effects, depth: &Plane, flow: 
         depth: Some(depth),
         depth_units: DepthUnits::MetricM,
         flow: Some(flow),
+        reference_valid: None,
     };
     Ok(fit(&inputs, &FitOptions { effects, ..Default::default() })?)
 }
@@ -170,6 +171,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         depth: Some(&disparity),
         depth_units: DepthUnits::MetricM,
         flow: Some(&flow),
+        reference_valid: None,
     };
     let fast_out = fit(&fast_inputs, &FitOptions::default())?;
 

@@ -47,6 +47,7 @@ fn run_one(args: &FitArgs, inp: &Loaded, opts: &FitOptions) -> Result<FitOutput>
         depth: inp.depth.as_ref(),
         depth_units: args.geometry.depth_units.into(),
         flow: inp.flow.as_ref(),
+        reference_valid: None,
     };
     Ok(fit(&fi, opts)?)
 }
