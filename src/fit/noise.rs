@@ -351,8 +351,9 @@ fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
         .collect();
     // Pixels where the reference does not hold count as clipped: the same
     // footprint exclusion keeps them out of every level's samples.
-    let invalid = |i: usize| valid.is_some_and(|v| !(v.data[i] > 0.5));
-    let any_invalid = valid.is_some_and(|v| v.data.iter().any(|x| !(*x > 0.5)));
+    let holds = |x: f32| x > 0.5; // NaN: does not hold
+    let invalid = |i: usize| valid.is_some_and(|v| !holds(v.data[i]));
+    let any_invalid = valid.is_some_and(|v| v.data.iter().any(|x| !holds(*x)));
     if limits.iter().all(|l| l.0.is_none() && l.1.is_none()) && !any_invalid {
         return ClipMask(None);
     }
