@@ -5,6 +5,7 @@
 //! Every effect carries `present` (the renderer skips absent effects) and
 //! `diagnostics` (how sure the estimator is, how it got there).
 
+pub mod compare;
 pub mod geometry;
 pub use geometry::{covering_rect, half_rect, tile_rect, GrainTable, Rect};
 pub mod kernels;

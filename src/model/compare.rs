@@ -1,0 +1,68 @@
+//! How far a model is from a known truth, one number per effect, as the tier
+//! benchmarks, the calibration tests and the demo report state it:
+//! * noise: the median over levels 0–3, R/G/B and luma 0.2…0.8 (clamped into each
+//!   model's range) of |σ_fit / σ_true − 1|, σ the level's std;
+//! * motion blur: |λ_fit − λ_true| (an absent effect reads λ = 0);
+//! * depth of field: the RMS of δ_fit(Z) − δ_true(Z) over the given depths (px).
+
+use super::{CameraModel, DepthOfField, Noise};
+
+const LUMAS: [f32; 7] = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8];
+
+/// Median relative error of the level stds; None if either side has no noise.
+pub fn noise_relative_error(fit: &Noise, truth: &Noise) -> Option<f32> {
+    if !fit.present || !truth.present {
+        return None;
+    }
+    let mut errs = vec![];
+    for (lf, lt) in fit.levels.iter().zip(&truth.levels).take(4) {
+        for c in 0..3 {
+            for y in LUMAS {
+                let yf = y.clamp(fit.luminance_range[0], fit.luminance_range[1]);
+                let yt = y.clamp(truth.luminance_range[0], truth.luminance_range[1]);
+                let (sf, st) = (lf.std(fit.form, c, yf), lt.std(truth.form, c, yt));
+                if st > 0.0 {
+                    errs.push((sf / st - 1.0).abs());
+                }
+            }
+        }
+    }
+    if errs.is_empty() {
+        return None;
+    }
+    errs.sort_by(f32::total_cmp);
+    Some(errs[errs.len() / 2])
+}
+
+/// |λ_fit − λ_true|, absent effects as λ = 0.
+pub fn exposure_error(fit: &CameraModel, truth: &CameraModel) -> f32 {
+    (fit.motion_blur.exposure_or_zero() - truth.motion_blur.exposure_or_zero()).abs()
+}
+
+/// RMS of δ_fit − δ_true over `depths` (px); absent effects as δ = 0.
+pub fn dof_rmse_px(fit: &DepthOfField, truth: &DepthOfField, depths: &[f32]) -> Option<f32> {
+    let d: Vec<f32> = depths.iter().copied().filter(|z| z.is_finite() && *z > 0.0).collect();
+    if d.is_empty() {
+        return None;
+    }
+    let s: f32 = d.iter().map(|&z| (fit.sigma_px(z) - truth.sigma_px(z)).powi(2)).sum();
+    Some((s / d.len() as f32).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_model_is_exact_against_itself_and_scaled_noise_reads_its_scale() {
+        let n = crate::synth::white_sensor_noise([1e-4; 3], [1e-3; 3], [0.0, 1.0]);
+        assert_eq!(noise_relative_error(&n, &n), Some(0.0));
+        let mut m = n.clone();
+        // Affine variance ×1.21 = std ×1.1.
+        for l in &mut m.levels {
+            l.slope.iter_mut().chain(l.intercept.iter_mut()).for_each(|v| *v *= 1.21);
+        }
+        let e = noise_relative_error(&m, &n).expect("both present");
+        assert!((e - 0.1).abs() < 1e-4, "{e}");
+    }
+}

@@ -1,0 +1,897 @@
+//! The calibration loop, frame by frame, as plain code: the worker thread and
+//! `calibrate` (a recorded sequence) run exactly this. Frames in (with the camera
+//! poses known so far), camera models out:
+//!
+//! 1. **Analyse** every frame: pose at its time from the smooth pose track, depth
+//!    (provider), motion at a sparse grid (pose + depth); keep it in a bounded
+//!    window (the newest `frames_held`, plus the sharpest frames seen recently, the
+//!    references for motion blur).
+//! 2. **Fit** when due: every frame during the start-up burst (boundary setup) and
+//!    after a detected change, then every `update_interval_s` of video. The tier
+//!    decides the references: `fast` fits the frame alone (blind); `balanced` and
+//!    `accurate` use video as its own reference (aligned mean as I_noNoise, the
+//!    sharpest aligned frames as I_noMB; `analysis::temporal`) or the providers
+//!    given by `--onnx`. Depth of field has no video reference (the focus does not
+//!    change), so it runs blind unless a defocus-deblur provider is given.
+//! 3. **Aggregate** the estimates of the last `window_s` seconds of video: the
+//!    coefficient-wise median (`fit::aggregate_models`: outliers do not move it),
+//!    presence with hysteresis (on at ≥ 60% of identifiable estimates, off at
+//!    ≤ 30%) so effects do not flicker.
+//! 4. **Detect change**: a shift of the luminance histogram, or two consecutive
+//!    estimates off the aggregate by more than their own uncertainty allows (an
+//!    exposure, gain or focus change), drops the estimates from before it and
+//!    restarts the burst, so the new camera is published within a few frames.
+//!
+//! Every published model is validated (no NaN, nothing out of range).
+
+use crate::analysis::timing::{PoseTrack, TimedPose};
+use crate::analysis::{
+    Analysed, DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, Frame, FrameContext,
+    GivenDepth, GivenFlow, Intrinsics, LucasKanadeFlow, MotionDeblurrer, PoseDepthFlow, TemporalDenoiser,
+    TemporalMotionDeblur,
+};
+use crate::fit::{self, Effects, FitInputs, FitOptions};
+use crate::model::{CameraModel, NoiseForm, Status};
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// How much compute each update may spend (the user's speed/accuracy trade).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CalibrationTier {
+    /// The frame alone (blind estimators), every frame.
+    Fast,
+    /// Temporal noise reference from 4 frames; motion blur and DoF blind.
+    Balanced,
+    /// Temporal references for noise (8 frames) and motion blur (sharp frames).
+    Accurate,
+}
+
+impl CalibrationTier {
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "fast" => Some(Self::Fast),
+            "balanced" => Some(Self::Balanced),
+            "accurate" => Some(Self::Accurate),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Fast => "fast",
+            Self::Balanced => "balanced",
+            Self::Accurate => "accurate",
+        }
+    }
+
+    /// Video time between updates after the burst.
+    pub fn update_interval_s(self) -> f64 {
+        match self {
+            Self::Fast => 0.0,
+            Self::Balanced => 0.2,
+            Self::Accurate => 0.25,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct CalibratorConfig {
+    pub tier: CalibrationTier,
+    /// Nominal frame interval (s): flow is per this interval.
+    pub frame_interval_s: f64,
+    pub intrinsics: Option<Intrinsics>,
+    pub effects: Effects,
+    /// Start-up burst (boundary setup): fit every frame for this long.
+    pub burst_s: f64,
+    /// Video time between fits after the burst (0: every frame).
+    pub update_interval_s: f64,
+    /// Estimates aggregated: the last this many seconds of video.
+    pub window_s: f64,
+    /// Newest frames held for temporal references (besides the sharp ones).
+    pub frames_held: usize,
+    /// Sharp frames (head at rest) held, and how long (s).
+    pub sharp_held: usize,
+    pub sharp_max_age_s: f64,
+}
+
+impl CalibratorConfig {
+    pub fn new(tier: CalibrationTier, frame_interval_s: f64, intrinsics: Option<Intrinsics>) -> Self {
+        Self {
+            tier,
+            frame_interval_s,
+            intrinsics,
+            effects: Effects::ALL,
+            burst_s: 1.0,
+            update_interval_s: tier.update_interval_s(),
+            window_s: 1.0,
+            frames_held: match tier {
+                CalibrationTier::Fast => 1,
+                CalibrationTier::Balanced => 6,
+                CalibrationTier::Accurate => 10,
+            },
+            sharp_held: 3,
+            sharp_max_age_s: 3.0,
+        }
+    }
+}
+
+/// The providers per role. `for_tier` picks the defaults; `--onnx` replaces them.
+pub struct Providers {
+    pub depth: Box<dyn DepthProvider>,
+    pub flow: Box<dyn FlowProvider>,
+    /// Fallback flow when the primary one cannot serve a frame.
+    pub flow_fallback: Option<Box<dyn FlowProvider>>,
+    pub denoise: Option<Box<dyn Denoiser>>,
+    pub motion_deblur: Option<Box<dyn MotionDeblurrer>>,
+    pub defocus_deblur: Option<Box<dyn DefocusDeblurrer>>,
+}
+
+impl Providers {
+    /// Headset-native depth and pose + depth flow (Lucas–Kanade when a frame has no
+    /// pose or depth); temporal references for the tiers that use them.
+    pub fn for_tier(tier: CalibrationTier) -> Self {
+        let (denoise, motion_deblur): (Option<Box<dyn Denoiser>>, Option<Box<dyn MotionDeblurrer>>) = match tier {
+            CalibrationTier::Fast => (None, None),
+            CalibrationTier::Balanced => {
+                (Some(Box::new(TemporalDenoiser { frames: 4, min_frames: 3, ..Default::default() })), None)
+            }
+            CalibrationTier::Accurate => {
+                (Some(Box::new(TemporalDenoiser::default())), Some(Box::new(TemporalMotionDeblur::default())))
+            }
+        };
+        Self {
+            depth: Box::new(GivenDepth),
+            flow: Box::new(PoseDepthFlow),
+            flow_fallback: Some(Box::new(LucasKanadeFlow::default())),
+            denoise,
+            motion_deblur,
+            defocus_deblur: None,
+        }
+    }
+
+    /// Flow files instead of computed flow.
+    pub fn with_given_flow(mut self) -> Self {
+        self.flow = Box::new(GivenFlow);
+        self.flow_fallback = None;
+        self
+    }
+}
+
+/// Why a model was published.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpdateReason {
+    Burst,
+    Schedule,
+    Change,
+}
+
+/// A published model and what it cost.
+#[derive(Clone, Debug)]
+pub struct Update {
+    pub frame: u64,
+    pub t_s: f64,
+    pub model: CameraModel,
+    pub reason: UpdateReason,
+    /// Wall time of this update (analysis + fits + aggregation), s.
+    pub compute_s: f64,
+    /// Frames whose estimates the model aggregates.
+    pub frames_used: Vec<u64>,
+}
+
+/// What one frame did.
+#[derive(Clone, Debug)]
+pub enum Event {
+    Published(Update),
+    /// A provider could not serve this frame (the fit went on without it).
+    Degraded { frame: u64, reason: String },
+    /// The frame was not used (and why).
+    Skipped { frame: u64, reason: String },
+    /// A camera change was detected at this frame.
+    ChangeDetected { frame: u64, t_s: f64, cause: String },
+    /// Camera tracking jumped: poses before it are no longer used.
+    TrackingLoss { t_s: f64, reason: String },
+}
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum CalibError {
+    #[error("frame {frame} is {got_w}×{got_h}, earlier frames are {want_w}×{want_h}")]
+    FrameSize { frame: u64, want_w: usize, want_h: usize, got_w: usize, got_h: usize },
+    #[error("frame {frame} is empty (0×0)")]
+    Empty { frame: u64 },
+    #[error("frame {frame} has a non-finite value at x={x}, y={y}")]
+    NonFinite { frame: u64, x: usize, y: usize },
+    #[error("frame {frame} at t = {t_s} s is not later than the previous frame (t = {previous_s} s)")]
+    Time { frame: u64, t_s: f64, previous_s: f64 },
+    #[error("pose at t = {t_s} s: {reason}")]
+    Pose { t_s: f64, reason: String },
+    #[error("intrinsics are for {iw}×{ih} but the frames are {w}×{h}")]
+    Intrinsics { iw: usize, ih: usize, w: usize, h: usize },
+    #[error("configuration: {0}")]
+    Config(String),
+}
+
+/// Video time between blind probes at the slower tiers (change detection).
+const PROBE_INTERVAL_S: f64 = 0.1;
+
+/// A blind probe's headline numbers.
+#[derive(Clone, Copy, Debug)]
+struct Probe {
+    t_s: f64,
+    noise: Option<f32>,
+    lambda: Option<f32>,
+}
+
+/// One fit's result, kept for aggregation.
+#[derive(Clone, Debug)]
+struct Estimate {
+    frame: u64,
+    t_s: f64,
+    model: CameraModel,
+}
+
+/// Presence with hysteresis.
+#[derive(Clone, Copy, Debug, Default)]
+struct Presence {
+    on: Option<bool>,
+}
+
+impl Presence {
+    /// `present` of `identifiable` estimates said present.
+    fn update(&mut self, present: usize, identifiable: usize) -> bool {
+        if identifiable == 0 {
+            return self.on.unwrap_or(false);
+        }
+        let frac = present as f64 / identifiable as f64;
+        let on = match self.on {
+            None => frac > 0.5,
+            Some(false) => frac >= 0.6,
+            Some(true) => frac > 0.3,
+        };
+        self.on = Some(on);
+        on
+    }
+}
+
+/// Luma histogram of a frame on a sparse grid (16 bins, normalised).
+fn luma_histogram(frame: &Frame) -> [f32; 16] {
+    let img = &frame.image;
+    let mut h = [0f32; 16];
+    let step = ((img.len() / 4096) as f64).sqrt().max(1.0) as usize;
+    let mut n = 0.0f32;
+    for y in (0..img.height).step_by(step) {
+        for x in (0..img.width).step_by(step) {
+            let i = y * img.width + x;
+            let l = 0.2126 * img.channels[0][i] + 0.7152 * img.channels[1][i] + 0.0722 * img.channels[2][i];
+            h[((l.clamp(0.0, 1.0) * 16.0) as usize).min(15)] += 1.0;
+            n += 1.0;
+        }
+    }
+    h.iter_mut().for_each(|v| *v /= n.max(1.0));
+    h
+}
+
+/// Level-0 noise std of the green channel at mid-range luma: the noise headline.
+fn noise_headline(m: &CameraModel) -> Option<f32> {
+    let n = &m.noise;
+    if !n.present || n.levels.is_empty() {
+        return None;
+    }
+    let y = 0.5f32.clamp(n.luminance_range[0], n.luminance_range[1]);
+    let l = &n.levels[0];
+    let v = l.intercept[1] + l.slope[1] * y;
+    Some(match n.form {
+        NoiseForm::AffineVariance => v.max(0.0).sqrt(),
+        NoiseForm::LinearStd => v.max(0.0),
+    })
+}
+
+/// Variance (px²) of the Gaussian both sides of the temporal motion-blur fit pass
+/// through.
+const MB_PREFILTER_VAR_PX2: f32 = 1.0;
+
+fn prefilter(img: &crate::image::Rgb) -> crate::image::Rgb {
+    let k = crate::image::discrete_gaussian_kernel(MB_PREFILTER_VAR_PX2);
+    crate::image::Rgb::from_planes(std::array::from_fn(|c| crate::image::blur_separable(&img.plane(c), &k)))
+}
+
+/// Scale a fitted noise model by `variance_factor` (the temporal reference's
+/// leftover noise divided out).
+fn scale_noise(m: &mut CameraModel, variance_factor: f32) {
+    let s = match m.noise.form {
+        NoiseForm::AffineVariance => variance_factor,
+        NoiseForm::LinearStd => variance_factor.sqrt(),
+    };
+    for l in m.noise.levels.iter_mut().chain(m.noise.lowpass.iter_mut()) {
+        l.slope.iter_mut().chain(l.intercept.iter_mut()).for_each(|v| *v *= s);
+    }
+}
+
+pub struct Calibrator {
+    cfg: CalibratorConfig,
+    providers: Providers,
+    poses: Vec<TimedPose>,
+    track: Option<PoseTrack>,
+    window: VecDeque<Arc<Analysed>>,
+    sharp: VecDeque<Arc<Analysed>>,
+    estimates: VecDeque<Estimate>,
+    size: Option<(usize, usize)>,
+    last_t_s: Option<f64>,
+    burst_until_s: f64,
+    last_fit_s: f64,
+    histogram: Option<[f32; 16]>,
+    probes: VecDeque<Probe>,
+    last_probe_s: f64,
+    after_change: bool,
+    presence: [Presence; 3],
+    published: Option<CameraModel>,
+}
+
+/// Head motion no tracker reports for a real head (m/s, rad/s): a tracking loss.
+const MAX_SPEED_M_S: f32 = 5.0;
+const MAX_ANGULAR_SPEED_RAD_S: f32 = 20.0;
+/// Pose history kept (s).
+const POSE_HISTORY_S: f64 = 4.0;
+
+impl Calibrator {
+    pub fn new(cfg: CalibratorConfig, providers: Providers) -> Result<Self, CalibError> {
+        if !(cfg.frame_interval_s.is_finite() && cfg.frame_interval_s > 0.0 && cfg.frame_interval_s < 1.0) {
+            return Err(CalibError::Config(format!("frame interval {} s: need 0 < Δ < 1 s", cfg.frame_interval_s)));
+        }
+        if !(cfg.window_s > 0.0 && cfg.burst_s >= 0.0 && cfg.update_interval_s >= 0.0) {
+            return Err(CalibError::Config("window, burst and update interval must be ≥ 0 (window > 0)".into()));
+        }
+        if let Some(k) = &cfg.intrinsics {
+            if ![k.fx, k.fy, k.cx, k.cy].iter().all(|v| v.is_finite()) || k.fx <= 0.0 || k.fy <= 0.0 {
+                return Err(CalibError::Config(format!("intrinsics {k:?}: need finite values and fx, fy > 0")));
+            }
+        }
+        Ok(Self {
+            cfg,
+            providers,
+            poses: vec![],
+            track: None,
+            window: VecDeque::new(),
+            sharp: VecDeque::new(),
+            estimates: VecDeque::new(),
+            size: None,
+            last_t_s: None,
+            burst_until_s: f64::NEG_INFINITY,
+            last_fit_s: f64::NEG_INFINITY,
+            histogram: None,
+            probes: VecDeque::new(),
+            last_probe_s: f64::NEG_INFINITY,
+            after_change: false,
+            presence: Default::default(),
+            published: None,
+        })
+    }
+
+    pub fn config(&self) -> &CalibratorConfig {
+        &self.cfg
+    }
+
+    /// The last published model.
+    pub fn current(&self) -> Option<&CameraModel> {
+        self.published.as_ref()
+    }
+
+    /// Camera poses (`world_from_camera`, OpenCV axes) as they become known, in time
+    /// order. Bad poses are errors; an impossible jump is a tracking loss: the
+    /// history before it is dropped (reported as an event).
+    pub fn push_poses(&mut self, poses: &[TimedPose]) -> Result<Vec<Event>, CalibError> {
+        let mut events = vec![];
+        for p in poses {
+            let t_s = p.t_ns as f64 * 1e-9;
+            if !p.position_m.is_finite() || !p.orientation.is_finite() {
+                return Err(CalibError::Pose { t_s, reason: "not finite".into() });
+            }
+            if (p.orientation.length() - 1.0).abs() > 1e-3 {
+                return Err(CalibError::Pose {
+                    t_s,
+                    reason: format!("quaternion of length {} (not a unit quaternion)", p.orientation.length()),
+                });
+            }
+            if let Some(last) = self.poses.last() {
+                if p.t_ns <= last.t_ns {
+                    return Err(CalibError::Pose { t_s, reason: "not later than the previous pose".into() });
+                }
+                let dt = (p.t_ns - last.t_ns) as f32 * 1e-9;
+                let speed = (p.position_m - last.position_m).length() / dt;
+                let angular = last.orientation.angle_between(p.orientation) / dt;
+                if speed > MAX_SPEED_M_S || angular > MAX_ANGULAR_SPEED_RAD_S {
+                    events.push(Event::TrackingLoss {
+                        t_s,
+                        reason: format!("the camera jumped ({speed:.1} m/s, {angular:.1} rad/s): earlier poses dropped"),
+                    });
+                    self.poses.clear();
+                    // Frames held from before the jump are in another frame of reference.
+                    self.window.clear();
+                    self.sharp.clear();
+                }
+            }
+            self.poses.push(*p);
+        }
+        if let Some(last) = self.poses.last() {
+            let keep_from = last.t_ns - (POSE_HISTORY_S * 1e9) as i64;
+            let cut = self.poses.partition_point(|q| q.t_ns < keep_from);
+            self.poses.drain(..cut);
+        }
+        self.track = if self.poses.len() >= 2 { PoseTrack::new(self.poses.clone()).ok() } else { None };
+        Ok(events)
+    }
+
+    fn check_frame(&mut self, frame: &Frame) -> Result<(), CalibError> {
+        let (w, h) = (frame.image.width, frame.image.height);
+        if w == 0 || h == 0 {
+            return Err(CalibError::Empty { frame: frame.index });
+        }
+        if let Some((ww, wh)) = self.size {
+            if (w, h) != (ww, wh) {
+                return Err(CalibError::FrameSize { frame: frame.index, want_w: ww, want_h: wh, got_w: w, got_h: h });
+            }
+        }
+        if let Some(k) = &self.cfg.intrinsics {
+            if (k.width, k.height) != (w, h) {
+                return Err(CalibError::Intrinsics { iw: k.width, ih: k.height, w, h });
+            }
+        }
+        if let Some((x, y, _)) = frame.image.first_non_finite() {
+            return Err(CalibError::NonFinite { frame: frame.index, x, y });
+        }
+        if let Some(prev) = self.last_t_s {
+            if !(frame.t_s > prev) {
+                return Err(CalibError::Time { frame: frame.index, t_s: frame.t_s, previous_s: prev });
+            }
+        }
+        self.size = Some((w, h));
+        self.last_t_s = Some(frame.t_s);
+        Ok(())
+    }
+
+    fn held(&self) -> Vec<Arc<Analysed>> {
+        let mut v: Vec<Arc<Analysed>> = self.sharp.iter().chain(self.window.iter()).cloned().collect();
+        v.sort_by(|a, b| a.frame.t_s.total_cmp(&b.frame.t_s));
+        v.dedup_by(|a, b| a.frame.index == b.frame.index);
+        v
+    }
+
+
+    /// Analyse `frame`, fit when due, publish when the aggregate changes.
+    pub fn push_frame(&mut self, frame: Frame) -> Result<Vec<Event>, CalibError> {
+        self.check_frame(&frame)?;
+        let started = Instant::now();
+        let mut events = vec![];
+        let (index, t_s) = (frame.index, frame.t_s);
+        if self.burst_until_s == f64::NEG_INFINITY {
+            self.burst_until_s = t_s + self.cfg.burst_s;
+        }
+
+        // 1. Analysis.
+        let pose = self.track.as_ref().and_then(|tr| tr.at(crate::analysis::flow::to_ns(t_s)));
+        let mut analysed = Analysed {
+            frame,
+            depth: None,
+            world_from_camera: pose.as_ref().map(crate::analysis::temporal::pose_matrix),
+            sparse_flow: None,
+        };
+        let held = self.held();
+        let (track, k, dt) = (self.track.as_ref(), self.cfg.intrinsics.as_ref(), self.cfg.frame_interval_s);
+        let depth = self.providers.depth.depth(&FrameContext {
+            current: &analysed,
+            window: &held,
+            poses: track,
+            intrinsics: k,
+            frame_interval_s: dt,
+        });
+        match depth {
+            Ok(d) if (d.depth.width, d.depth.height) == (analysed.frame.image.width, analysed.frame.image.height) => {
+                analysed.depth = Some(d)
+            }
+            Ok(d) => events.push(Event::Degraded {
+                frame: index,
+                reason: format!("depth is {}×{}, the frame is not: depth ignored", d.depth.width, d.depth.height),
+            }),
+            Err(e) => events.push(Event::Degraded { frame: index, reason: e.to_string() }),
+        }
+        if analysed.world_from_camera.is_some() && analysed.depth.is_some() && self.cfg.intrinsics.is_some() {
+            analysed.sparse_flow = PoseDepthFlow::sparse(&FrameContext {
+                current: &analysed,
+                window: &held,
+                poses: track,
+                intrinsics: k,
+                frame_interval_s: dt,
+            })
+            .ok();
+        }
+
+        // 2. Change detection on the luminance histogram.
+        let hist = luma_histogram(&analysed.frame);
+        let mut change = None;
+        if let Some(base) = &self.histogram {
+            let l1: f32 = base.iter().zip(&hist).map(|(a, b)| (a - b).abs()).sum();
+            if l1 > 0.5 {
+                change = Some(format!("luminance histogram moved by {l1:.2} (L1)"));
+            }
+        }
+        self.histogram = Some(match &self.histogram {
+            Some(b) if change.is_none() => std::array::from_fn(|i| 0.9 * b[i] + 0.1 * hist[i]),
+            _ => hist,
+        });
+        if let Some(cause) = change {
+            self.on_change(index, t_s, t_s, cause, &mut events);
+        }
+
+        // 3. Blind probe (change detection): the fast tier's own fit serves as the
+        //    probe; the slower tiers run the blind estimators every `PROBE_INTERVAL_S`.
+        let probe_due = self.cfg.tier != CalibrationTier::Fast && t_s - self.last_probe_s >= PROBE_INTERVAL_S - 1e-9;
+        if probe_due {
+            self.last_probe_s = t_s;
+            if let Some(m) = self.blind_probe(&analysed, &held) {
+                self.push_probe(t_s, &m);
+            }
+            if let Some((since, cause)) = self.detect_change() {
+                self.on_change(index, t_s, since, cause, &mut events);
+            }
+        }
+
+        // 4. Fit when due.
+        let in_burst = t_s < self.burst_until_s;
+        if !in_burst {
+            self.after_change = false;
+        }
+        let due = in_burst || t_s - self.last_fit_s >= self.cfg.update_interval_s - 1e-9;
+        let analysed = Arc::new(analysed);
+        if due {
+            self.last_fit_s = t_s;
+            match self.fit_frame(&analysed, &held, &mut events) {
+                Some(model) => {
+                    if self.cfg.tier == CalibrationTier::Fast {
+                        self.push_probe(t_s, &model);
+                        if let Some((since, cause)) = self.detect_change() {
+                            self.on_change(index, t_s, since, cause, &mut events);
+                        }
+                    }
+                    self.estimates.push_back(Estimate { frame: index, t_s, model });
+                    let reason = if in_burst && self.after_change {
+                        UpdateReason::Change
+                    } else if in_burst {
+                        UpdateReason::Burst
+                    } else {
+                        UpdateReason::Schedule
+                    };
+                    if let Some(update) = self.aggregate(index, t_s, reason, started) {
+                        events.push(Event::Published(update));
+                    }
+                }
+                None => events.push(Event::Skipped { frame: index, reason: "no effect could be fitted".into() }),
+            }
+        }
+
+        // 5. Hold the frame for later references.
+        if self.cfg.frames_held > 0 {
+            self.window.push_back(analysed.clone());
+            while self.window.len() > self.cfg.frames_held {
+                self.window.pop_front();
+            }
+        }
+        if self.cfg.tier == CalibrationTier::Accurate {
+            if let Some(m) = analysed.max_motion_px() {
+                if m <= 0.5 {
+                    self.sharp.push_back(analysed);
+                    while self.sharp.len() > self.cfg.sharp_held {
+                        self.sharp.pop_front();
+                    }
+                }
+            }
+            let max_age = self.cfg.sharp_max_age_s;
+            self.sharp.retain(|a| t_s - a.frame.t_s <= max_age);
+        }
+        Ok(events)
+    }
+
+    /// A change first seen at `since_s`: estimates and held frames from before it
+    /// were made with the old camera (no references from them).
+    fn on_change(&mut self, frame: u64, t_s: f64, since_s: f64, cause: String, events: &mut Vec<Event>) {
+        events.push(Event::ChangeDetected { frame, t_s, cause });
+        self.estimates.retain(|e| e.t_s >= since_s);
+        self.probes.retain(|p| p.t_s >= since_s);
+        self.burst_until_s = t_s + 0.5 * self.cfg.burst_s;
+        self.after_change = true;
+        self.window.retain(|a| a.frame.t_s >= since_s);
+        self.sharp.retain(|a| a.frame.t_s >= since_s);
+    }
+
+    /// Change detection on blind probes: the fast estimators' noise level and λ,
+    /// compared with their own recent history (a blind estimator's bias depends on
+    /// the view but changes slowly, so a step in its output is a step in the
+    /// camera). Four probes in a row beyond the threshold, on the same side of
+    /// the median of the probes before them (at least five, within 2 s): a change,
+    /// dated at the first of the four. Thresholds from the blind estimators'
+    /// view-to-view scatter on the Motorcycle sequence (noise ±25%, λ ±0.08):
+    /// noise ×1.42 (|ln| > 0.35), λ ± 0.1.
+    fn detect_change(&mut self) -> Option<(f64, String)> {
+        const RECENT: usize = 4;
+        let n = self.probes.len();
+        if n < RECENT + 5 {
+            return None;
+        }
+        let (older, recent) = self.probes.make_contiguous().split_at(n - RECENT);
+        let median = |v: Vec<f32>| -> Option<f32> {
+            let mut v = v;
+            if v.len() < 5 {
+                return None;
+            }
+            v.sort_by(f32::total_cmp);
+            Some(v[v.len() / 2])
+        };
+        let since = recent[0].t_s;
+        // Noise: log ratio beyond ±0.35.
+        let base = median(older.iter().filter_map(|p| p.noise).collect());
+        if let Some(b) = base.filter(|b| *b > 0.0) {
+            let r: Vec<f32> = recent.iter().filter_map(|p| p.noise.map(|x| (x / b).ln())).collect();
+            if r.len() == RECENT && (r.iter().all(|x| *x > 0.35) || r.iter().all(|x| *x < -0.35)) {
+                return Some((since, format!("blind noise level moved ×{:.2}", r[RECENT - 1].exp())));
+            }
+        }
+        let base = median(older.iter().filter_map(|p| p.lambda).collect());
+        if let Some(b) = base {
+            let r: Vec<f32> = recent.iter().filter_map(|p| p.lambda.map(|x| x - b)).collect();
+            if r.len() == RECENT && (r.iter().all(|x| *x > 0.1) || r.iter().all(|x| *x < -0.1)) {
+                return Some((since, format!("blind exposure moved by {:+.2}", r[RECENT - 1])));
+            }
+        }
+        None
+    }
+
+    fn push_probe(&mut self, t_s: f64, m: &CameraModel) {
+        let mb = &m.motion_blur;
+        let lambda = mb
+            .exposure
+            .filter(|_| mb.diagnostics.status == Status::Present && mb.diagnostics.stderr.is_some_and(|s| s <= 0.05));
+        self.probes.push_back(Probe { t_s, noise: noise_headline(m), lambda });
+        while self.probes.front().is_some_and(|p| p.t_s < t_s - 2.0) {
+            self.probes.pop_front();
+        }
+    }
+
+    /// The blind noise and motion-blur estimators on this frame (the probe).
+    fn blind_probe(&mut self, current: &Analysed, held: &[Arc<Analysed>]) -> Option<CameraModel> {
+        let ctx = FrameContext {
+            current,
+            window: held,
+            poses: self.track.as_ref(),
+            intrinsics: self.cfg.intrinsics.as_ref(),
+            frame_interval_s: self.cfg.frame_interval_s,
+        };
+        let flow = self.providers.flow.flow(&ctx).ok();
+        let inp = FitInputs { flow: flow.as_ref(), ..FitInputs::new(&current.frame.image) };
+        let opts = FitOptions {
+            tier: Some(fit::Tier::Fast),
+            effects: Effects { noise: true, motion_blur: flow.is_some(), depth_of_field: false },
+            ..Default::default()
+        };
+        fit::fit(&inp, &opts).ok().map(|o| o.model)
+    }
+
+    /// One frame's fit at the configured tier.
+    fn fit_frame(&mut self, current: &Arc<Analysed>, held: &[Arc<Analysed>], events: &mut Vec<Event>) -> Option<CameraModel> {
+        let index = current.frame.index;
+        let fx = self.cfg.effects;
+        let ctx = FrameContext {
+            current,
+            window: held,
+            poses: self.track.as_ref(),
+            intrinsics: self.cfg.intrinsics.as_ref(),
+            frame_interval_s: self.cfg.frame_interval_s,
+        };
+        let flow = if fx.motion_blur {
+            match self.providers.flow.flow(&ctx) {
+                Ok(f) => Some(f),
+                Err(e) => {
+                    let fallback = self.providers.flow_fallback.as_mut().map(|p| p.flow(&ctx));
+                    match fallback {
+                        Some(Ok(f)) => {
+                            events.push(Event::Degraded { frame: index, reason: format!("{e}; Lucas–Kanade flow used") });
+                            Some(f)
+                        }
+                        Some(Err(e2)) => {
+                            events.push(Event::Degraded { frame: index, reason: format!("{e}; {e2}") });
+                            None
+                        }
+                        None => {
+                            events.push(Event::Degraded { frame: index, reason: e.to_string() });
+                            None
+                        }
+                    }
+                }
+            }
+        } else {
+            None
+        };
+        let depth = current.depth.as_ref();
+        let image = &current.frame.image;
+        let base = FitInputs {
+            depth: depth.map(|d| &d.depth),
+            depth_units: depth.map_or(crate::model::DepthUnits::MetricM, |d| d.units),
+            flow: flow.as_ref(),
+            ..FitInputs::new(image)
+        };
+        let only = |n, m, d| FitOptions { effects: Effects { noise: n, motion_blur: m, depth_of_field: d }, ..Default::default() };
+        let fast_opts = |e: Effects| FitOptions { tier: Some(fit::Tier::Fast), effects: e, ..Default::default() };
+
+        // References per effect (None: that effect runs blind).
+        let denoised = match (fx.noise, self.providers.denoise.as_mut()) {
+            (true, Some(p)) => match p.denoise(&ctx) {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    events.push(Event::Degraded { frame: index, reason: e.to_string() });
+                    None
+                }
+            },
+            _ => None,
+        };
+        let sharp = match (fx.motion_blur, flow.as_ref(), self.providers.motion_deblur.as_mut()) {
+            (true, Some(f), Some(p)) => match p.deblur(&ctx, f) {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    events.push(Event::Degraded { frame: index, reason: e.to_string() });
+                    None
+                }
+            },
+            _ => None,
+        };
+        let in_focus = match (fx.depth_of_field, depth, self.providers.defocus_deblur.as_mut()) {
+            (true, Some(d), Some(p)) => match p.deblur(&ctx, d) {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    events.push(Event::Degraded { frame: index, reason: e.to_string() });
+                    None
+                }
+            },
+            _ => None,
+        };
+
+        // The effects without references in one blind call; each reference its own
+        // accurate call (their validity masks differ).
+        let blind = Effects {
+            noise: fx.noise && denoised.is_none(),
+            motion_blur: fx.motion_blur && sharp.is_none(),
+            depth_of_field: fx.depth_of_field && in_focus.is_none(),
+        };
+        let mut model = match fit::fit(&base, &fast_opts(blind)) {
+            Ok(o) => o.model,
+            Err(e) => {
+                events.push(Event::Skipped { frame: index, reason: e.to_string() });
+                return None;
+            }
+        };
+        if let Some(r) = &denoised {
+            let inp = FitInputs { denoised: Some(&r.image), reference_valid: r.valid.as_ref(), ..base };
+            match fit::fit(&inp, &FitOptions { tier: Some(fit::Tier::Accurate), ..only(true, false, false) }) {
+                Ok(o) => {
+                    model.noise = o.model.noise;
+                    // I − mean carries (1 + ratio)·σ².
+                    scale_noise(&mut model, 1.0 / (1.0 + r.noise_variance_ratio));
+                    model.noise.diagnostics.method = "accurate (temporal reference)".into();
+                }
+                Err(e) => events.push(Event::Degraded { frame: index, reason: format!("noise fit: {e}") }),
+            }
+        }
+        if let Some(r) = &sharp {
+            // Both through the same small Gaussian first: it commutes with the streak
+            // (both are convolutions), and it removes the frequencies where the
+            // reference differs from a true I_noMB — resampling's attenuation near
+            // Nyquist and the reference's own noise — which would otherwise read as
+            // blur the reference already has (λ biased low).
+            let (image_lp, sharp_lp) = (prefilter(image), prefilter(&r.image));
+            let inp = FitInputs {
+                image: &image_lp,
+                motion_deblurred: Some(&sharp_lp),
+                reference_valid: r.valid.as_ref(),
+                ..base
+            };
+            match fit::fit(&inp, &FitOptions { tier: Some(fit::Tier::Accurate), ..only(false, true, false) }) {
+                Ok(o) => {
+                    model.motion_blur = o.model.motion_blur;
+                    model.motion_blur.diagnostics.method = "accurate (temporal reference)".into();
+                }
+                Err(e) => events.push(Event::Degraded { frame: index, reason: format!("motion-blur fit: {e}") }),
+            }
+        }
+        if let Some(r) = &in_focus {
+            let inp = FitInputs { defocus_deblurred: Some(&r.image), ..base };
+            match fit::fit(&inp, &FitOptions { tier: Some(fit::Tier::Accurate), ..only(false, false, true) }) {
+                Ok(o) => model.depth_of_field = o.model.depth_of_field,
+                Err(e) => events.push(Event::Degraded { frame: index, reason: format!("DoF fit: {e}") }),
+            }
+        }
+        model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
+        model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
+        model.validate().ok().map(|_| model)
+    }
+
+    /// Aggregate the window's estimates, apply hysteresis, validate.
+    fn aggregate(&mut self, frame: u64, t_s: f64, reason: UpdateReason, started: Instant) -> Option<Update> {
+        let from = t_s - self.cfg.window_s;
+        while self.estimates.front().is_some_and(|e| e.t_s < from) {
+            self.estimates.pop_front();
+        }
+        let mut models: Vec<CameraModel> = self.estimates.iter().map(|e| e.model.clone()).collect();
+        // Presence votes: every identifiable estimate.
+        let count = |f: &dyn Fn(&CameraModel) -> (bool, bool)| {
+            models.iter().fold((0, 0), |(p, i), m| {
+                let (present, identifiable) = f(m);
+                (p + present as usize, i + identifiable as usize)
+            })
+        };
+        let ident = |s: Status| matches!(s, Status::Present | Status::Absent);
+        let (np, ni) = count(&|m| (m.noise.present, ident(m.noise.diagnostics.status)));
+        let (mp, mi) = count(&|m| (m.motion_blur.present, ident(m.motion_blur.diagnostics.status)));
+        let (dp, di) = count(&|m| (m.depth_of_field.present, ident(m.depth_of_field.diagnostics.status)));
+        // Value votes: λ only from estimates that pin it down (± 0.05); a frame with
+        // little motion says "λ near 0 or anything" and would drag the median.
+        for m in &mut models {
+            if m.motion_blur.diagnostics.stderr.is_none_or(|s| s > 0.05) {
+                m.motion_blur.exposure = None;
+            }
+        }
+        // Where the window holds estimates made with a reference (the accurate fits
+        // on temporal or network references), blind estimates of that effect are
+        // not mixed in: they only bridge the time until the first reference.
+        let with_reference = |d: &crate::model::Diagnostics| d.method.starts_with("accurate");
+        let not_fitted = || crate::model::Diagnostics::not_fitted("superseded by estimates with a reference");
+        if models.iter().any(|m| with_reference(&m.noise.diagnostics) && m.noise.present) {
+            for m in models.iter_mut().filter(|m| !with_reference(&m.noise.diagnostics)) {
+                m.noise = crate::model::Noise::absent(not_fitted());
+            }
+        }
+        if models.iter().any(|m| with_reference(&m.motion_blur.diagnostics) && m.motion_blur.exposure.is_some()) {
+            for m in models.iter_mut().filter(|m| !with_reference(&m.motion_blur.diagnostics)) {
+                m.motion_blur = crate::model::MotionBlur::absent(not_fitted());
+            }
+        }
+        if models.iter().any(|m| with_reference(&m.depth_of_field.diagnostics) && m.depth_of_field.present) {
+            for m in models.iter_mut().filter(|m| !with_reference(&m.depth_of_field.diagnostics)) {
+                let units = m.depth_of_field.units;
+                m.depth_of_field = crate::model::DepthOfField::absent(units, not_fitted());
+            }
+        }
+        let mut agg = fit::aggregate_models(&models).ok()?;
+        let prev = self.published.clone();
+        let on = [self.presence[0].update(np, ni), self.presence[1].update(mp, mi), self.presence[2].update(dp, di)];
+        // Hysteresis holds an effect on while the window's majority has flipped:
+        // keep the aggregate's values if it has any, else the last published ones.
+        if on[0] != agg.noise.present {
+            match (&prev, on[0] && np == 0) {
+                (Some(p), true) => agg.noise = p.noise.clone(),
+                _ => agg.noise.present = on[0] && np > 0,
+            }
+        }
+        if on[1] != agg.motion_blur.present {
+            agg.motion_blur.present = on[1] && agg.motion_blur.exposure.is_some();
+        }
+        if on[2] != agg.depth_of_field.present {
+            match (&prev, on[2] && dp == 0) {
+                (Some(p), true) => agg.depth_of_field = p.depth_of_field.clone(),
+                _ => agg.depth_of_field.present = on[2] && agg.depth_of_field.curve.is_some(),
+            }
+        }
+        agg.validate().ok()?;
+        self.published = Some(agg.clone());
+        Some(Update {
+            frame,
+            t_s,
+            model: agg,
+            reason,
+            compute_s: started.elapsed().as_secs_f64(),
+            frames_used: self.estimates.iter().map(|e| e.frame).collect(),
+        })
+    }
+}
+
+impl std::fmt::Debug for Calibrator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Calibrator").field("tier", &self.cfg.tier).field("frames_held", &self.window.len()).finish()
+    }
+}

@@ -1,0 +1,214 @@
+//! The calibrator on its own thread at background priority (nice 19 on desktop
+//! Linux and Android: `setpriority` per thread, through `thread-priority`), fed
+//! through a latest-frame slot: `submit` replaces a frame the worker has not
+//! taken yet (counted as dropped), so a slow fit never queues frames without
+//! bound and the submitting thread (camera callback, frame loop) only ever holds
+//! the slot's lock for a swap. Poses are never dropped (they are small and the
+//! track needs them all); their queue is bounded at `MAX_QUEUED_POSES`, oldest
+//! first out. Models go out through `ModelChannel::publish` (validated, lock-free
+//! for the reader).
+
+use super::calibrator::{Calibrator, Event};
+use super::ModelChannel;
+use crate::analysis::timing::TimedPose;
+use crate::analysis::Frame;
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+const MAX_QUEUED_POSES: usize = 4096;
+
+#[derive(Default)]
+struct Slot {
+    frame: Option<Frame>,
+    poses: Vec<TimedPose>,
+    submitted: u64,
+    dropped: u64,
+    busy: bool,
+    stop: bool,
+}
+
+struct Shared {
+    slot: Mutex<Slot>,
+    wake: Condvar,
+    idle: Condvar,
+}
+
+/// One published model as the worker saw it.
+#[derive(Clone, Debug)]
+pub struct Published {
+    pub frame: u64,
+    pub t_s: f64,
+    pub generation: u64,
+    pub compute_s: f64,
+    /// Wall time since the worker started.
+    pub at_s: f64,
+}
+
+/// What the worker did, returned by `stop`.
+#[derive(Clone, Debug, Default)]
+pub struct WorkerStats {
+    pub submitted: u64,
+    pub dropped: u64,
+    pub processed: u64,
+    pub published: Vec<Published>,
+    /// Frames refused (bad input) and provider problems, as logged.
+    pub errors: Vec<String>,
+    /// Why the thread's priority could not be lowered (None: it was).
+    pub priority_error: Option<String>,
+}
+
+pub struct Worker {
+    shared: Arc<Shared>,
+    handle: Option<JoinHandle<WorkerStats>>,
+}
+
+fn lock(m: &Mutex<Slot>) -> std::sync::MutexGuard<'_, Slot> {
+    // A panic on the worker thread poisons the lock; the slot's data stay valid
+    // (plain values), so carry on rather than propagate the panic.
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl Worker {
+    /// Start `calibrator` on a background thread publishing into `channel`.
+    pub fn spawn(mut calibrator: Calibrator, channel: ModelChannel) -> std::io::Result<Worker> {
+        let shared = Arc::new(Shared { slot: Mutex::new(Slot::default()), wake: Condvar::new(), idle: Condvar::new() });
+        let s = shared.clone();
+        let handle = std::thread::Builder::new().name("calibration".into()).spawn(move || {
+            let started = Instant::now();
+            let mut stats = WorkerStats {
+                priority_error: thread_priority::set_current_thread_priority(thread_priority::ThreadPriority::Min)
+                    .err()
+                    .map(|e| format!("{e:?}")),
+                ..Default::default()
+            };
+            if let Some(e) = &stats.priority_error {
+                log::warn!("calibration thread: could not lower its priority ({e}); running at normal priority");
+            }
+            loop {
+                let (frame, poses) = {
+                    let mut slot = lock(&s.slot);
+                    slot.busy = false;
+                    s.idle.notify_all();
+                    while slot.frame.is_none() && !slot.stop {
+                        slot = s.wake.wait(slot).unwrap_or_else(|p| p.into_inner());
+                    }
+                    if slot.stop {
+                        stats.submitted = slot.submitted;
+                        stats.dropped = slot.dropped;
+                        break;
+                    }
+                    slot.busy = true;
+                    (slot.frame.take(), std::mem::take(&mut slot.poses))
+                };
+                match calibrator.push_poses(&poses) {
+                    Ok(events) => log_events(&events, &mut stats),
+                    Err(e) => {
+                        log::warn!("calibration: poses refused: {e}");
+                        stats.errors.push(e.to_string());
+                    }
+                }
+                let Some(frame) = frame else { continue };
+                let index = frame.index;
+                match calibrator.push_frame(frame) {
+                    Ok(events) => {
+                        stats.processed += 1;
+                        for e in &events {
+                            if let Event::Published(u) = e {
+                                match channel.publish(u.model.clone()) {
+                                    Ok(generation) => stats.published.push(Published {
+                                        frame: u.frame,
+                                        t_s: u.t_s,
+                                        generation,
+                                        compute_s: u.compute_s,
+                                        at_s: started.elapsed().as_secs_f64(),
+                                    }),
+                                    Err(e) => {
+                                        log::error!("calibration: model of frame {} refused by validation: {e}", u.frame);
+                                        stats.errors.push(e.to_string());
+                                    }
+                                }
+                            }
+                        }
+                        log_events(&events, &mut stats);
+                    }
+                    Err(e) => {
+                        log::warn!("calibration: frame {index} skipped: {e}");
+                        stats.errors.push(e.to_string());
+                    }
+                }
+            }
+            stats
+        })?;
+        Ok(Worker { shared, handle: Some(handle) })
+    }
+
+    /// Hand over the newest frame and the poses known since the last call. Never
+    /// waits for the worker: a frame it has not taken yet is replaced (dropped).
+    pub fn submit(&self, frame: Frame, poses: &[TimedPose]) {
+        let mut slot = lock(&self.shared.slot);
+        slot.submitted += 1;
+        if slot.frame.replace(frame).is_some() {
+            slot.dropped += 1;
+        }
+        slot.poses.extend_from_slice(poses);
+        let excess = slot.poses.len().saturating_sub(MAX_QUEUED_POSES);
+        slot.poses.drain(..excess);
+        drop(slot);
+        self.shared.wake.notify_one();
+    }
+
+    /// Wait until the worker has taken and finished every submitted frame (tests,
+    /// recordings); false on timeout.
+    pub fn wait_idle(&self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        let mut slot = lock(&self.shared.slot);
+        while slot.frame.is_some() || slot.busy {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            slot = self.shared.idle.wait_timeout(slot, left).map(|r| r.0).unwrap_or_else(|p| p.into_inner().0);
+        }
+        true
+    }
+
+    /// Stop after the current fit and return what the worker did.
+    pub fn stop(mut self) -> WorkerStats {
+        self.shutdown()
+    }
+
+    fn shutdown(&mut self) -> WorkerStats {
+        lock(&self.shared.slot).stop = true;
+        self.shared.wake.notify_all();
+        match self.handle.take().map(|h| h.join()) {
+            Some(Ok(stats)) => stats,
+            Some(Err(_)) => WorkerStats { errors: vec!["the calibration thread panicked".into()], ..Default::default() },
+            None => WorkerStats::default(),
+        }
+    }
+}
+
+impl Drop for Worker {
+    /// The thread must not outlive the channel's users unnoticed: stop and join.
+    fn drop(&mut self) {
+        if self.handle.is_some() {
+            self.shutdown();
+        }
+    }
+}
+
+fn log_events(events: &[Event], stats: &mut WorkerStats) {
+    for e in events {
+        match e {
+            Event::Published(u) => log::debug!("calibration: published the model of frame {} ({:?})", u.frame, u.reason),
+            Event::Degraded { frame, reason } => log::debug!("calibration: frame {frame}: {reason}"),
+            Event::Skipped { frame, reason } => {
+                log::info!("calibration: frame {frame} skipped: {reason}");
+                stats.errors.push(format!("frame {frame}: {reason}"));
+            }
+            Event::ChangeDetected { frame, cause, .. } => log::info!("calibration: camera change at frame {frame}: {cause}"),
+            Event::TrackingLoss { t_s, reason } => log::warn!("calibration: tracking loss at {t_s:.3} s: {reason}"),
+        }
+    }
+}
