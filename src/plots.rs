@@ -191,3 +191,83 @@ pub fn mb_plot(path: &Path, data: &MbPlotData) -> Result<(), PlotError> {
     }
     root.present().map_err(|e| err(path, e))
 }
+
+/// One curve of a multi-panel plot: points (x, y), and whether it is drawn as a
+/// line (truth, estimates over time) or as dots (the frames fitted).
+pub struct Series {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+    pub colour: RGBColor,
+    pub dots: bool,
+}
+
+/// One panel: a title, axis names and its curves.
+pub struct Panel {
+    pub title: String,
+    pub x_desc: String,
+    pub y_desc: String,
+    pub series: Vec<Series>,
+    pub log_x: bool,
+}
+
+/// Panels stacked vertically (the calibration timeline: one parameter per panel
+/// over video time; the tier trade: error against compute).
+pub fn panels_plot(path: &Path, panels: &[Panel], width: u32, panel_height: u32) -> Result<(), PlotError> {
+    register_font();
+    let root = BitMapBackend::new(path, (width, panel_height * panels.len().max(1) as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(path, e))?;
+    let areas = root.split_evenly((panels.len().max(1), 1));
+    for (area, p) in areas.iter().zip(panels) {
+        let all = p.series.iter().flat_map(|s| s.points.iter()).filter(|(x, y)| x.is_finite() && y.is_finite());
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, 0f64, f64::NEG_INFINITY);
+        for &(x, y) in all {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+        if !(x0.is_finite() && x1.is_finite() && y1.is_finite()) {
+            continue;
+        }
+        if x1 <= x0 {
+            x1 = x0 + 1.0;
+        }
+        let y1 = if y1 > y0 { y1 + 0.08 * (y1 - y0) } else { y0 + 1.0 };
+        let mut builder = ChartBuilder::on(area);
+        builder.caption(&p.title, ("sans-serif", 20)).margin(10).x_label_area_size(36).y_label_area_size(70);
+        macro_rules! draw {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                chart.configure_mesh().x_desc(&p.x_desc).y_desc(&p.y_desc).draw().map_err(|e| err(path, e))?;
+                for s in &p.series {
+                    let colour = s.colour;
+                    if s.dots {
+                        chart
+                            .draw_series(s.points.iter().map(|&(x, y)| Circle::new((x, y), 4, colour.filled())))
+                            .map_err(|e| err(path, e))?
+                            .label(s.label.clone())
+                            .legend(move |(x, y)| Circle::new((x + 10, y), 4, colour.filled()));
+                    } else {
+                        chart
+                            .draw_series(LineSeries::new(s.points.iter().cloned(), colour.stroke_width(2)))
+                            .map_err(|e| err(path, e))?
+                            .label(s.label.clone())
+                            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+                    }
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(|e| err(path, e))?;
+            }};
+        }
+        if p.log_x && x0 > 0.0 {
+            draw!(builder.build_cartesian_2d((x0 * 0.8..x1 * 1.25).log_scale(), y0..y1).map_err(|e| err(path, e))?);
+        } else {
+            draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|e| err(path, e))?);
+        }
+    }
+    root.present().map_err(|e| err(path, e))
+}

@@ -253,3 +253,44 @@ impl MotionDeblurrer for TemporalMotionDeblur {
 pub fn pose_matrix(p: &super::timing::TimedPose) -> Mat4 {
     Mat4::from_rotation_translation(p.orientation, p.position_m)
 }
+
+/// A cheap, view-independent noise probe for change detection: the previous frame
+/// aligned into this one and subtracted; in the flattest third of the valid pixels
+/// (smallest gradient of this frame) the difference is the two frames' noise, so
+/// its robust spread (green channel: the mean absolute deviation from the median
+/// of the inner 90%, scaled to a Gaussian std, over √2) tracks the noise level; a
+/// mean rather than a MAD because 8-bit frames make a median step in 1/255. Not
+/// an estimate of it — alignment low-passes the previous frame's noise and motion
+/// differs slightly between frames — but a quantity with a steady bias, whose
+/// steps are steps of the camera's noise.
+pub fn noise_probe(previous: &Analysed, current: &Analysed, k: &Intrinsics) -> Option<f32> {
+    let a = align(previous, current, k)?;
+    let img = &current.frame.image;
+    let (w, h) = (img.width, img.height);
+    let g = &img.channels[1];
+    let mut cand: Vec<(f32, f32)> = vec![];
+    for y in (1..h.saturating_sub(1)).step_by(2) {
+        for x in (1..w.saturating_sub(1)).step_by(2) {
+            let i = y * w + x;
+            if !(a.valid[i] && a.valid[i - 1] && a.valid[i + 1] && a.valid[i - w] && a.valid[i + w]) {
+                continue;
+            }
+            let grad = (g[i + 1] - g[i - 1]).abs() + (g[i + w] - g[i - w]).abs();
+            cand.push((grad, g[i] - a.image.channels[1][i]));
+        }
+    }
+    if cand.len() < 300 {
+        return None;
+    }
+    let third = cand.len() / 3;
+    cand.select_nth_unstable_by(third, |p, q| p.0.total_cmp(&q.0));
+    let mut d: Vec<f32> = cand[..third].iter().map(|p| p.1).collect();
+    let mid = d.len() / 2;
+    let median = *d.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let mut dev: Vec<f32> = d.iter().map(|v| (v - median).abs()).collect();
+    dev.sort_by(f32::total_cmp);
+    let inner = &dev[..(dev.len() * 9 / 10).max(1)];
+    let mean = inner.iter().sum::<f32>() / inner.len() as f32;
+    // E|X| = σ·√(2/π) for a Gaussian; trimming the top 10% lowers it by a fixed factor.
+    Some(mean * (std::f32::consts::PI / 2.0).sqrt() / std::f32::consts::SQRT_2)
+}

@@ -3,6 +3,7 @@
 //! H×W×2, x then y). Every error names the file and what is wrong.
 
 mod float;
+pub mod poses;
 
 pub use float::{read_npy_f32, read_pfm, write_npy_rgb, write_pfm_rgb};
 

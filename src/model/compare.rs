@@ -34,6 +34,16 @@ pub fn noise_relative_error(fit: &Noise, truth: &Noise) -> Option<f32> {
     Some(errs[errs.len() / 2])
 }
 
+/// The noise headline: level-0 std of the green channel at luma 0.5 (clamped into
+/// the model's range); None when noise is absent.
+pub fn noise_headline(n: &Noise) -> Option<f32> {
+    if !n.present || n.levels.is_empty() {
+        return None;
+    }
+    let y = 0.5f32.clamp(n.luminance_range[0], n.luminance_range[1]);
+    Some(n.levels[0].std(n.form, 1, y))
+}
+
 /// |λ_fit − λ_true|, absent effects as λ = 0.
 pub fn exposure_error(fit: &CameraModel, truth: &CameraModel) -> f32 {
     (fit.motion_blur.exposure_or_zero() - truth.motion_blur.exposure_or_zero()).abs()

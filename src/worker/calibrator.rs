@@ -26,9 +26,8 @@
 
 use crate::analysis::timing::{PoseTrack, TimedPose};
 use crate::analysis::{
-    Analysed, DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, Frame, FrameContext,
-    GivenDepth, GivenFlow, Intrinsics, LucasKanadeFlow, MotionDeblurrer, PoseDepthFlow, TemporalDenoiser,
-    TemporalMotionDeblur,
+    Analysed, DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, Frame, FrameContext, GivenDepth, GivenFlow,
+    Intrinsics, LucasKanadeFlow, MotionDeblurrer, PoseDepthFlow, TemporalDenoiser, TemporalMotionDeblur,
 };
 use crate::fit::{self, Effects, FitInputs, FitOptions};
 use crate::model::{CameraModel, NoiseForm, Status};
@@ -106,7 +105,7 @@ impl CalibratorConfig {
             update_interval_s: tier.update_interval_s(),
             window_s: 1.0,
             frames_held: match tier {
-                CalibrationTier::Fast => 1,
+                CalibrationTier::Fast => 1, // the previous frame: flow fallback, noise probe
                 CalibrationTier::Balanced => 6,
                 CalibrationTier::Accurate => 10,
             },
@@ -131,14 +130,16 @@ impl Providers {
     /// Headset-native depth and pose + depth flow (Lucas–Kanade when a frame has no
     /// pose or depth); temporal references for the tiers that use them.
     pub fn for_tier(tier: CalibrationTier) -> Self {
-        let (denoise, motion_deblur): (Option<Box<dyn Denoiser>>, Option<Box<dyn MotionDeblurrer>>) = match tier {
-            CalibrationTier::Fast => (None, None),
+        let denoise: Option<Box<dyn Denoiser>> = match tier {
+            CalibrationTier::Fast => None,
             CalibrationTier::Balanced => {
-                (Some(Box::new(TemporalDenoiser { frames: 4, min_frames: 3, ..Default::default() })), None)
+                Some(Box::new(TemporalDenoiser { frames: 4, min_frames: 3, ..Default::default() }))
             }
-            CalibrationTier::Accurate => {
-                (Some(Box::new(TemporalDenoiser::default())), Some(Box::new(TemporalMotionDeblur::default())))
-            }
+            CalibrationTier::Accurate => Some(Box::new(TemporalDenoiser::default())),
+        };
+        let motion_deblur: Option<Box<dyn MotionDeblurrer>> = match tier {
+            CalibrationTier::Accurate => Some(Box::new(TemporalMotionDeblur::default())),
+            _ => None,
         };
         Self {
             depth: Box::new(GivenDepth),
@@ -182,15 +183,28 @@ pub struct Update {
 /// What one frame did.
 #[derive(Clone, Debug)]
 pub enum Event {
-    Published(Update),
+    Published(Box<Update>),
     /// A provider could not serve this frame (the fit went on without it).
-    Degraded { frame: u64, reason: String },
+    Degraded {
+        frame: u64,
+        reason: String,
+    },
     /// The frame was not used (and why).
-    Skipped { frame: u64, reason: String },
+    Skipped {
+        frame: u64,
+        reason: String,
+    },
     /// A camera change was detected at this frame.
-    ChangeDetected { frame: u64, t_s: f64, cause: String },
+    ChangeDetected {
+        frame: u64,
+        t_s: f64,
+        cause: String,
+    },
     /// Camera tracking jumped: poses before it are no longer used.
-    TrackingLoss { t_s: f64, reason: String },
+    TrackingLoss {
+        t_s: f64,
+        reason: String,
+    },
 }
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -214,12 +228,11 @@ pub enum CalibError {
 /// Video time between blind probes at the slower tiers (change detection).
 const PROBE_INTERVAL_S: f64 = 0.1;
 
-/// A blind probe's headline numbers.
+/// A noise probe's value.
 #[derive(Clone, Copy, Debug)]
 struct Probe {
     t_s: f64,
     noise: Option<f32>,
-    lambda: Option<f32>,
 }
 
 /// One fit's result, kept for aggregation.
@@ -271,19 +284,8 @@ fn luma_histogram(frame: &Frame) -> [f32; 16] {
     h
 }
 
-/// Level-0 noise std of the green channel at mid-range luma: the noise headline.
 fn noise_headline(m: &CameraModel) -> Option<f32> {
-    let n = &m.noise;
-    if !n.present || n.levels.is_empty() {
-        return None;
-    }
-    let y = 0.5f32.clamp(n.luminance_range[0], n.luminance_range[1]);
-    let l = &n.levels[0];
-    let v = l.intercept[1] + l.slope[1] * y;
-    Some(match n.form {
-        NoiseForm::AffineVariance => v.max(0.0).sqrt(),
-        NoiseForm::LinearStd => v.max(0.0),
-    })
+    crate::model::compare::noise_headline(&m.noise)
 }
 
 /// Variance (px²) of the Gaussian both sides of the temporal motion-blur fit pass
@@ -322,6 +324,7 @@ pub struct Calibrator {
     histogram: Option<[f32; 16]>,
     probes: VecDeque<Probe>,
     last_probe_s: f64,
+    exposure_suspects: usize,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -361,6 +364,7 @@ impl Calibrator {
             histogram: None,
             probes: VecDeque::new(),
             last_probe_s: f64::NEG_INFINITY,
+            exposure_suspects: 0,
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -402,7 +406,9 @@ impl Calibrator {
                 if speed > MAX_SPEED_M_S || angular > MAX_ANGULAR_SPEED_RAD_S {
                     events.push(Event::TrackingLoss {
                         t_s,
-                        reason: format!("the camera jumped ({speed:.1} m/s, {angular:.1} rad/s): earlier poses dropped"),
+                        reason: format!(
+                            "the camera jumped ({speed:.1} m/s, {angular:.1} rad/s): earlier poses dropped"
+                        ),
                     });
                     self.poses.clear();
                     // Frames held from before the jump are in another frame of reference.
@@ -440,7 +446,7 @@ impl Calibrator {
             return Err(CalibError::NonFinite { frame: frame.index, x, y });
         }
         if let Some(prev) = self.last_t_s {
-            if !(frame.t_s > prev) {
+            if frame.t_s.partial_cmp(&prev) != Some(std::cmp::Ordering::Greater) {
                 return Err(CalibError::Time { frame: frame.index, t_s: frame.t_s, previous_s: prev });
             }
         }
@@ -455,7 +461,6 @@ impl Calibrator {
         v.dedup_by(|a, b| a.frame.index == b.frame.index);
         v
     }
-
 
     /// Analyse `frame`, fit when due, publish when the aggregate changes.
     pub fn push_frame(&mut self, frame: Frame) -> Result<Vec<Event>, CalibError> {
@@ -524,12 +529,10 @@ impl Calibrator {
 
         // 3. Blind probe (change detection): the fast tier's own fit serves as the
         //    probe; the slower tiers run the blind estimators every `PROBE_INTERVAL_S`.
-        let probe_due = self.cfg.tier != CalibrationTier::Fast && t_s - self.last_probe_s >= PROBE_INTERVAL_S - 1e-9;
-        if probe_due {
+        if t_s - self.last_probe_s >= PROBE_INTERVAL_S - 1e-9 {
             self.last_probe_s = t_s;
-            if let Some(m) = self.blind_probe(&analysed, &held) {
-                self.push_probe(t_s, &m);
-            }
+            let v = self.noise_probe(&analysed);
+            self.push_probe(t_s, v);
             if let Some((since, cause)) = self.detect_change() {
                 self.on_change(index, t_s, since, cause, &mut events);
             }
@@ -546,11 +549,9 @@ impl Calibrator {
             self.last_fit_s = t_s;
             match self.fit_frame(&analysed, &held, &mut events) {
                 Some(model) => {
-                    if self.cfg.tier == CalibrationTier::Fast {
-                        self.push_probe(t_s, &model);
-                        if let Some((since, cause)) = self.detect_change() {
-                            self.on_change(index, t_s, since, cause, &mut events);
-                        }
+                    if let Some(cause) = self.check_exposure(&model) {
+                        let since = self.estimates.back().map_or(t_s, |e| e.t_s);
+                        self.on_change(index, t_s, since, cause, &mut events);
                     }
                     self.estimates.push_back(Estimate { frame: index, t_s, model });
                     let reason = if in_burst && self.after_change {
@@ -561,7 +562,7 @@ impl Calibrator {
                         UpdateReason::Schedule
                     };
                     if let Some(update) = self.aggregate(index, t_s, reason, started) {
-                        events.push(Event::Published(update));
+                        events.push(Event::Published(Box::new(update)));
                     }
                 }
                 None => events.push(Event::Skipped { frame: index, reason: "no effect could be fitted".into() }),
@@ -602,16 +603,15 @@ impl Calibrator {
         self.sharp.retain(|a| a.frame.t_s >= since_s);
     }
 
-    /// Change detection on blind probes: the fast estimators' noise level and λ,
-    /// compared with their own recent history (a blind estimator's bias depends on
-    /// the view but changes slowly, so a step in its output is a step in the
-    /// camera). Four probes in a row beyond the threshold, on the same side of
-    /// the median of the probes before them (at least five, within 2 s): a change,
-    /// dated at the first of the four. Thresholds from the blind estimators'
-    /// view-to-view scatter on the Motorcycle sequence (noise ±25%, λ ±0.08):
-    /// noise ×1.42 (|ln| > 0.35), λ ± 0.1.
+    /// Change detection on the noise probes (every `PROBE_INTERVAL_S`), each
+    /// compared with the probes before it: three in a row beyond ×1.22 (|ln| > 0.2)
+    /// on the same side of the median of the earlier ones (at least five, within
+    /// 2 s) is a change, dated at the first of the three. The threshold is 2.5× the
+    /// temporal probe's scatter on the Motorcycle sequence (±8% with head motion);
+    /// the blind probe (no poses) scatters ±25% from view to view, so it only sees
+    /// steps beyond that (|ln| > 0.35).
     fn detect_change(&mut self) -> Option<(f64, String)> {
-        const RECENT: usize = 4;
+        const RECENT: usize = 3;
         let n = self.probes.len();
         if n < RECENT + 5 {
             return None;
@@ -626,56 +626,75 @@ impl Calibrator {
             Some(v[v.len() / 2])
         };
         let since = recent[0].t_s;
-        // Noise: log ratio beyond ±0.35.
+        let limit = if self.cfg.intrinsics.is_some() { 0.2 } else { 0.35 };
         let base = median(older.iter().filter_map(|p| p.noise).collect());
         if let Some(b) = base.filter(|b| *b > 0.0) {
             let r: Vec<f32> = recent.iter().filter_map(|p| p.noise.map(|x| (x / b).ln())).collect();
-            if r.len() == RECENT && (r.iter().all(|x| *x > 0.35) || r.iter().all(|x| *x < -0.35)) {
+            if r.len() == RECENT && (r.iter().all(|x| *x > limit) || r.iter().all(|x| *x < -limit)) {
                 return Some((since, format!("blind noise level moved ×{:.2}", r[RECENT - 1].exp())));
-            }
-        }
-        let base = median(older.iter().filter_map(|p| p.lambda).collect());
-        if let Some(b) = base {
-            let r: Vec<f32> = recent.iter().filter_map(|p| p.lambda.map(|x| x - b)).collect();
-            if r.len() == RECENT && (r.iter().all(|x| *x > 0.1) || r.iter().all(|x| *x < -0.1)) {
-                return Some((since, format!("blind exposure moved by {:+.2}", r[RECENT - 1])));
             }
         }
         None
     }
 
-    fn push_probe(&mut self, t_s: f64, m: &CameraModel) {
-        let mb = &m.motion_blur;
-        let lambda = mb
-            .exposure
-            .filter(|_| mb.diagnostics.status == Status::Present && mb.diagnostics.stderr.is_some_and(|s| s <= 0.05));
-        self.probes.push_back(Probe { t_s, noise: noise_headline(m), lambda });
+    fn push_probe(&mut self, t_s: f64, noise: Option<f32>) {
+        self.probes.push_back(Probe { t_s, noise });
         while self.probes.front().is_some_and(|p| p.t_s < t_s - 2.0) {
             self.probes.pop_front();
         }
     }
 
-    /// The blind noise and motion-blur estimators on this frame (the probe).
-    fn blind_probe(&mut self, current: &Analysed, held: &[Arc<Analysed>]) -> Option<CameraModel> {
-        let ctx = FrameContext {
-            current,
-            window: held,
-            poses: self.track.as_ref(),
-            intrinsics: self.cfg.intrinsics.as_ref(),
-            frame_interval_s: self.cfg.frame_interval_s,
-        };
-        let flow = self.providers.flow.flow(&ctx).ok();
-        let inp = FitInputs { flow: flow.as_ref(), ..FitInputs::new(&current.frame.image) };
+    /// The noise probe of this frame: the temporal one (`analysis::temporal::
+    /// noise_probe`, against the previous frame) with poses and depth (None when
+    /// this frame cannot be aligned: the two kinds are not mixed), else the blind
+    /// noise estimator.
+    fn noise_probe(&mut self, current: &Analysed) -> Option<f32> {
+        if let Some(k) = self.cfg.intrinsics.as_ref() {
+            let prev = self.window.back()?;
+            if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
+                return None;
+            }
+            return crate::analysis::temporal::noise_probe(prev, current, k);
+        }
         let opts = FitOptions {
             tier: Some(fit::Tier::Fast),
-            effects: Effects { noise: true, motion_blur: flow.is_some(), depth_of_field: false },
+            effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
             ..Default::default()
         };
-        fit::fit(&inp, &opts).ok().map(|o| o.model)
+        fit::fit(&FitInputs::new(&current.frame.image), &opts).ok().and_then(|o| noise_headline(&o.model))
+    }
+
+    /// Two consecutive confident estimates of λ by the same method, both off the
+    /// published λ by more than 4 standard errors and 0.1: an exposure change.
+    fn check_exposure(&mut self, m: &CameraModel) -> Option<String> {
+        let agg = self.published.as_ref()?;
+        let (a, mb) = (agg.motion_blur.exposure?, &m.motion_blur);
+        let (b, se) = (mb.exposure?, mb.diagnostics.stderr?);
+        if mb.diagnostics.status != Status::Present
+            || se > 0.05
+            || agg.motion_blur.diagnostics.method != mb.diagnostics.method
+        {
+            return None;
+        }
+        if (a - b).abs() as f64 > (4.0 * se).max(0.1) {
+            self.exposure_suspects += 1;
+            if self.exposure_suspects >= 2 {
+                self.exposure_suspects = 0;
+                return Some(format!("two estimates in a row read λ ≈ {b:.3}, the model {a:.3}"));
+            }
+        } else {
+            self.exposure_suspects = 0;
+        }
+        None
     }
 
     /// One frame's fit at the configured tier.
-    fn fit_frame(&mut self, current: &Arc<Analysed>, held: &[Arc<Analysed>], events: &mut Vec<Event>) -> Option<CameraModel> {
+    fn fit_frame(
+        &mut self,
+        current: &Arc<Analysed>,
+        held: &[Arc<Analysed>],
+        events: &mut Vec<Event>,
+    ) -> Option<CameraModel> {
         let index = current.frame.index;
         let fx = self.cfg.effects;
         let ctx = FrameContext {
@@ -692,7 +711,10 @@ impl Calibrator {
                     let fallback = self.providers.flow_fallback.as_mut().map(|p| p.flow(&ctx));
                     match fallback {
                         Some(Ok(f)) => {
-                            events.push(Event::Degraded { frame: index, reason: format!("{e}; Lucas–Kanade flow used") });
+                            events
+                                .push(Event::Degraded {
+                                    frame: index, reason: format!("{e}; Lucas–Kanade flow used")
+                                });
                             Some(f)
                         }
                         Some(Err(e2)) => {
@@ -717,7 +739,10 @@ impl Calibrator {
             flow: flow.as_ref(),
             ..FitInputs::new(image)
         };
-        let only = |n, m, d| FitOptions { effects: Effects { noise: n, motion_blur: m, depth_of_field: d }, ..Default::default() };
+        let only = |n, m, d| FitOptions {
+            effects: Effects { noise: n, motion_blur: m, depth_of_field: d },
+            ..Default::default()
+        };
         let fast_opts = |e: Effects| FitOptions { tier: Some(fit::Tier::Fast), effects: e, ..Default::default() };
 
         // References per effect (None: that effect runs blind).
@@ -830,9 +855,12 @@ impl Calibrator {
         let (mp, mi) = count(&|m| (m.motion_blur.present, ident(m.motion_blur.diagnostics.status)));
         let (dp, di) = count(&|m| (m.depth_of_field.present, ident(m.depth_of_field.diagnostics.status)));
         // Value votes: λ only from estimates that pin it down (± 0.05); a frame with
-        // little motion says "λ near 0 or anything" and would drag the median.
+        // little motion says "λ near 0 or anything" and would drag the median. The
+        // blind estimator's root search returns the bracket end (0 or 1, with a zero
+        // spread) when its balance has no sign change: no information either.
         for m in &mut models {
-            if m.motion_blur.diagnostics.stderr.is_none_or(|s| s > 0.05) {
+            let at_bracket_end = m.motion_blur.exposure.is_some_and(|l| !(1e-6..=1.0 - 1e-6).contains(&l));
+            if at_bracket_end || m.motion_blur.diagnostics.stderr.map_or(true, |s| s > 0.05) {
                 m.motion_blur.exposure = None;
             }
         }
@@ -866,6 +894,13 @@ impl Calibrator {
             match (&prev, on[0] && np == 0) {
                 (Some(p), true) => agg.noise = p.noise.clone(),
                 _ => agg.noise.present = on[0] && np > 0,
+            }
+        }
+        if on[1] && agg.motion_blur.exposure.is_none() {
+            // No confident λ in the window (e.g. the head at rest since a change):
+            // keep the last published exposure rather than flicker to none.
+            if let Some(p) = prev.as_ref().filter(|p| p.motion_blur.exposure.is_some()) {
+                agg.motion_blur = p.motion_blur.clone();
             }
         }
         if on[1] != agg.motion_blur.present {

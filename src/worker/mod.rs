@@ -9,6 +9,8 @@ pub mod calibrator;
 mod channel;
 pub mod thread;
 
-pub use calibrator::{CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, Providers, Update, UpdateReason};
+pub use calibrator::{
+    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, Providers, Update, UpdateReason,
+};
 pub use channel::{ModelChannel, Snapshot};
 pub use thread::{Published, Worker, WorkerStats};

@@ -124,7 +124,10 @@ impl Worker {
                                         at_s: started.elapsed().as_secs_f64(),
                                     }),
                                     Err(e) => {
-                                        log::error!("calibration: model of frame {} refused by validation: {e}", u.frame);
+                                        log::error!(
+                                            "calibration: model of frame {} refused by validation: {e}",
+                                            u.frame
+                                        );
                                         stats.errors.push(e.to_string());
                                     }
                                 }
@@ -183,7 +186,9 @@ impl Worker {
         self.shared.wake.notify_all();
         match self.handle.take().map(|h| h.join()) {
             Some(Ok(stats)) => stats,
-            Some(Err(_)) => WorkerStats { errors: vec!["the calibration thread panicked".into()], ..Default::default() },
+            Some(Err(_)) => {
+                WorkerStats { errors: vec!["the calibration thread panicked".into()], ..Default::default() }
+            }
             None => WorkerStats::default(),
         }
     }
@@ -201,13 +206,17 @@ impl Drop for Worker {
 fn log_events(events: &[Event], stats: &mut WorkerStats) {
     for e in events {
         match e {
-            Event::Published(u) => log::debug!("calibration: published the model of frame {} ({:?})", u.frame, u.reason),
+            Event::Published(u) => {
+                log::debug!("calibration: published the model of frame {} ({:?})", u.frame, u.reason)
+            }
             Event::Degraded { frame, reason } => log::debug!("calibration: frame {frame}: {reason}"),
             Event::Skipped { frame, reason } => {
                 log::info!("calibration: frame {frame} skipped: {reason}");
                 stats.errors.push(format!("frame {frame}: {reason}"));
             }
-            Event::ChangeDetected { frame, cause, .. } => log::info!("calibration: camera change at frame {frame}: {cause}"),
+            Event::ChangeDetected { frame, cause, .. } => {
+                log::info!("calibration: camera change at frame {frame}: {cause}")
+            }
             Event::TrackingLoss { t_s, reason } => log::warn!("calibration: tracking loss at {t_s:.3} s: {reason}"),
         }
     }

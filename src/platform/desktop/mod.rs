@@ -1,6 +1,8 @@
-//! Desktop CLI: `fit`, `synth` and `demo`. Parses arguments, loads files, calls the
-//! library, writes results. Errors carry the file and the problem (anyhow context).
+//! Desktop CLI: `fit`, `synth`, `demo`, `render`, `xr`, `calibrate`, `synth-video`. Parses arguments,
+//! loads files, calls the library, writes results. Errors carry the file and the
+//! problem (anyhow context).
 
+mod calibrate_cmd;
 mod demo;
 mod fit_cmd;
 mod render_cmd;
@@ -182,6 +184,76 @@ pub struct XrArgs {
     validation: bool,
 }
 
+#[derive(clap::Args)]
+pub struct CalibrateArgs {
+    /// Folder of frames (PNG/JPEG/PFM/.npy), in name order; frame i is row `frame = i`
+    /// of --poses.
+    #[arg(long)]
+    frames: PathBuf,
+    /// Depth per frame: a folder of files named like the frames (PFM, 16-bit PNG
+    /// scaled by --depth-png-scale, .npy), with their units (--depth-units).
+    #[command(flatten)]
+    geometry: CalibrateDepthArgs,
+    /// poses.csv: `frame,t_s,tx,ty,tz,qx,qy,qz,qw`, world_from_camera, camera in
+    /// OpenCV axes (x right, y down, z forward), metres, t_s = middle of exposure.
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// Pinhole intrinsics in pixels of the frames: fx,fy,cx,cy (with --poses).
+    #[arg(long)]
+    intrinsics: Option<String>,
+    /// Flow per frame (a folder of .flo/.npy named like the frames), px per frame
+    /// interval, instead of flow from poses and depth.
+    #[arg(long)]
+    flow: Option<PathBuf>,
+    /// fast (the frame alone, every frame) | balanced | accurate (video as its own
+    /// reference).
+    #[arg(long, default_value = "accurate")]
+    tier: String,
+    /// Frame rate when --poses does not give times (and the nominal frame interval).
+    #[arg(long, default_value_t = 30.0)]
+    fps: f32,
+    /// Effects to calibrate (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    only: Option<Vec<EffectArg>>,
+    /// The last published camera model (JSON).
+    #[arg(long)]
+    out: PathBuf,
+    /// Every published model, one JSON object per line: {"frame", "t_s", "model"}.
+    #[arg(long)]
+    timeline: Option<PathBuf>,
+    /// timeline.png: each parameter over video time, the frames fitted, the truth.
+    #[arg(long)]
+    plots: Option<PathBuf>,
+    /// Known truth (a timeline file, as `synth-video` writes): errors are reported.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Clone)]
+pub struct CalibrateDepthArgs {
+    #[arg(long)]
+    depth: Option<PathBuf>,
+    #[arg(long, value_enum, default_value = "metric-m")]
+    depth_units: DepthUnitsArg,
+    #[arg(long, default_value_t = 0.001)]
+    depth_png_scale: f32,
+}
+
+#[derive(clap::Args)]
+pub struct SynthVideoArgs {
+    /// Output folder (frames/, depth/, flow/, poses.csv, intrinsics.txt, truth.jsonl).
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, default_value_t = 90)]
+    frames: usize,
+    /// Frame size WxH (the field of view is the same at every size).
+    #[arg(long, default_value = "320x240")]
+    size: String,
+    /// The camera changes (exposure halves, gain ×1.5) at this video time (s).
+    #[arg(long)]
+    change_at_s: Option<f64>,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Fit a camera model to a frame (or a folder of frames).
@@ -197,6 +269,17 @@ enum Command {
     /// Run the OpenXR frame loop on the active runtime (a headset's, or on desktop
     /// the test runtime: XR_RUNTIME_JSON from `cargo xtask xr-runtime`).
     Xr(XrArgs),
+    /// Calibrate from a recorded sequence with the worker's loop (frames, depth,
+    /// poses): the last model, a timeline of every published one, plots.
+    Calibrate(CalibrateArgs),
+    /// Write a recorded sequence with known truth (the bundled photograph along a
+    /// head path; an optional mid-sequence camera change).
+    SynthVideo(SynthVideoArgs),
+}
+
+pub fn parse_size(s: &str) -> Result<(usize, usize)> {
+    let (w, h) = render_cmd::parse_size(s)?;
+    Ok((w as usize, h as usize))
 }
 
 pub fn effects(only: &Option<Vec<EffectArg>>) -> Effects {
@@ -265,6 +348,8 @@ pub fn main() -> std::process::ExitCode {
         Command::Demo(a) => demo::run(a),
         Command::Render(a) => render_cmd::run(a),
         Command::Xr(a) => xr_cmd::run(a),
+        Command::Calibrate(a) => calibrate_cmd::run(a),
+        Command::SynthVideo(a) => calibrate_cmd::synth_video(a),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

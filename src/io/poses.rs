@@ -1,0 +1,127 @@
+//! `poses.csv` of a recorded sequence: header `frame,t_s,tx,ty,tz,qx,qy,qz,qw`, one
+//! row per frame, `world_from_camera` with the camera in OpenCV axes (x right,
+//! y down, z forward), metres and seconds; `t_s` is the middle of the frame's
+//! exposure. Missing fields, non-finite values, non-unit quaternions, repeated or
+//! decreasing times are errors naming the row.
+
+use super::{fmt_err, IoError};
+use crate::analysis::timing::TimedPose;
+use glam::{Quat, Vec3};
+use std::path::Path;
+
+pub const POSES_HEADER: &str = "frame,t_s,tx,ty,tz,qx,qy,qz,qw";
+
+/// One row: the frame number it belongs to and the pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseRow {
+    pub frame: u64,
+    pub t_s: f64,
+    pub pose: TimedPose,
+}
+
+pub fn read_poses_csv(path: &Path) -> Result<Vec<PoseRow>, IoError> {
+    let text = std::fs::read_to_string(path).map_err(|source| IoError::Io { path: path.to_path_buf(), source })?;
+    parse_poses_csv(&text).map_err(|problem| fmt_err(path, problem))
+}
+
+pub fn parse_poses_csv(text: &str) -> Result<Vec<PoseRow>, String> {
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let header = lines.next().map(|(_, l)| l.trim().replace(' ', "")).unwrap_or_default();
+    if header != POSES_HEADER {
+        return Err(format!("header must be `{POSES_HEADER}`, found `{header}`"));
+    }
+    let mut rows: Vec<PoseRow> = vec![];
+    for (n, line) in lines {
+        let row = n + 1; // 1-based line number
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != 9 {
+            return Err(format!("line {row}: {} fields, 9 expected", fields.len()));
+        }
+        let frame: u64 =
+            fields[0].parse().map_err(|_| format!("line {row}: frame `{}` is not a whole number", fields[0]))?;
+        let mut v = [0f64; 8];
+        for (k, f) in fields[1..].iter().enumerate() {
+            let x: f64 = f.parse().map_err(|_| format!("line {row} (frame {frame}): `{f}` is not a number"))?;
+            if !x.is_finite() {
+                return Err(format!("line {row} (frame {frame}): non-finite value `{f}`"));
+            }
+            v[k] = x;
+        }
+        let q = Quat::from_xyzw(v[4] as f32, v[5] as f32, v[6] as f32, v[7] as f32);
+        let len = q.length();
+        if (len - 1.0).abs() > 1e-3 {
+            return Err(format!("line {row} (frame {frame}): quaternion of length {len:.5}, not a unit quaternion"));
+        }
+        let t_s = v[0];
+        if let Some(prev) = rows.last() {
+            if t_s <= prev.t_s {
+                return Err(format!(
+                    "line {row} (frame {frame}): t_s {t_s} is not later than the previous row's {}",
+                    prev.t_s
+                ));
+            }
+            if frame <= prev.frame {
+                return Err(format!("line {row}: frame {frame} does not follow frame {}", prev.frame));
+            }
+        }
+        rows.push(PoseRow {
+            frame,
+            t_s,
+            pose: TimedPose {
+                t_ns: (t_s * 1e9).round() as i64,
+                position_m: Vec3::new(v[1] as f32, v[2] as f32, v[3] as f32),
+                orientation: q.normalize(),
+            },
+        });
+    }
+    if rows.is_empty() {
+        return Err("no pose rows".into());
+    }
+    Ok(rows)
+}
+
+/// The CSV text of `rows` (what `synth-video` writes).
+pub fn format_poses_csv(rows: &[PoseRow]) -> String {
+    let mut s = format!("{POSES_HEADER}\n");
+    for r in rows {
+        let (p, q) = (r.pose.position_m, r.pose.orientation);
+        s += &format!("{},{:.9},{},{},{},{},{},{},{}\n", r.frame, r.t_s, p.x, p.y, p.z, q.x, q.y, q.z, q.w);
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_round_trip_and_bad_rows_are_named() {
+        let rows = vec![
+            PoseRow {
+                frame: 0,
+                t_s: 0.0,
+                pose: TimedPose { t_ns: 0, position_m: Vec3::ZERO, orientation: Quat::IDENTITY },
+            },
+            PoseRow {
+                frame: 1,
+                t_s: 1.0 / 30.0,
+                pose: TimedPose {
+                    t_ns: 33_333_333,
+                    position_m: Vec3::new(0.01, 0.0, 0.0),
+                    orientation: Quat::from_rotation_y(0.01),
+                },
+            },
+        ];
+        let back = parse_poses_csv(&format_poses_csv(&rows)).expect("round trip");
+        assert_eq!(back.len(), 2);
+        assert!((back[1].pose.orientation.dot(rows[1].pose.orientation) - 1.0).abs() < 1e-6);
+        let e = parse_poses_csv("frame,t_s,tx,ty,tz,qx,qy,qz,qw\n0,0,0,0,0,0,0,0,2\n").unwrap_err();
+        assert!(e.contains("line 2") && e.contains("not a unit quaternion"), "{e}");
+        let e = parse_poses_csv("frame,t_s,tx,ty,tz,qx,qy,qz,qw\n0,0,0,0,NaN,0,0,0,1\n").unwrap_err();
+        assert!(e.contains("line 2") && e.contains("non-finite"), "{e}");
+        let e = parse_poses_csv("frame,t_s,tx,ty,tz,qx,qy,qz,qw\n0,0,0,0,0,0,0,1\n").unwrap_err();
+        assert!(e.contains("8 fields"), "{e}");
+        let e = parse_poses_csv("frame,t,tx\n").unwrap_err();
+        assert!(e.contains("header"), "{e}");
+    }
+}

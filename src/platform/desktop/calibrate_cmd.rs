@@ -1,0 +1,389 @@
+//! `blind-augment calibrate`: the worker's calibration loop over a recorded
+//! sequence (frames, optional depth, poses + intrinsics, flow), with a timeline of
+//! every published model and, given the truth, its error over time; and
+//! `blind-augment synth-video`: such a sequence with known truth (the bundled
+//! Motorcycle photograph along a head path, distorted by a camera that changes
+//! mid-sequence).
+
+use super::{CalibrateArgs, SynthVideoArgs};
+use anyhow::{bail, ensure, Context, Result};
+use blind_augment::analysis::{DepthMap, Frame, Intrinsics};
+use blind_augment::io::poses::{format_poses_csv, read_poses_csv, PoseRow};
+use blind_augment::io::{self, BitDepth};
+use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_headline, noise_relative_error};
+use blind_augment::model::CameraModel;
+use blind_augment::plots::{panels_plot, Panel, Series};
+use blind_augment::synth::sequence::{motorcycle, SequenceSpec};
+use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
+use plotters::style::RGBColor;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+const IMAGE_EXTS: [&str; 5] = ["png", "jpg", "jpeg", "pfm", "npy"];
+
+fn list_frames(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading frames folder {}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| IMAGE_EXTS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    frames.sort();
+    ensure!(!frames.is_empty(), "frames folder {} holds no images ({})", dir.display(), IMAGE_EXTS.join(", "));
+    Ok(frames)
+}
+
+/// The file in `dir` with the same stem as `frame`.
+fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
+    let stem = frame.file_stem().context("frame without a file name")?;
+    for e in std::fs::read_dir(dir).with_context(|| format!("reading {what} folder {}", dir.display()))?.flatten() {
+        if e.path().file_stem() == Some(stem) {
+            return Ok(e.path());
+        }
+    }
+    bail!("{what} folder {} has no file for frame {}", dir.display(), frame.display())
+}
+
+pub fn parse_intrinsics(s: &str, w: usize, h: usize) -> Result<Intrinsics> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--intrinsics `{s}`: expected fx,fy,cx,cy (numbers)"))?;
+    ensure!(v.len() == 4, "--intrinsics `{s}`: expected 4 numbers fx,fy,cx,cy, got {}", v.len());
+    ensure!(
+        v.iter().all(|x| x.is_finite()) && v[0] > 0.0 && v[1] > 0.0,
+        "--intrinsics `{s}`: need finite values with fx, fy > 0"
+    );
+    Ok(Intrinsics { fx: v[0], fy: v[1], cx: v[2], cy: v[3], width: w, height: h })
+}
+
+/// One line of `--timeline` / `truth.jsonl`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct TimelineEntry {
+    frame: u64,
+    t_s: f64,
+    model: CameraModel,
+}
+
+fn read_truth(path: &Path) -> Result<Vec<TimelineEntry>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = vec![];
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let e: TimelineEntry = serde_json::from_str(line)
+            .with_context(|| format!("{} line {}: not a timeline entry", path.display(), i + 1))?;
+        e.model.validate().with_context(|| format!("{} line {}: model", path.display(), i + 1))?;
+        out.push(e);
+    }
+    ensure!(!out.is_empty(), "{} holds no entries", path.display());
+    Ok(out)
+}
+
+fn truth_at(truth: &[TimelineEntry], t_s: f64) -> &CameraModel {
+    let i = truth.partition_point(|e| e.t_s <= t_s + 1e-9).saturating_sub(1);
+    &truth[i].model
+}
+
+/// Errors of a published model against the truth at its time.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Errors {
+    pub lambda: Option<f32>,
+    pub noise: Option<f32>,
+    pub dof_px: Option<f32>,
+}
+
+pub fn errors(m: &CameraModel, truth: &CameraModel) -> Errors {
+    let r = truth.depth_of_field.depth_range;
+    let depths: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
+    Errors {
+        lambda: (truth.motion_blur.present || m.motion_blur.present).then(|| exposure_error(m, truth)),
+        noise: noise_relative_error(&m.noise, &truth.noise),
+        dof_px: dof_rmse_px(&m.depth_of_field, &truth.depth_of_field, &depths),
+    }
+}
+
+pub fn run(args: CalibrateArgs) -> Result<()> {
+    let tier = CalibrationTier::parse(&args.tier)
+        .with_context(|| format!("--tier `{}`: expected fast, balanced or accurate", args.tier))?;
+    ensure!(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0, "--fps {}: need 0 < fps ≤ 1000", args.fps);
+    let frames = list_frames(&args.frames)?;
+    let (first, _) = io::load_rgb(&frames[0]).with_context(|| format!("frame {}", frames[0].display()))?;
+    let (w, h) = (first.width, first.height);
+    let poses: Option<Vec<PoseRow>> = match (&args.poses, &args.intrinsics) {
+        (Some(p), Some(_)) => Some(read_poses_csv(p)?),
+        (Some(_), None) => bail!("--poses needs --intrinsics fx,fy,cx,cy (pixels of the frames)"),
+        (None, Some(_)) => bail!("--intrinsics is only used with --poses"),
+        (None, None) => None,
+    };
+    let intrinsics = args.intrinsics.as_deref().map(|s| parse_intrinsics(s, w, h)).transpose()?;
+    if let Some(rows) = &poses {
+        for (i, f) in frames.iter().enumerate() {
+            ensure!(
+                rows.iter().any(|r| r.frame == i as u64),
+                "frame {i} ({}) has no row in {}",
+                f.display(),
+                args.poses.as_ref().map_or(String::new(), |p| p.display().to_string())
+            );
+        }
+    }
+    let truth = args.truth.as_deref().map(read_truth).transpose()?;
+    let mut providers = Providers::for_tier(tier);
+    if args.flow.is_some() {
+        providers = providers.with_given_flow();
+    }
+    let mut cfg = CalibratorConfig::new(tier, 1.0 / args.fps as f64, intrinsics);
+    cfg.effects = super::effects(&args.only);
+    let mut cal = Calibrator::new(cfg, providers)?;
+    let mut timeline = match &args.timeline {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
+        )),
+        None => None,
+    };
+    let bar = indicatif::ProgressBar::new(frames.len() as u64).with_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    // Poses run ahead of camera frames on a headset (the camera pipeline's latency):
+    // each frame arrives with the poses up to two frames later.
+    const POSE_LEAD: usize = 2;
+    let mut pushed_rows = 0usize;
+    let mut published: Vec<(u64, f64, CameraModel, f64)> = vec![];
+    let mut fitted_frames: Vec<f64> = vec![];
+    let (mut skipped, mut changes) = (0usize, vec![]);
+    for (i, path) in frames.iter().enumerate() {
+        bar.set_message(path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default());
+        let (image, _) = io::load_rgb(path).with_context(|| format!("frame {}", path.display()))?;
+        ensure!(
+            (image.width, image.height) == (w, h),
+            "frame {} is {}×{}, earlier frames are {w}×{h}",
+            path.display(),
+            image.width,
+            image.height
+        );
+        let t_s = match &poses {
+            Some(rows) => {
+                let upto = rows.partition_point(|r| r.frame <= (i + POSE_LEAD) as u64);
+                if upto > pushed_rows {
+                    let new: Vec<_> = rows[pushed_rows..upto].iter().map(|r| r.pose).collect();
+                    for e in cal.push_poses(&new)? {
+                        if let Event::TrackingLoss { t_s, reason } = e {
+                            log::warn!("tracking loss at {t_s:.3} s: {reason}");
+                            bar.println(format!("tracking loss at {t_s:.3} s: {reason}"));
+                        }
+                    }
+                    pushed_rows = upto;
+                }
+                rows.iter().find(|r| r.frame == i as u64).map(|r| r.t_s).unwrap_or(i as f64 / args.fps as f64)
+            }
+            None => i as f64 / args.fps as f64,
+        };
+        let g = &args.geometry;
+        let depth = match &g.depth {
+            Some(d) => Some(DepthMap {
+                depth: io::load_depth(&sibling(d, path, "depth")?, g.depth_png_scale)?,
+                units: g.depth_units.into(),
+            }),
+            None => None,
+        };
+        let flow = match &args.flow {
+            Some(d) => Some(io::load_flow(&sibling(d, path, "flow")?)?),
+            None => None,
+        };
+        let frame = Frame { index: i as u64, t_s, image, depth, flow };
+        let events = cal.push_frame(frame).with_context(|| format!("frame {}", path.display()))?;
+        for e in events {
+            match e {
+                Event::Published(u) => {
+                    fitted_frames.push(u.t_s);
+                    if let Some(tl) = &mut timeline {
+                        let line = serde_json::to_string(&TimelineEntry {
+                            frame: u.frame,
+                            t_s: u.t_s,
+                            model: u.model.clone(),
+                        })?;
+                        writeln!(tl, "{line}").context("writing the timeline")?;
+                    }
+                    published.push((u.frame, u.t_s, u.model, u.compute_s));
+                }
+                Event::Skipped { frame, reason } => {
+                    skipped += 1;
+                    log::info!("frame {frame} skipped: {reason}");
+                }
+                Event::ChangeDetected { frame, t_s, cause } => {
+                    bar.println(format!("camera change detected at frame {frame} ({t_s:.2} s): {cause}"));
+                    changes.push(t_s);
+                }
+                Event::TrackingLoss { t_s, reason } => bar.println(format!("tracking loss at {t_s:.3} s: {reason}")),
+                Event::Degraded { frame, reason } => log::debug!("frame {frame}: {reason}"),
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish();
+    if let Some(tl) = &mut timeline {
+        tl.flush().context("writing the timeline")?;
+    }
+    let Some((frame, t_s, model, _)) = published.last().cloned() else {
+        bail!("no camera model was published: every frame was skipped ({skipped}); see the log (RUST_LOG=info)")
+    };
+    std::fs::write(&args.out, model.to_json()?).with_context(|| format!("writing {}", args.out.display()))?;
+    let costs: Vec<f64> = published.iter().map(|p| p.3).collect();
+    let mean_ms = 1e3 * costs.iter().sum::<f64>() / costs.len() as f64;
+    eprintln!(
+        "wrote {} (the model published at frame {frame}, {t_s:.2} s; {} models published, {:.1} ms per update on average, tier {})",
+        args.out.display(),
+        published.len(),
+        mean_ms,
+        tier.name()
+    );
+    super::fit_cmd::summarize(&model);
+    if let Some(truth) = &truth {
+        let e = errors(&model, truth_at(truth, t_s));
+        eprintln!(
+            "  against the truth at {t_s:.2} s: λ error {}, noise median relative error {}, δ RMSE {}",
+            e.lambda.map_or("n/a".into(), |v| format!("{v:.4}")),
+            e.noise.map_or("n/a".into(), |v| format!("{:.1}%", 100.0 * v)),
+            e.dof_px.map_or("n/a".into(), |v| format!("{v:.3} px"))
+        );
+    }
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let p = dir.join("timeline.png");
+        timeline_plot(&p, &published, truth.as_deref(), &changes)?;
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+const EST: RGBColor = RGBColor(38, 110, 210);
+const TRUTH: RGBColor = RGBColor(60, 60, 60);
+const FIT: RGBColor = RGBColor(220, 50, 47);
+
+fn timeline_plot(
+    path: &Path,
+    published: &[(u64, f64, CameraModel, f64)],
+    truth: Option<&[TimelineEntry]>,
+    changes: &[f64],
+) -> Result<()> {
+    let mid_depth = |m: &CameraModel| {
+        let r = m.depth_of_field.depth_range;
+        0.5 * (r[0] + r[1])
+    };
+    type Get = fn(&CameraModel, f32) -> Option<f64>;
+    let params: [(&str, &str, Get); 3] = [
+        ("exposure λ", "λ", |m, _| Some(m.motion_blur.exposure_or_zero() as f64)),
+        ("noise: level-0 std (green, luma 0.5)", "std", |m, _| noise_headline(&m.noise).map(|v| v as f64)),
+        ("depth of field: δ at the truth's mid depth", "δ (px)", |m, z| Some(m.depth_of_field.sigma_px(z) as f64)),
+    ];
+    let z_mid =
+        truth.map(|t| mid_depth(&t[0].model)).or_else(|| published.first().map(|p| mid_depth(&p.2))).unwrap_or(1.0);
+    let panels: Vec<Panel> = params
+        .iter()
+        .map(|(title, y, get)| {
+            let mut series = vec![Series {
+                label: "published".into(),
+                points: published.iter().filter_map(|p| get(&p.2, z_mid).map(|v| (p.1, v))).collect(),
+                colour: EST,
+                dots: false,
+            }];
+            series.push(Series {
+                label: "fitted at".into(),
+                points: published.iter().filter_map(|p| get(&p.2, z_mid).map(|v| (p.1, v))).collect(),
+                colour: FIT,
+                dots: true,
+            });
+            if let Some(t) = truth {
+                let t_end = published.last().map_or(0.0, |p| p.1);
+                let mut pts: Vec<(f64, f64)> = vec![];
+                for (k, e) in t.iter().enumerate() {
+                    if let Some(v) = get(&e.model, z_mid) {
+                        if k > 0 {
+                            if let Some(&(_, prev)) = pts.last() {
+                                pts.push((e.t_s, prev));
+                            }
+                        }
+                        pts.push((e.t_s, v));
+                    }
+                }
+                if let Some(&(_, v)) = pts.last() {
+                    pts.push((t_end, v));
+                }
+                series.push(Series { label: "truth".into(), points: pts, colour: TRUTH, dots: false });
+            }
+            let title = if changes.is_empty() {
+                title.to_string()
+            } else {
+                format!(
+                    "{title} (change detected at {})",
+                    changes.iter().map(|c| format!("{c:.2} s")).collect::<Vec<_>>().join(", ")
+                )
+            };
+            Panel { title, x_desc: "video time (s)".into(), y_desc: y.to_string(), series, log_x: false }
+        })
+        .collect();
+    panels_plot(path, &panels, 1200, 330)?;
+    Ok(())
+}
+
+/// `synth-video`: a recorded sequence with known truth.
+pub fn synth_video(args: SynthVideoArgs) -> Result<()> {
+    let (w, h) = super::parse_size(&args.size)?;
+    ensure!(args.frames >= 2, "--frames {}: at least 2", args.frames);
+    let scene = motorcycle().map_err(anyhow::Error::msg)?;
+    let spec = SequenceSpec::motorcycle(&scene, w, h, args.frames, args.change_at_s);
+    let out = &args.out;
+    for sub in ["frames", "depth", "flow"] {
+        std::fs::create_dir_all(out.join(sub)).with_context(|| format!("creating {}", out.join(sub).display()))?;
+    }
+    let bar = indicatif::ProgressBar::new(args.frames as u64);
+    let mut rows = vec![];
+    let mut truth = String::new();
+    // Poses cover two frames past the last one (the pose lead `calibrate` uses).
+    for i in 0..args.frames + 2 {
+        let t = spec.frame_time_s(i);
+        let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
+        rows.push(PoseRow {
+            frame: i as u64,
+            t_s: t,
+            pose: blind_augment::analysis::timing::TimedPose {
+                t_ns: (t * 1e9).round() as i64,
+                position_m: p,
+                orientation: q,
+            },
+        });
+    }
+    for i in 0..args.frames {
+        let f = spec.frame(&scene, i);
+        let name = format!("{i:04}");
+        io::save_rgb(&out.join("frames").join(format!("{name}.png")), &f.image, BitDepth::Eight)?;
+        io::save_depth(&out.join("depth").join(format!("{name}.pfm")), &f.depth_m)?;
+        io::save_flow(&out.join("flow").join(format!("{name}.flo")), &f.flow)?;
+        if i == 0 || spec.truth_at(spec.frame_time_s(i - 1)) != &f.truth {
+            truth += &serde_json::to_string(&TimelineEntry { frame: i as u64, t_s: f.t_s, model: f.truth.clone() })?;
+            truth.push('\n');
+        }
+        bar.inc(1);
+    }
+    bar.finish();
+    std::fs::write(out.join("poses.csv"), format_poses_csv(&rows)).context("writing poses.csv")?;
+    let k = spec.view;
+    std::fs::write(out.join("intrinsics.txt"), format!("{},{},{},{}\n", k.fx, k.fy, k.cx, k.cy))
+        .context("writing intrinsics.txt")?;
+    std::fs::write(out.join("truth.jsonl"), truth).context("writing truth.jsonl")?;
+    eprintln!(
+        "wrote {} frames of {w}×{h} at {} fps into {} (frames/, depth/ in metres, flow/, poses.csv, intrinsics.txt = {},{},{},{}, truth.jsonl)",
+        args.frames,
+        spec.fps,
+        out.display(),
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy
+    );
+    Ok(())
+}
