@@ -1,0 +1,319 @@
+//! Live calibration end to end on recorded video with known truth (the bundled
+//! Motorcycle photograph with its real depth, re-rendered along a head path and
+//! distorted by a camera that changes mid-sequence): the calibrator converges, it
+//! follows the change within 1 s of video, the worker thread publishes through the
+//! channel without blocking the submitter, and bad input is refused by name.
+
+use blind_augment::analysis::timing::TimedPose;
+use blind_augment::analysis::{DepthMap, Frame};
+use blind_augment::image::Rgb;
+use blind_augment::model::compare::{exposure_error, noise_relative_error};
+use blind_augment::model::{CameraModel, DepthUnits};
+use blind_augment::synth::sequence::{motorcycle, Scene, SequenceSpec};
+use blind_augment::worker::{
+    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Providers, Worker,
+};
+use std::sync::OnceLock;
+
+const CHANGE_S: f64 = 1.5;
+
+fn scene() -> &'static Scene {
+    static S: OnceLock<Scene> = OnceLock::new();
+    S.get_or_init(|| motorcycle().expect("bundled scene"))
+}
+
+/// 90 frames (3 s at 30 Hz) of 320×240, the camera changing at 1.5 s; rendered once.
+fn sequence() -> &'static (SequenceSpec, Vec<blind_augment::synth::sequence::SequenceFrame>) {
+    static S: OnceLock<(SequenceSpec, Vec<blind_augment::synth::sequence::SequenceFrame>)> = OnceLock::new();
+    S.get_or_init(|| {
+        let spec = SequenceSpec::motorcycle(scene(), 320, 240, 90, Some(CHANGE_S));
+        let frames = (0..spec.frames).map(|i| spec.frame(scene(), i)).collect();
+        (spec, frames)
+    })
+}
+
+fn pose(spec: &SequenceSpec, i: usize) -> TimedPose {
+    let t = spec.frame_time_s(i);
+    let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
+    TimedPose { t_ns: (t * 1e9).round() as i64, position_m: p, orientation: q }
+}
+
+fn frame(f: &blind_augment::synth::sequence::SequenceFrame) -> Frame {
+    Frame {
+        index: f.index as u64,
+        t_s: f.t_s,
+        image: f.image.clone(),
+        depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
+        flow: None,
+    }
+}
+
+/// Run a tier over the sequence; every published (t, model, truth) and the changes.
+fn run(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>) {
+    let (spec, frames) = sequence();
+    let cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
+    let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("valid config");
+    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
+    let (mut out, mut changes) = (vec![], vec![]);
+    for f in frames {
+        // Poses lead the camera by two frames, as on a headset.
+        cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
+        for e in cal.push_frame(frame(f)).expect("valid frame") {
+            match e {
+                Event::Published(u) => {
+                    u.model.validate().expect("every published model is valid");
+                    out.push((u.t_s, u.model, f.truth.clone()));
+                }
+                Event::ChangeDetected { t_s, .. } => changes.push(t_s),
+                _ => {}
+            }
+        }
+    }
+    (out, changes)
+}
+
+/// The accurate tier (video as its own reference) before and after the change.
+/// Tolerances, from the accurate-tier targets where this 320×240 sequence
+/// meets them, wider where it cannot and why:
+/// * λ within 0.02 before the change (goal 0.01; measured 0.006–0.011: the first
+///   estimates come from frames early in a turn, with 3–5 px of motion);
+/// * noise within 6% (goal 3%; measured 2–5%: at 320×240 the coarse levels have
+///   few samples, and bicubic alignment lowers the reference's level-0 noise
+///   below the 1/m the fit divides out);
+/// * after the change at 1.5 s: a change is detected within 1 s of video, and the
+///   model published 1 s after the change has λ within 0.03 of the new 0.25.
+#[test]
+fn accurate_tier_converges_and_follows_a_camera_change() {
+    let (published, changes) = run(CalibrationTier::Accurate);
+    assert!(!published.is_empty());
+    let before: Vec<&(f64, CameraModel, CameraModel)> =
+        published.iter().filter(|p| p.0 > 1.0 && p.0 < CHANGE_S).collect();
+    let last_before = before.last().expect("a model published before the change");
+    let lam = exposure_error(&last_before.1, &last_before.2);
+    let noise = noise_relative_error(&last_before.1.noise, &last_before.2.noise).expect("noise present");
+    eprintln!("before the change: λ error {lam:.4}, noise {:.1}%", 100.0 * noise);
+    assert!(lam < 0.02, "λ error {lam}");
+    assert!(noise < 0.06, "noise error {noise}");
+    let detected = changes.iter().find(|t| **t >= CHANGE_S).expect("the change is detected");
+    eprintln!("change at {CHANGE_S} s detected at {detected:.2} s; all detections {changes:?}");
+    assert!(*detected <= CHANGE_S + 1.0, "detected at {detected}");
+    let after = published.iter().filter(|p| p.0 <= CHANGE_S + 1.0).last().expect("published");
+    let lam = exposure_error(&after.1, &after.2);
+    eprintln!("1 s after the change: λ {:?} (truth 0.25), error {lam:.4}", after.1.motion_blur.exposure);
+    assert!(lam < 0.03, "λ error {lam} at {}", after.0);
+}
+
+/// The fast tier (the frame alone) publishes every frame and never anything
+/// invalid; its blind estimators' accuracy is the subject of BENCHMARKS.md (it is
+/// far from the accurate tier's on this sequence), so only convergence of the
+/// noise to within the fast-tier target of 10%… is not asserted here: the test
+/// holds the structural guarantees (a model per frame, valid, presence stable).
+#[test]
+fn fast_tier_publishes_every_frame_and_presence_does_not_flicker() {
+    let (published, _) = run(CalibrationTier::Fast);
+    assert_eq!(published.len(), sequence().1.len(), "one model per frame");
+    // Hysteresis: once on, noise stays on.
+    let flips = published.windows(2).filter(|w| w[0].1.noise.present != w[1].1.noise.present).count();
+    assert!(flips <= 1, "noise presence flipped {flips} times");
+}
+
+/// The worker thread: frames submitted far faster than it fits are dropped (the
+/// slot holds one), models arrive through the channel in generation order, the
+/// thread runs at lowered priority, and stopping it joins.
+#[test]
+fn worker_thread_drops_frames_and_publishes_through_the_channel() {
+    let (spec, frames) = sequence();
+    let channel = ModelChannel::new(CameraModel::empty(320, 240)).expect("valid initial model");
+    let tier = CalibrationTier::Accurate;
+    let cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier))
+        .expect("config");
+    let worker = Worker::spawn(cal, channel.clone()).expect("thread");
+    worker.submit(frame(&frames[0]), &[pose(spec, 0), pose(spec, 1), pose(spec, 2)]);
+    assert!(worker.wait_idle(std::time::Duration::from_secs(60)));
+    // A burst with no waiting: most of these replace each other in the slot.
+    for f in &frames[1..40] {
+        worker.submit(frame(f), &[pose(spec, f.index + 2)]);
+    }
+    assert!(worker.wait_idle(std::time::Duration::from_secs(120)));
+    let stats = worker.stop();
+    eprintln!(
+        "submitted {}, dropped {}, processed {}, published {}, priority error {:?}",
+        stats.submitted,
+        stats.dropped,
+        stats.processed,
+        stats.published.len(),
+        stats.priority_error
+    );
+    assert_eq!(stats.submitted, 40);
+    assert_eq!(stats.processed + stats.dropped, 40, "every frame is processed or dropped, none queued");
+    assert!(stats.dropped > 0, "a burst must overflow a one-frame slot");
+    assert!(!stats.published.is_empty());
+    let gens: Vec<u64> = stats.published.iter().map(|p| p.generation).collect();
+    assert!(gens.windows(2).all(|w| w[1] > w[0]), "generations increase: {gens:?}");
+    assert_eq!(channel.latest().generation, *gens.last().expect("published"));
+    #[cfg(target_os = "linux")]
+    assert!(stats.priority_error.is_none(), "priority not lowered: {:?}", stats.priority_error);
+}
+
+/// Bad input: each is refused with an error naming it (or reported as an event),
+/// never a panic, never an invalid model.
+#[test]
+fn bad_input_is_refused_by_name() {
+    let (spec, frames) = sequence();
+    let tier = CalibrationTier::Accurate;
+    let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier))
+        .expect("config");
+    cal.push_poses(&[pose(spec, 0), pose(spec, 1), pose(spec, 2)]).expect("poses");
+    cal.push_frame(frame(&frames[0])).expect("first frame");
+    // A frame of another size.
+    let mut small = frame(&frames[1]);
+    small.image = Rgb::new(160, 120, [0.5; 3]);
+    let e = cal.push_frame(small).unwrap_err();
+    assert!(matches!(e, CalibError::Intrinsics { .. } | CalibError::FrameSize { .. }), "{e}");
+    // A frame with NaN.
+    let mut nan = frame(&frames[1]);
+    nan.image.channels[1][5] = f32::NAN;
+    assert!(matches!(cal.push_frame(nan).unwrap_err(), CalibError::NonFinite { frame: 1, .. }));
+    // Time going backwards.
+    let mut back = frame(&frames[1]);
+    back.t_s = -1.0;
+    assert!(matches!(cal.push_frame(back).unwrap_err(), CalibError::Time { .. }));
+    // A non-unit quaternion.
+    let mut p = pose(spec, 3);
+    p.orientation = p.orientation * 2.0;
+    let e = cal.push_poses(&[p]).unwrap_err();
+    assert!(e.to_string().contains("not a unit quaternion"), "{e}");
+    // A tracking loss (a 3 m jump in one frame): reported, history dropped, no panic.
+    let mut jump = pose(spec, 3);
+    jump.position_m.x += 3.0;
+    let events = cal.push_poses(&[jump]).expect("a jump is an event, not an error");
+    assert!(events.iter().any(|e| matches!(e, Event::TrackingLoss { .. })), "{events:?}");
+    // A frame without depth, after the loss (no poses around it either): the fit
+    // goes on without the providers that need them, and says so.
+    let mut no_depth = frame(&frames[2]);
+    no_depth.depth = None;
+    let events = cal.push_frame(no_depth).expect("a frame without depth is degraded, not refused");
+    assert!(events.iter().any(|e| matches!(e, Event::Degraded { .. })), "{events:?}");
+    for e in &events {
+        if let Event::Published(u) = e {
+            u.model.validate().expect("valid");
+        }
+    }
+    // A bad configuration.
+    let mut cfg = CalibratorConfig::new(tier, 0.0, Some(spec.view));
+    assert!(matches!(Calibrator::new(cfg.clone(), Providers::for_tier(tier)).unwrap_err(), CalibError::Config(_)));
+    cfg.frame_interval_s = 1.0 / 30.0;
+    cfg.intrinsics.as_mut().expect("set").fx = f32::NAN;
+    assert!(matches!(Calibrator::new(cfg, Providers::for_tier(tier)).unwrap_err(), CalibError::Config(_)));
+}
+
+fn cli(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_blind-augment")).args(args).output().expect("the binary runs")
+}
+
+/// `synth-video` then `calibrate` on its files: the recorded-sequence path end to
+/// end (files, poses.csv, intrinsics, timeline, plots), and its bad inputs.
+#[test]
+fn calibrate_command_on_a_recorded_sequence() {
+    let dir = std::env::temp_dir().join(format!("ba-calibrate-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let seq = dir.join("seq");
+    let out = cli(&["synth-video", "--out", seq.to_str().unwrap(), "--frames", "24", "--size", "160x120"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let intrinsics = std::fs::read_to_string(seq.join("intrinsics.txt")).expect("intrinsics.txt");
+    let s = |p: &str| seq.join(p).to_str().unwrap().to_string();
+    let cam = dir.join("camera.json");
+    let timeline = dir.join("timeline.jsonl");
+    let plots = dir.join("plots");
+    let args = [
+        "calibrate",
+        "--frames",
+        &s("frames"),
+        "--depth",
+        &s("depth"),
+        "--poses",
+        &s("poses.csv"),
+        "--intrinsics",
+        intrinsics.trim(),
+        "--tier",
+        "balanced",
+        "--out",
+        cam.to_str().unwrap(),
+        "--timeline",
+        timeline.to_str().unwrap(),
+        "--plots",
+        plots.to_str().unwrap(),
+        "--truth",
+        &s("truth.jsonl"),
+    ];
+    let out = cli(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("against the truth"), "{err}");
+    let model = CameraModel::from_json(&std::fs::read_to_string(&cam).expect("camera.json")).expect("valid model");
+    assert_eq!((model.reference.width, model.reference.height), (160, 120));
+    let lines = std::fs::read_to_string(&timeline).expect("timeline");
+    assert!(lines.lines().count() >= 5, "{lines}");
+    for l in lines.lines() {
+        let v: serde_json::Value = serde_json::from_str(l).expect("one JSON object per line");
+        assert!(v["frame"].is_u64() && v["t_s"].is_f64() && v["model"].is_object(), "{l}");
+    }
+    assert!(plots.join("timeline.png").exists());
+
+    // Bad inputs, each named.
+    let bad = |args: &[&str], needle: &str| {
+        let out = cli(args);
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert!(!out.status.success() && err.contains(needle), "expected `{needle}` in: {err}");
+    };
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).expect("mkdir");
+    bad(&["calibrate", "--frames", empty.to_str().unwrap(), "--out", cam.to_str().unwrap()], "holds no images");
+    let poses_text = std::fs::read_to_string(seq.join("poses.csv")).expect("poses");
+    let broken = dir.join("broken.csv");
+    let mut lines: Vec<String> = poses_text.lines().map(str::to_string).collect();
+    let mut fields: Vec<&str> = lines[3].split(',').collect();
+    fields[8] = "1.5"; // qw: the quaternion is no longer unit length
+    lines[3] = fields.join(",");
+    std::fs::write(&broken, lines.join("\n")).expect("write");
+    bad(
+        &[
+            "calibrate",
+            "--frames",
+            &s("frames"),
+            "--poses",
+            broken.to_str().unwrap(),
+            "--intrinsics",
+            intrinsics.trim(),
+            "--out",
+            cam.to_str().unwrap(),
+        ],
+        "not a unit quaternion",
+    );
+    let short = dir.join("short.csv");
+    std::fs::write(&short, poses_text.lines().take(5).collect::<Vec<_>>().join("\n")).expect("write");
+    bad(
+        &[
+            "calibrate",
+            "--frames",
+            &s("frames"),
+            "--poses",
+            short.to_str().unwrap(),
+            "--intrinsics",
+            intrinsics.trim(),
+            "--out",
+            cam.to_str().unwrap(),
+        ],
+        "has no row",
+    );
+    bad(
+        &["calibrate", "--frames", &s("frames"), "--poses", &s("poses.csv"), "--out", cam.to_str().unwrap()],
+        "--intrinsics",
+    );
+    let mixed = dir.join("mixed");
+    std::fs::create_dir_all(&mixed).expect("mkdir");
+    std::fs::copy(seq.join("frames/0000.png"), mixed.join("0000.png")).expect("copy");
+    image::RgbImage::new(32, 32).save(mixed.join("0001.png")).expect("png");
+    bad(&["calibrate", "--frames", mixed.to_str().unwrap(), "--out", cam.to_str().unwrap()], "32×32");
+    let _ = std::fs::remove_dir_all(&dir);
+}
