@@ -97,7 +97,7 @@ fn accurate_tier_converges_and_follows_a_camera_change() {
     let detected = changes.iter().find(|t| **t >= CHANGE_S).expect("the change is detected");
     eprintln!("change at {CHANGE_S} s detected at {detected:.2} s; all detections {changes:?}");
     assert!(*detected <= CHANGE_S + 1.0, "detected at {detected}");
-    let after = published.iter().filter(|p| p.0 <= CHANGE_S + 1.0).last().expect("published");
+    let after = published.iter().rfind(|p| p.0 <= CHANGE_S + 1.0).expect("published");
     let lam = exposure_error(&after.1, &after.2);
     eprintln!("1 s after the change: λ {:?} (truth 0.25), error {lam:.4}", after.1.motion_blur.exposure);
     assert!(lam < 0.03, "λ error {lam} at {}", after.0);

@@ -87,6 +87,11 @@ pub struct CalibratorConfig {
     pub update_interval_s: f64,
     /// Estimates aggregated: the last this many seconds of video.
     pub window_s: f64,
+    /// Video time between refits of each effect (noise, motion blur, depth of
+    /// field) after the burst; an update fits only the effects that are due, so
+    /// the cost of rarely changing ones is spread out (a fixed-focus camera's DoF
+    /// only changes with a detected change, which restarts the burst).
+    pub refit_s: [f64; 3],
     /// Newest frames held for temporal references (besides the sharp ones).
     pub frames_held: usize,
     /// Sharp frames (head at rest) held, and how long (s).
@@ -103,6 +108,10 @@ impl CalibratorConfig {
             effects: Effects::ALL,
             burst_s: 1.0,
             update_interval_s: tier.update_interval_s(),
+            refit_s: match tier {
+                CalibrationTier::Fast => [0.1, 0.0, 0.5],
+                _ => [0.0, 0.0, 1.0],
+            },
             window_s: 1.0,
             frames_held: match tier {
                 CalibrationTier::Fast => 1, // the previous frame: flow fallback, noise probe
@@ -324,6 +333,7 @@ pub struct Calibrator {
     histogram: Option<[f32; 16]>,
     probes: VecDeque<Probe>,
     last_probe_s: f64,
+    last_effect_fit_s: [f64; 3],
     exposure_suspects: usize,
     after_change: bool,
     presence: [Presence; 3],
@@ -364,6 +374,7 @@ impl Calibrator {
             histogram: None,
             probes: VecDeque::new(),
             last_probe_s: f64::NEG_INFINITY,
+            last_effect_fit_s: [f64::NEG_INFINITY; 3],
             exposure_suspects: 0,
             after_change: false,
             presence: Default::default(),
@@ -696,7 +707,22 @@ impl Calibrator {
         events: &mut Vec<Event>,
     ) -> Option<CameraModel> {
         let index = current.frame.index;
-        let fx = self.cfg.effects;
+        // Per-effect cadence (`CalibratorConfig::refit_s`): every update during a
+        // burst, else when the effect's interval has passed.
+        let t_s = current.frame.t_s;
+        let in_burst = t_s < self.burst_until_s;
+        let mut due = |k: usize, wanted: bool| {
+            let ok = wanted && (in_burst || t_s - self.last_effect_fit_s[k] >= self.cfg.refit_s[k] - 1e-9);
+            if ok {
+                self.last_effect_fit_s[k] = t_s;
+            }
+            ok
+        };
+        let fx = Effects {
+            noise: due(0, self.cfg.effects.noise),
+            motion_blur: due(1, self.cfg.effects.motion_blur),
+            depth_of_field: due(2, self.cfg.effects.depth_of_field),
+        };
         let ctx = FrameContext {
             current,
             window: held,

@@ -194,7 +194,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     io::save_rgb(&out.join("side_by_side.png"), &sbs, BitDepth::Eight)?;
 
     eprintln!("rendering: bundled glTF object over a {SEQUENCE_FRAMES}-frame background sequence (stereo, Vulkan)");
-    let render_section = match render_demo(out, &clean, &disparity, &truth, &accurate) {
+    let render_section = match render_demo(out, &clean, &disparity, &truth) {
         Ok(s) => s,
         Err(e) => {
             // No Vulkan device: the fitting half of the demo still stands; say why
@@ -319,14 +319,8 @@ fn reproject(img: &Rgb, depth: &Plane, dx_m: f32, median_z: f32) -> (Rgb, Plane)
 }
 
 /// Background sequence, fitted-model render, side-by-sides; returns the report section.
-fn render_demo(
-    out: &std::path::Path,
-    clean: &Rgb,
-    depth: &Plane,
-    truth: &CameraModel,
-    fitted: &CameraModel,
-) -> Result<String> {
-    use super::render_cmd::{render_sequence, side_by_side, write_frames, Motion};
+fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &CameraModel) -> Result<String> {
+    use super::render_cmd::{render_sequence, side_by_side, write_frames, ModelSource, Motion};
     use blind_augment::render::layer::{FrameEffects, LayerSettings};
     use glam::{Mat4, Vec3};
     let interval = truth.reference.frame_interval_s.unwrap_or(1.0 / 30.0);
@@ -356,10 +350,30 @@ fn render_demo(
         world_from_scene: Mat4::from_translation(Vec3::new(-0.42, 0.06, -2.5)),
     };
     let settings = LayerSettings::default();
-    let (rendered, stats) =
-        render_sequence(&scene, &frames, fitted, (w as u32, h as u32), FOCAL_PX, &motion, settings, &|k| {
-            eprintln!("  frame {}/{SEQUENCE_FRAMES}", k + 1)
-        })?;
+    // Live: the calibration worker runs on its own low-priority thread over a
+    // 30 Hz video of the same scene along a head path (the same true camera), and
+    // every rendered frame takes whatever model it has published by then.
+    let live = LiveCalibration::start(truth)?;
+    // Boundary setup: the start-up burst runs before the object appears; then the
+    // frames render spread over the rest of the video, each with the newest model.
+    live.wait_until_video_s(LIVE_RENDER_START_S);
+    let result = render_sequence(
+        &scene,
+        &frames,
+        ModelSource::Live(&live.channel),
+        (w as u32, h as u32),
+        FOCAL_PX,
+        &motion,
+        settings,
+        &|k| {
+            eprintln!("  frame {}/{SEQUENCE_FRAMES} (model generation {})", k + 1, live.channel.latest().generation);
+            live.wait_until_video_s(LIVE_RENDER_START_S + (k + 1) as f64 * LIVE_RENDER_STEP_S);
+        },
+    );
+    // Stop the worker whatever the render did, then report.
+    let live_report = live.finish(out, truth)?;
+    let (rendered, stats) = result?;
+    let fitted = &live_report.last_model;
     let dir = out.join("render");
     write_frames(&dir, &rendered)?;
     for (k, f) in frames.iter().enumerate() {
@@ -386,14 +400,14 @@ fn render_demo(
     let _ = writeln!(r, "\n## Render: bundled glTF object over the background sequence\n");
     let _ = writeln!(
         r,
-        "{SEQUENCE_FRAMES} camera frames ({w}×{h}, 30 Hz) from the photograph by depth-based reprojection along a ±{:.0} cm head sway, each distorted by the *true* camera; the object (assets/toy.glb: spinning textured cube, orbiting sphere) rendered by the stereo Vulkan renderer on {} with the *accurate fit*. `composite_side_by_side.png`: naive | matched (left eye, frame {pick}); `composite_zoom.png`: naive | matched | background alone, 3×; `render/`: every frame, both eyes, naive and matched.\n",
+        "{SEQUENCE_FRAMES} camera frames ({w}×{h}, 30 Hz) from the photograph by depth-based reprojection along a ±{:.0} cm head sway, each distorted by the *true* camera; the object (assets/toy.glb: spinning textured cube, orbiting sphere) rendered by the stereo Vulkan renderer on {} with the models the calibration worker published live (below): the first frame after the start-up burst ({LIVE_RENDER_START_S} s of video), then one every {LIVE_RENDER_STEP_S} s of video, each with the newest snapshot. `composite_side_by_side.png`: naive | matched (left eye, frame {pick}); `composite_zoom.png`: naive | matched | background alone, 3×; `render/`: every frame, both eyes, naive and matched.\n",
         SWAY_M * 100.0,
         stats.device
     );
     let _ = writeln!(r, "| effect | applied to the object |\n|---|---|");
     let _ = writeln!(
         r,
-        "| DoF | δ({:.2} m) = {sigma:.2} px (fitted curve; the renderer's reach {} px) |",
+        "| DoF | δ({:.2} m) = {sigma:.2} px (the last live model's curve; the renderer's reach {} px) |",
         2.5, stats.dof_radius_px
     );
     let _ = writeln!(
@@ -404,8 +418,11 @@ fn render_demo(
         fitted.motion_blur.exposure_or_zero() * interval * 1e3,
         fx.exposure_ratio
     );
-    let _ =
-        writeln!(r, "| grain | {} (fitted noise model at the object's luma) |", if fx.noise { "on" } else { "off" });
+    let _ = writeln!(
+        r,
+        "| grain | {} (the last live model's noise at the object's luma) |",
+        if fx.noise { "on" } else { "off" }
+    );
     let _ = writeln!(
         r,
         "\nWall time per frame (render + GPU wait + readback, both eyes): naive {:.1} ms, matched {:.1} ms on {} — a software rasteriser when that is lavapipe; see BENCHMARKS.md for GPU-timed passes.",
@@ -413,8 +430,194 @@ fn render_demo(
         stats.matched_ms / stats.frames as f64,
         stats.device
     );
+    let gens: Vec<String> = stats.generations.iter().map(|g| g.to_string()).collect();
+    let _ = writeln!(
+        r,
+        "\nModel generation per rendered frame (0 = nothing calibrated yet: the object is drawn unmatched): {}.\n",
+        gens.join(", ")
+    );
+    r += &live_report.markdown;
     eprintln!("wrote {} and composite_side_by_side.png / composite_zoom.png", dir.display());
     Ok(r)
+}
+
+/// Frames of live video the demo's worker sees (3 s at 30 Hz).
+const LIVE_FRAMES: usize = 90;
+/// Video time at which the render starts (after the start-up burst) and between
+/// rendered frames.
+const LIVE_RENDER_START_S: f64 = 1.0;
+const LIVE_RENDER_STEP_S: f64 = 0.25;
+
+/// The snapshots the camera thread saw published, with the video time it saw each.
+type Seen = Vec<(f64, std::sync::Arc<blind_augment::worker::Snapshot>)>;
+
+/// The calibration worker running live during the demo's render.
+struct LiveCalibration {
+    channel: blind_augment::worker::ModelChannel,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    started: std::time::Instant,
+    producer: std::thread::JoinHandle<(blind_augment::worker::WorkerStats, Seen)>,
+}
+
+struct LiveReport {
+    markdown: String,
+    last_model: CameraModel,
+}
+
+impl LiveCalibration {
+    /// Start the worker (accurate tier: video as its own reference) and a producer
+    /// thread delivering a 30 Hz head-path video of the scene distorted by `truth`,
+    /// paced in real time (frames the worker is too busy for are dropped).
+    fn start(truth: &CameraModel) -> Result<Self> {
+        use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, ModelChannel, Providers, Worker};
+        let scene = synth::sequence::motorcycle().map_err(anyhow::Error::msg)?;
+        let mut spec = synth::sequence::SequenceSpec::motorcycle(&scene, 320, 240, LIVE_FRAMES, None);
+        let mut t = truth.clone();
+        t.reference = spec.truth.reference.clone();
+        spec.truth = t;
+        let mut initial = CameraModel::empty(320, 240);
+        initial.reference = spec.truth.reference.clone();
+        let channel = ModelChannel::new(initial)?;
+        let tier = CalibrationTier::Accurate;
+        let cal = Calibrator::new(
+            CalibratorConfig::new(tier, 1.0 / spec.fps as f64, Some(spec.view)),
+            Providers::for_tier(tier),
+        )?;
+        let worker = Worker::spawn(cal, channel.clone()).context("starting the calibration thread")?;
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (stop2, channel2) = (stop.clone(), channel.clone());
+        let started = std::time::Instant::now();
+        let producer = std::thread::Builder::new()
+            .name("camera".into())
+            .spawn(move || {
+                let pose = |i: usize| {
+                    let t = spec.frame_time_s(i);
+                    let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
+                    blind_augment::analysis::timing::TimedPose {
+                        t_ns: (t * 1e9).round() as i64,
+                        position_m: p,
+                        orientation: q,
+                    }
+                };
+                let mut seen: Seen = vec![];
+                let mut poses = vec![pose(0), pose(1)];
+                for i in 0..spec.frames {
+                    if stop2.load(std::sync::atomic::Ordering::Relaxed) {
+                        break;
+                    }
+                    let f = spec.frame(&scene, i);
+                    // The camera delivers frame i at its time on the video clock.
+                    let due = std::time::Duration::from_secs_f64(f.t_s);
+                    if let Some(wait) = due.checked_sub(started.elapsed()) {
+                        std::thread::sleep(wait);
+                    }
+                    poses.push(pose(i + 2));
+                    let frame = blind_augment::analysis::Frame {
+                        index: i as u64,
+                        t_s: f.t_s,
+                        image: f.image,
+                        depth: Some(blind_augment::analysis::DepthMap { depth: f.depth_m, units: DepthUnits::MetricM }),
+                        flow: None,
+                    };
+                    worker.submit(frame, &poses);
+                    poses.clear();
+                    let latest = channel2.latest();
+                    if seen.last().map_or(true, |s| s.1.generation != latest.generation) {
+                        seen.push((f.t_s, latest));
+                    }
+                }
+                worker.wait_idle(std::time::Duration::from_secs(30));
+                let latest = channel2.latest();
+                if seen.last().map_or(true, |s| s.1.generation != latest.generation) {
+                    seen.push((spec.frame_time_s(spec.frames), latest));
+                }
+                (worker.stop(), seen)
+            })
+            .context("starting the camera thread")?;
+        Ok(Self { channel, stop, started, producer })
+    }
+
+    /// Block until the live video's clock reaches `t_s` (the camera thread delivers
+    /// frame i at i/30 s after the start).
+    fn wait_until_video_s(&self, t_s: f64) {
+        if let Some(wait) = std::time::Duration::from_secs_f64(t_s).checked_sub(self.started.elapsed()) {
+            std::thread::sleep(wait);
+        }
+    }
+
+    /// Stop, join, and report the timeline against the truth (table + PNG).
+    fn finish(self, out: &std::path::Path, truth: &CameraModel) -> Result<LiveReport> {
+        use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_relative_error};
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        let (stats, seen) = self.producer.join().map_err(|_| anyhow::anyhow!("the camera thread panicked"))?;
+        let r = truth.depth_of_field.depth_range;
+        let depths: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
+        let mut md = String::new();
+        let _ = writeln!(md, "\n## Live calibration during the render\n");
+        let _ = writeln!(
+            md,
+            "The calibration worker (accurate tier: other frames aligned by pose and depth as references; low-priority thread, latest-frame slot) watched a {LIVE_FRAMES}-frame 30 Hz head-path video of the same scene distorted by the same true camera, delivered in real time while the frames above rendered: {} frames submitted, {} dropped because it was busy, {} processed, {} models published{}.\n",
+            stats.submitted,
+            stats.dropped,
+            stats.processed,
+            stats.published.len(),
+            stats.priority_error.as_ref().map_or(String::new(), |e| format!(" (priority not lowered: {e})"))
+        );
+        let _ = writeln!(
+            md,
+            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) |\n|---|---|---|---|---|",
+            truth.motion_blur.exposure_or_zero()
+        );
+        let mut points: Vec<(f64, f64)> = vec![];
+        for (t, snap) in &seen {
+            let m = &snap.model;
+            let _ = writeln!(
+                md,
+                "| {} | {t:.2} s | {} | {} | {} |",
+                snap.generation,
+                m.motion_blur.exposure.map_or("—".into(), |l| format!("{l:.3}")),
+                noise_relative_error(&m.noise, &truth.noise).map_or("—".into(), |e| format!("{:.1}%", 100.0 * e)),
+                dof_rmse_px(&m.depth_of_field, &truth.depth_of_field, &depths)
+                    .map_or("—".into(), |e| format!("{e:.3}"))
+            );
+            points.push((*t, exposure_error(m, truth) as f64));
+        }
+        let plot = out.join("live_timeline.png");
+        let noise_pts: Vec<(f64, f64)> = seen
+            .iter()
+            .filter_map(|(t, s)| noise_relative_error(&s.model.noise, &truth.noise).map(|e| (*t, e as f64)))
+            .collect();
+        let panels = [
+            blind_augment::plots::Panel {
+                title: "live calibration: |λ − λ_true| of the model the renderer could use".into(),
+                x_desc: "video time (s)".into(),
+                y_desc: "λ error".into(),
+                series: vec![blind_augment::plots::Series {
+                    label: "published".into(),
+                    points,
+                    colour: plotters::style::RGBColor(38, 110, 210),
+                    dots: true,
+                }],
+                log_x: false,
+            },
+            blind_augment::plots::Panel {
+                title: "live calibration: noise median relative error".into(),
+                x_desc: "video time (s)".into(),
+                y_desc: "relative error".into(),
+                series: vec![blind_augment::plots::Series {
+                    label: "published".into(),
+                    points: noise_pts,
+                    colour: plotters::style::RGBColor(220, 50, 47),
+                    dots: true,
+                }],
+                log_x: false,
+            },
+        ];
+        blind_augment::plots::panels_plot(&plot, &panels, 1000, 300)?;
+        let _ = writeln!(md, "\n`live_timeline.png`: the errors over video time.");
+        let last_model = seen.last().map(|s| s.1.model.clone()).unwrap_or_else(|| self.channel.latest().model.clone());
+        Ok(LiveReport { markdown: md, last_model })
+    }
 }
 
 fn crop_rgb(img: &Rgb, x0: usize, y0: usize, w: usize, h: usize) -> Rgb {

@@ -36,6 +36,16 @@ pub struct RenderStats {
     pub device: String,
     /// Largest DoF reach (eye px) the matched frames used (from the content's depth).
     pub dof_radius_px: i32,
+    /// The model generation each frame was rendered with (live: as published).
+    pub generations: Vec<u64>,
+}
+
+/// Where each frame's camera model comes from.
+pub enum ModelSource<'a> {
+    /// One model for every frame.
+    Fixed(&'a CameraModel),
+    /// The newest snapshot the calibration worker has published, read once per frame.
+    Live(&'a blind_augment::worker::ModelChannel),
 }
 
 pub struct RenderedFrame {
@@ -97,7 +107,7 @@ fn eyes(world_from_head: Mat4, focal_px: f32, w: u32, h: u32) -> [Eye; 2] {
 pub fn render_sequence(
     scene: &Scene,
     backgrounds: &[Rgb],
-    model: &CameraModel,
+    source: ModelSource,
     eye: (u32, u32),
     camera_focal_px: f32,
     motion: &Motion,
@@ -108,17 +118,40 @@ pub fn render_sequence(
     let (w, h) = eye;
     anyhow::ensure!(w >= 8 && h >= 8 && w <= 8192 && h <= 8192, "eye size {w}×{h} must be 8…8192 px per side");
     let eye_focal_px = camera_focal_px * w as f32 / first.width as f32;
-    let interval_s = model.reference.frame_interval_s.unwrap_or(1.0 / 30.0);
-    let ctx = GpuContext::new(&GpuOptions::default()).context("no Vulkan device (install mesa-vulkan-drivers)")?;
-    let mut model = model.clone();
     // The camera's pixels per radian at the centre is its focal length in pixels.
-    model.reference.pixels_per_radian.get_or_insert(camera_focal_px);
-    let snapshot = Snapshot::new(1, model);
+    let with_focal = |m: &CameraModel| {
+        let mut m = m.clone();
+        m.reference.pixels_per_radian.get_or_insert(camera_focal_px);
+        m
+    };
+    let mut fixed: Option<std::sync::Arc<Snapshot>> = None;
+    let interval_s = match &source {
+        ModelSource::Fixed(m) => m.reference.frame_interval_s,
+        ModelSource::Live(c) => c.latest().model.reference.frame_interval_s,
+    }
+    .unwrap_or(1.0 / 30.0);
+    let ctx = GpuContext::new(&GpuOptions::default()).context("no Vulkan device (install mesa-vulkan-drivers)")?;
     let mut renderer =
         StereoRenderer::new(&ctx, scene, w, h, settings, Some(eye_focal_px)).context("building the stereo renderer")?;
     let mut stats = RenderStats { device: ctx.device_name().to_string(), ..Default::default() };
     let mut out = Vec::new();
     for (k, bg) in backgrounds.iter().enumerate() {
+        // One snapshot for the whole frame (both renders): a live model published
+        // mid-frame is picked up by the next frame.
+        let snapshot = match &source {
+            ModelSource::Fixed(m) => {
+                fixed.get_or_insert_with(|| std::sync::Arc::new(Snapshot::new(1, with_focal(m)))).clone()
+            }
+            ModelSource::Live(c) => {
+                let latest = c.latest();
+                if latest.model.reference.pixels_per_radian.is_some() {
+                    latest
+                } else {
+                    std::sync::Arc::new(Snapshot::new(latest.generation, with_focal(&latest.model)))
+                }
+            }
+        };
+        stats.generations.push(snapshot.generation);
         let t = k as f32 * interval_s;
         let t_prev = t - settings.render_interval_s;
         let bg_eye = to_rgba8(&resample(bg, w as usize, h as usize));
@@ -253,8 +286,16 @@ pub fn run(args: RenderArgs) -> Result<()> {
         world_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -args.object_depth_m)),
     };
     let bar = indicatif::ProgressBar::new(frames.len() as u64);
-    let (rendered, stats) =
-        render_sequence(&scene, &frames, &model, eye, focal, &motion, LayerSettings::default(), &|_| bar.inc(1))?;
+    let (rendered, stats) = render_sequence(
+        &scene,
+        &frames,
+        ModelSource::Fixed(&model),
+        eye,
+        focal,
+        &motion,
+        LayerSettings::default(),
+        &|_| bar.inc(1),
+    )?;
     bar.finish_and_clear();
     write_frames(&args.out, &rendered)?;
     eprintln!(

@@ -1,0 +1,239 @@
+//! The measured speed/accuracy trade of live calibration (the paper's FULLPIPELINE
+//! experiment, Sec. 4.5): recorded video with known truth — the Motorcycle
+//! photograph with its real depth, re-rendered along a head path of fixations and
+//! turns, distorted by a camera whose exposure and gain change mid-sequence — run
+//! through the worker's calibration loop per tier. Accuracy and convergence on
+//! 320×240 frames (5 s, the change at 2.5 s); compute per update single-threaded
+//! on 1280×960 frames (the Quest camera's), the same head path. Prints a markdown
+//! table and writes the Pareto plot to target/bench/calibration_pareto.png.
+//!
+//! `cargo bench --bench calibration` (part of `cargo xtask bench`).
+
+use blind_augment::analysis::timing::TimedPose;
+use blind_augment::analysis::{DepthMap, Frame};
+use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_relative_error};
+use blind_augment::model::{CameraModel, DepthUnits};
+use blind_augment::plots::{panels_plot, Panel, Series};
+use blind_augment::synth::sequence::{motorcycle, Scene, SequenceFrame, SequenceSpec};
+use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
+use plotters::style::RGBColor;
+use std::time::Instant;
+
+const TIERS: [CalibrationTier; 3] = [CalibrationTier::Fast, CalibrationTier::Balanced, CalibrationTier::Accurate];
+const CHANGE_S: f64 = 2.5;
+/// "Converged": λ within 0.05 and noise within 10% (the fast tier's targets).
+const CONVERGED_LAMBDA: f32 = 0.05;
+const CONVERGED_NOISE: f32 = 0.10;
+
+/// A tier's point on the Pareto plot: compute per update (ms), λ error, noise
+/// error, time to converge after the change.
+type Point = (CalibrationTier, f64, f64, f64, Option<f64>);
+
+struct Published {
+    t_s: f64,
+    model: CameraModel,
+    truth: CameraModel,
+    compute_s: f64,
+}
+
+struct Run {
+    published: Vec<Published>,
+    changes: Vec<f64>,
+    frame_s: Vec<f64>,
+}
+
+fn pose(spec: &SequenceSpec, i: usize) -> TimedPose {
+    let t = spec.frame_time_s(i);
+    let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
+    TimedPose { t_ns: (t * 1e9).round() as i64, position_m: p, orientation: q }
+}
+
+fn run(tier: CalibrationTier, spec: &SequenceSpec, frames: &[SequenceFrame]) -> Run {
+    let cfg = CalibratorConfig::new(tier, 1.0 / spec.fps as f64, Some(spec.view));
+    let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("config");
+    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
+    let mut r = Run { published: vec![], changes: vec![], frame_s: vec![] };
+    for f in frames {
+        cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
+        let frame = Frame {
+            index: f.index as u64,
+            t_s: f.t_s,
+            image: f.image.clone(),
+            depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
+            flow: None,
+        };
+        let t0 = Instant::now();
+        let events = cal.push_frame(frame).expect("frame");
+        r.frame_s.push(t0.elapsed().as_secs_f64());
+        for e in events {
+            match e {
+                Event::Published(u) => r.published.push(Published {
+                    t_s: u.t_s,
+                    model: u.model,
+                    truth: f.truth.clone(),
+                    compute_s: u.compute_s,
+                }),
+                Event::ChangeDetected { t_s, .. } => r.changes.push(t_s),
+                _ => {}
+            }
+        }
+    }
+    r
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    Some(v[v.len() / 2])
+}
+
+fn percentile(mut v: Vec<f64>, p: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn errs(p: &Published) -> (f32, Option<f32>, Option<f32>) {
+    let r = p.truth.depth_of_field.depth_range;
+    let depths: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
+    (
+        exposure_error(&p.model, &p.truth),
+        noise_relative_error(&p.model.noise, &p.truth.noise),
+        dof_rmse_px(&p.model.depth_of_field, &p.truth.depth_of_field, &depths),
+    )
+}
+
+fn converged(p: &Published) -> bool {
+    let (l, n, _) = errs(p);
+    l <= CONVERGED_LAMBDA && n.is_some_and(|n| n <= CONVERGED_NOISE)
+}
+
+/// Video time from `from_s` until every later publication before `until_s` is
+/// converged (None: never).
+fn time_to_converge(r: &Run, from_s: f64, until_s: f64) -> Option<f64> {
+    let seg: Vec<&Published> = r.published.iter().filter(|p| p.t_s >= from_s && p.t_s < until_s).collect();
+    let last_bad = seg.iter().rposition(|p| !converged(p));
+    match last_bad {
+        None => seg.first().map(|p| p.t_s - from_s),
+        Some(i) if i + 1 < seg.len() => Some(seg[i + 1].t_s - from_s),
+        Some(_) => None,
+    }
+}
+
+fn fmt_opt(v: Option<f64>, scale: f64, digits: usize, unit: &str) -> String {
+    v.map_or("—".into(), |x| format!("{:.*}{unit}", digits, x * scale))
+}
+
+fn frames(scene: &Scene, spec: &SequenceSpec, n: usize) -> Vec<SequenceFrame> {
+    (0..n).map(|i| spec.frame(scene, i)).collect()
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        // `cargo test --benches` lists benchmarks; nothing to list here.
+        return;
+    }
+    let scene = motorcycle().expect("bundled scene");
+    let small = SequenceSpec::motorcycle(&scene, 320, 240, 150, Some(CHANGE_S));
+    eprintln!("rendering 150 frames of 320×240 …");
+    let small_frames = frames(&scene, &small, small.frames);
+    // The Quest camera's 1280×960, 1.5 s (a fixation, a turn, the next fixation).
+    let big = SequenceSpec::motorcycle(&scene, 1280, 960, 45, None);
+    eprintln!("rendering 45 frames of 1280×960 …");
+    let big_frames = frames(&scene, &big, big.frames);
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+
+    println!("## Live calibration: the speed/accuracy trade per tier (`cargo bench --bench calibration`)\n");
+    println!("Accuracy: 320×240, 150 frames at 30 Hz, the camera changing at {CHANGE_S} s (λ 0.5 → 0.25, noise std ×1.5). Compute: 1280×960, 45 frames, one thread. \"Converged\": λ within {CONVERGED_LAMBDA} and noise within {:.0}% at every publication from then on.\n", 100.0 * CONVERGED_NOISE);
+    println!("| tier | update / frame at 1280×960, 1 thread (median, p95) | per frame without update | λ error before / after change | noise error before / after | δ RMSE (px) | converged after start | change detected after | converged after change |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let mut points = vec![];
+    for tier in TIERS {
+        let r = run(tier, &small, &small_frames);
+        let big_run = one.install(|| run(tier, &big, &big_frames));
+        let updates: Vec<f64> = big_run.published.iter().map(|p| p.compute_s).collect();
+        let (upd_med, upd_p95) = (median(updates.clone()).unwrap_or(f64::NAN), percentile(updates, 0.95));
+        let n_upd = big_run.published.len();
+        let idle: Vec<f64> = {
+            // Frames that published nothing: the ingest cost alone.
+            let published_frames = big_run.published.len();
+            let mut f = big_run.frame_s.clone();
+            f.sort_by(f64::total_cmp);
+            f.truncate(big_run.frame_s.len().saturating_sub(published_frames));
+            f
+        };
+        let stats = |from: f64, to: f64| {
+            let seg: Vec<&Published> = r.published.iter().filter(|p| p.t_s >= from && p.t_s < to).collect();
+            let l = median(seg.iter().map(|p| errs(p).0 as f64).collect());
+            let n = median(seg.iter().filter_map(|p| errs(p).1.map(f64::from)).collect());
+            let d = median(seg.iter().filter_map(|p| errs(p).2.map(f64::from)).collect());
+            (l, n, d)
+        };
+        // Steady state: the second before the change and the last second.
+        let (lb, nb, db) = stats(CHANGE_S - 1.0, CHANGE_S);
+        let (la, na, _) = stats(small.frame_time_s(small.frames - 1) - 1.0, f64::INFINITY);
+        let detect = r.changes.iter().find(|t| **t >= CHANGE_S).map(|t| t - CHANGE_S);
+        let conv0 = time_to_converge(&r, 0.0, CHANGE_S);
+        let conv1 = time_to_converge(&r, CHANGE_S, f64::INFINITY);
+        println!(
+            "| {} | {:.1} ms, {:.1} ms ({} updates / {} frames) | {} | {} / {} | {} / {} | {} | {} | {} | {} |",
+            tier.name(),
+            upd_med * 1e3,
+            upd_p95 * 1e3,
+            n_upd,
+            big_run.frame_s.len(),
+            fmt_opt(median(idle), 1e3, 1, " ms"),
+            fmt_opt(lb, 1.0, 3, ""),
+            fmt_opt(la, 1.0, 3, ""),
+            fmt_opt(nb, 100.0, 1, "%"),
+            fmt_opt(na, 100.0, 1, "%"),
+            fmt_opt(db, 1.0, 3, ""),
+            fmt_opt(conv0, 1.0, 2, " s"),
+            fmt_opt(detect, 1.0, 2, " s"),
+            fmt_opt(conv1, 1.0, 2, " s"),
+        );
+        // Stage shares of the 1280×960 updates (the fits' own stage timers).
+        let mut stages: std::collections::BTreeMap<String, f64> = Default::default();
+        for p in &big_run.published {
+            for (effect, d) in [
+                ("noise", &p.model.noise.diagnostics),
+                ("motion blur", &p.model.motion_blur.diagnostics),
+                ("depth of field", &p.model.depth_of_field.diagnostics),
+            ] {
+                *stages.entry(format!("{effect} fit")).or_default() += d.fit_time_s / n_upd.max(1) as f64;
+            }
+        }
+        eprintln!(
+            "{}: fit time per update (aggregated diagnostics, ms): {}",
+            tier.name(),
+            stages.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect::<Vec<_>>().join(", ")
+        );
+        points.push((tier, upd_med * 1e3, lb.unwrap_or(f64::NAN), nb.unwrap_or(f64::NAN), conv1));
+    }
+    let colours = [RGBColor(220, 50, 47), RGBColor(230, 150, 0), RGBColor(38, 110, 210)];
+    let panel = |title: &str, y: &str, get: &dyn Fn(&Point) -> f64| Panel {
+        title: title.into(),
+        x_desc: "compute per update at 1280×960, one thread (ms, log)".into(),
+        y_desc: y.into(),
+        series: points
+            .iter()
+            .zip(colours)
+            .map(|(p, c)| Series { label: p.0.name().into(), points: vec![(p.1, get(p))], colour: c, dots: true })
+            .collect(),
+        log_x: true,
+    };
+    let panels = [
+        panel("exposure λ: error before the change", "|λ − λ_true|", &|p| p.2),
+        panel("noise: median relative error of the level stds", "relative error", &|p| p.3),
+        panel("time to converge after the camera change (video)", "s (missing: never)", &|p| p.4.unwrap_or(f64::NAN)),
+    ];
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/bench");
+    let _ = std::fs::create_dir_all(&dir);
+    let path = dir.join("calibration_pareto.png");
+    match panels_plot(&path, &panels, 900, 300) {
+        Ok(()) => eprintln!("wrote {}", path.display()),
+        Err(e) => eprintln!("plot: {e}"),
+    }
+}
