@@ -5,7 +5,7 @@
 //! through the worker's calibration loop per tier. Accuracy and convergence on
 //! 320×240 frames (5 s, the change at 2.5 s); compute per update single-threaded
 //! on 1280×960 frames (the Quest camera's), the same head path. Prints a markdown
-//! table and writes the Pareto plot to target/bench/calibration_pareto.png.
+//! table and writes the Pareto plot to benches/results/calibration_pareto.png.
 //!
 //! `cargo bench --bench calibration` (part of `cargo xtask bench`).
 
@@ -218,9 +218,12 @@ fn main() {
         panel("noise: median relative error of the level stds", "relative error", &|p| p.3),
         panel("time to converge after the camera change (video)", "s (missing: never)", &|p| p.4.unwrap_or(f64::NAN)),
     ];
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/bench");
-    let _ = std::fs::create_dir_all(&dir);
-    let path = dir.join("calibration_pareto.png");
+    // Written next to this file: BENCHMARKS.md shows it (a measured figure, committed
+    // with the table it belongs to).
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/results/calibration_pareto.png");
+    if let Some(dir) = path.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
     match panels_plot(&path, &panels, 900, 300) {
         Ok(()) => eprintln!("wrote {}", path.display()),
         Err(e) => eprintln!("plot: {e}"),

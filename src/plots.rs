@@ -241,15 +241,18 @@ pub fn panels_plot(path: &Path, panels: &[Panel], width: u32, panel_height: u32)
                 chart.configure_mesh().x_desc(&p.x_desc).y_desc(&p.y_desc).draw().map_err(|e| err(path, e))?;
                 for s in &p.series {
                     let colour = s.colour;
+                    // Missing values (NaN) are left out, not drawn at 0.
+                    let pts: Vec<(f64, f64)> =
+                        s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
                     if s.dots {
                         chart
-                            .draw_series(s.points.iter().map(|&(x, y)| Circle::new((x, y), 4, colour.filled())))
+                            .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 4, colour.filled())))
                             .map_err(|e| err(path, e))?
                             .label(s.label.clone())
                             .legend(move |(x, y)| Circle::new((x + 10, y), 4, colour.filled()));
                     } else {
                         chart
-                            .draw_series(LineSeries::new(s.points.iter().cloned(), colour.stroke_width(2)))
+                            .draw_series(LineSeries::new(pts.iter().cloned(), colour.stroke_width(2)))
                             .map_err(|e| err(path, e))?
                             .label(s.label.clone())
                             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));

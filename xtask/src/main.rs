@@ -44,7 +44,7 @@ fn bench() -> Result<()> {
     std::fs::write(dir.join("gpu.md"), gpu).context("writing target/bench/gpu.md")?;
     let frame = cargo(&["bench", "--bench", "frame"])?;
     std::fs::write(dir.join("frame.md"), frame).context("writing target/bench/frame.md")?;
-    // Live calibration per tier (also writes target/bench/calibration_pareto.png).
+    // Live calibration per tier (also writes benches/results/calibration_pareto.png).
     let calibration = cargo(&["bench", "--bench", "calibration"])?;
     std::fs::write(dir.join("calibration.md"), calibration).context("writing target/bench/calibration.md")?;
     std::fs::write(dir.join("xr.txt"), xr_bench()?).context("writing target/bench/xr.txt")?;
