@@ -16,8 +16,9 @@ use crate::image::{Flow, Plane, Rgb};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
 use glam::{Mat4, Quat, Vec3, Vec4};
 
-const PHOTO: &[u8] = include_bytes!("../../assets/motorcycle_left_333x497.png");
-const DISPARITY_X64: &[u8] = include_bytes!("../../assets/motorcycle_disp_333x497_x64.png");
+/// The bundled photograph and its disparity ×64 (assets/ATTRIBUTION.md).
+pub const PHOTO: &[u8] = include_bytes!("../../assets/motorcycle_left_333x497.png");
+pub const DISPARITY_X64: &[u8] = include_bytes!("../../assets/motorcycle_disp_333x497_x64.png");
 /// Middlebury 2014 Motorcycle calibration at the ¼ scale of the bundled crop
 /// (assets/ATTRIBUTION.md): Z = f·B / (d + doffs).
 pub const MOTORCYCLE_FOCAL_PX: f32 = 3979.911 / 4.0;
@@ -33,7 +34,8 @@ pub struct Scene {
     pub intrinsics: Intrinsics,
 }
 
-fn decode_rgb(bytes: &[u8]) -> Result<Rgb, String> {
+/// An encoded 8/16-bit image as RGB floats in [0, 1].
+pub fn decode_rgb(bytes: &[u8]) -> Result<Rgb, String> {
     let img = image::load_from_memory(bytes).map_err(|e| e.to_string())?.to_rgb32f();
     let (w, h) = (img.width() as usize, img.height() as usize);
     let raw = img.into_raw();

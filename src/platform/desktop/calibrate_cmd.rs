@@ -17,36 +17,9 @@ use blind_augment::synth::sequence::{motorcycle, SequenceSpec};
 use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
 use plotters::style::RGBColor;
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-const IMAGE_EXTS: [&str; 5] = ["png", "jpg", "jpeg", "pfm", "npy"];
-
-fn list_frames(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading frames folder {}", dir.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| IMAGE_EXTS.contains(&e.to_ascii_lowercase().as_str()))
-        })
-        .collect();
-    frames.sort();
-    ensure!(!frames.is_empty(), "frames folder {} holds no images ({})", dir.display(), IMAGE_EXTS.join(", "));
-    Ok(frames)
-}
-
-/// The file in `dir` with the same stem as `frame`.
-fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
-    let stem = frame.file_stem().context("frame without a file name")?;
-    for e in std::fs::read_dir(dir).with_context(|| format!("reading {what} folder {}", dir.display()))?.flatten() {
-        if e.path().file_stem() == Some(stem) {
-            return Ok(e.path());
-        }
-    }
-    bail!("{what} folder {} has no file for frame {}", dir.display(), frame.display())
-}
+use super::fit_cmd::{frames_bar, list_frames, sibling};
 
 pub fn parse_intrinsics(s: &str, w: usize, h: usize) -> Result<Intrinsics> {
     let v: Vec<f32> = s
@@ -144,10 +117,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         )),
         None => None,
     };
-    let bar = indicatif::ProgressBar::new(frames.len() as u64).with_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    let bar = frames_bar(frames.len());
     // Poses run ahead of camera frames on a headset (the camera pipeline's latency):
     // each frame arrives with the poses up to two frames later.
     const POSE_LEAD: usize = 2;

@@ -18,8 +18,7 @@ use blind_augment::model::*;
 use blind_augment::synth;
 use std::fmt::Write as _;
 
-const PHOTO: &[u8] = include_bytes!("../../../assets/motorcycle_left_333x497.png");
-const DISPARITY_X64: &[u8] = include_bytes!("../../../assets/motorcycle_disp_333x497_x64.png");
+use blind_augment::synth::sequence::{DISPARITY_X64, PHOTO};
 const TOY: &[u8] = include_bytes!("../../../assets/toy.glb");
 
 /// Middlebury 2014 Motorcycle calibration (calib.txt: f = 3979.911 px, baseline
@@ -39,16 +38,7 @@ fn metric_depth(disparity: &Plane) -> Plane {
 }
 
 fn decode_photo() -> Result<Rgb> {
-    let img = image::load_from_memory(PHOTO).context("decoding the embedded photograph")?.to_rgb32f();
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let raw = img.into_raw();
-    let mut out = Rgb::new(w, h, [0.0; 3]);
-    for i in 0..w * h {
-        for c in 0..3 {
-            out.channels[c][i] = raw[3 * i + c];
-        }
-    }
-    Ok(out)
+    synth::sequence::decode_rgb(PHOTO).map_err(|e| anyhow::anyhow!("decoding the embedded photograph: {e}"))
 }
 
 fn decode_disparity() -> Result<Plane> {

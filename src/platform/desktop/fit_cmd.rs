@@ -25,8 +25,33 @@ fn load_opt_rgb(p: &Option<PathBuf>) -> Result<Option<Rgb>> {
     })
 }
 
+/// The images in `dir`, in name order (an error when there are none).
+pub fn list_frames(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading frames folder {}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| IMAGE_EXTS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    frames.sort();
+    anyhow::ensure!(!frames.is_empty(), "frames folder {} holds no images ({})", dir.display(), IMAGE_EXTS.join(", "));
+    Ok(frames)
+}
+
+/// The progress bar of a run over `n` frames.
+pub fn frames_bar(n: usize) -> indicatif::ProgressBar {
+    indicatif::ProgressBar::new(n as u64).with_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    )
+}
+
 /// In folder mode, the file in `dir` with the same stem as `frame` (any extension).
-fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
+pub fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
     let stem = frame.file_stem().context("frame without a file name")?;
     let entries = std::fs::read_dir(dir).with_context(|| format!("reading {what} folder {}", dir.display()))?;
     for e in entries.flatten() {
@@ -56,22 +81,8 @@ pub fn run(args: FitArgs) -> Result<()> {
     let opts = FitOptions { tier: super::tier(args.tier), effects: super::effects(&args.only), ..Default::default() };
     let g = &args.geometry;
     let output = if let Some(dir) = &args.frames {
-        let mut frames: Vec<PathBuf> = std::fs::read_dir(dir)
-            .with_context(|| format!("reading frames folder {}", dir.display()))?
-            .flatten()
-            .map(|e| e.path())
-            .filter(|p| {
-                p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| IMAGE_EXTS.contains(&e.to_ascii_lowercase().as_str()))
-            })
-            .collect();
-        frames.sort();
-        anyhow::ensure!(!frames.is_empty(), "frames folder {} holds no images", dir.display());
-        let bar = indicatif::ProgressBar::new(frames.len() as u64).with_style(
-            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg} [{elapsed_precise}]")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
+        let frames = list_frames(dir)?;
+        let bar = frames_bar(frames.len());
         let mut models = vec![];
         let mut last = None;
         for frame in &frames {

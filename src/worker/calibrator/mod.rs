@@ -17,12 +17,16 @@
 //!    coefficient-wise median (`fit::aggregate_models`: outliers do not move it),
 //!    presence with hysteresis (on at ≥ 60% of identifiable estimates, off at
 //!    ≤ 30%) so effects do not flicker.
-//! 4. **Detect change**: a shift of the luminance histogram, or two consecutive
-//!    estimates off the aggregate by more than their own uncertainty allows (an
-//!    exposure, gain or focus change), drops the estimates from before it and
-//!    restarts the burst, so the new camera is published within a few frames.
+//! 4. **Detect change** (`change.rs`): a shift of the luminance histogram, a step in
+//!    the noise probe (this frame minus the previous one aligned, every 0.1 s), or
+//!    two confident exposure estimates in a row off the model (an exposure, gain or
+//!    focus change) drops the estimates and held frames from before it and restarts
+//!    the burst, so the new camera is published within a few frames.
 //!
 //! Every published model is validated (no NaN, nothing out of range).
+
+mod aggregate;
+mod change;
 
 use crate::analysis::timing::{PoseTrack, TimedPose};
 use crate::analysis::{
@@ -31,6 +35,8 @@ use crate::analysis::{
 };
 use crate::fit::{self, Effects, FitInputs, FitOptions};
 use crate::model::{CameraModel, NoiseForm, Status};
+use aggregate::Presence;
+use change::{luma_histogram, Probe, PROBE_INTERVAL_S};
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Instant;
@@ -234,63 +240,12 @@ pub enum CalibError {
     Config(String),
 }
 
-/// Video time between blind probes at the slower tiers (change detection).
-const PROBE_INTERVAL_S: f64 = 0.1;
-
-/// A noise probe's value.
-#[derive(Clone, Copy, Debug)]
-struct Probe {
-    t_s: f64,
-    noise: Option<f32>,
-}
-
 /// One fit's result, kept for aggregation.
 #[derive(Clone, Debug)]
 struct Estimate {
     frame: u64,
     t_s: f64,
     model: CameraModel,
-}
-
-/// Presence with hysteresis.
-#[derive(Clone, Copy, Debug, Default)]
-struct Presence {
-    on: Option<bool>,
-}
-
-impl Presence {
-    /// `present` of `identifiable` estimates said present.
-    fn update(&mut self, present: usize, identifiable: usize) -> bool {
-        if identifiable == 0 {
-            return self.on.unwrap_or(false);
-        }
-        let frac = present as f64 / identifiable as f64;
-        let on = match self.on {
-            None => frac > 0.5,
-            Some(false) => frac >= 0.6,
-            Some(true) => frac > 0.3,
-        };
-        self.on = Some(on);
-        on
-    }
-}
-
-/// Luma histogram of a frame on a sparse grid (16 bins, normalised).
-fn luma_histogram(frame: &Frame) -> [f32; 16] {
-    let img = &frame.image;
-    let mut h = [0f32; 16];
-    let step = ((img.len() / 4096) as f64).sqrt().max(1.0) as usize;
-    let mut n = 0.0f32;
-    for y in (0..img.height).step_by(step) {
-        for x in (0..img.width).step_by(step) {
-            let i = y * img.width + x;
-            let l = 0.2126 * img.channels[0][i] + 0.7152 * img.channels[1][i] + 0.0722 * img.channels[2][i];
-            h[((l.clamp(0.0, 1.0) * 16.0) as usize).min(15)] += 1.0;
-            n += 1.0;
-        }
-    }
-    h.iter_mut().for_each(|v| *v /= n.max(1.0));
-    h
 }
 
 fn noise_headline(m: &CameraModel) -> Option<f32> {
@@ -602,103 +557,6 @@ impl Calibrator {
         Ok(events)
     }
 
-    /// A change first seen at `since_s`: estimates and held frames from before it
-    /// were made with the old camera (no references from them).
-    fn on_change(&mut self, frame: u64, t_s: f64, since_s: f64, cause: String, events: &mut Vec<Event>) {
-        events.push(Event::ChangeDetected { frame, t_s, cause });
-        self.estimates.retain(|e| e.t_s >= since_s);
-        self.probes.retain(|p| p.t_s >= since_s);
-        self.burst_until_s = t_s + 0.5 * self.cfg.burst_s;
-        self.after_change = true;
-        self.window.retain(|a| a.frame.t_s >= since_s);
-        self.sharp.retain(|a| a.frame.t_s >= since_s);
-    }
-
-    /// Change detection on the noise probes (every `PROBE_INTERVAL_S`), each
-    /// compared with the probes before it: three in a row beyond ×1.22 (|ln| > 0.2)
-    /// on the same side of the median of the earlier ones (at least five, within
-    /// 2 s) is a change, dated at the first of the three. The threshold is 2.5× the
-    /// temporal probe's scatter on the Motorcycle sequence (±8% with head motion);
-    /// the blind probe (no poses) scatters ±25% from view to view, so it only sees
-    /// steps beyond that (|ln| > 0.35).
-    fn detect_change(&mut self) -> Option<(f64, String)> {
-        const RECENT: usize = 3;
-        let n = self.probes.len();
-        if n < RECENT + 5 {
-            return None;
-        }
-        let (older, recent) = self.probes.make_contiguous().split_at(n - RECENT);
-        let median = |v: Vec<f32>| -> Option<f32> {
-            let mut v = v;
-            if v.len() < 5 {
-                return None;
-            }
-            v.sort_by(f32::total_cmp);
-            Some(v[v.len() / 2])
-        };
-        let since = recent[0].t_s;
-        let limit = if self.cfg.intrinsics.is_some() { 0.2 } else { 0.35 };
-        let base = median(older.iter().filter_map(|p| p.noise).collect());
-        if let Some(b) = base.filter(|b| *b > 0.0) {
-            let r: Vec<f32> = recent.iter().filter_map(|p| p.noise.map(|x| (x / b).ln())).collect();
-            if r.len() == RECENT && (r.iter().all(|x| *x > limit) || r.iter().all(|x| *x < -limit)) {
-                return Some((since, format!("blind noise level moved ×{:.2}", r[RECENT - 1].exp())));
-            }
-        }
-        None
-    }
-
-    fn push_probe(&mut self, t_s: f64, noise: Option<f32>) {
-        self.probes.push_back(Probe { t_s, noise });
-        while self.probes.front().is_some_and(|p| p.t_s < t_s - 2.0) {
-            self.probes.pop_front();
-        }
-    }
-
-    /// The noise probe of this frame: the temporal one (`analysis::temporal::
-    /// noise_probe`, against the previous frame) with poses and depth (None when
-    /// this frame cannot be aligned: the two kinds are not mixed), else the blind
-    /// noise estimator.
-    fn noise_probe(&mut self, current: &Analysed) -> Option<f32> {
-        if let Some(k) = self.cfg.intrinsics.as_ref() {
-            let prev = self.window.back()?;
-            if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
-                return None;
-            }
-            return crate::analysis::temporal::noise_probe(prev, current, k);
-        }
-        let opts = FitOptions {
-            tier: Some(fit::Tier::Fast),
-            effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
-            ..Default::default()
-        };
-        fit::fit(&FitInputs::new(&current.frame.image), &opts).ok().and_then(|o| noise_headline(&o.model))
-    }
-
-    /// Two consecutive confident estimates of λ by the same method, both off the
-    /// published λ by more than 4 standard errors and 0.1: an exposure change.
-    fn check_exposure(&mut self, m: &CameraModel) -> Option<String> {
-        let agg = self.published.as_ref()?;
-        let (a, mb) = (agg.motion_blur.exposure?, &m.motion_blur);
-        let (b, se) = (mb.exposure?, mb.diagnostics.stderr?);
-        if mb.diagnostics.status != Status::Present
-            || se > 0.05
-            || agg.motion_blur.diagnostics.method != mb.diagnostics.method
-        {
-            return None;
-        }
-        if (a - b).abs() as f64 > (4.0 * se).max(0.1) {
-            self.exposure_suspects += 1;
-            if self.exposure_suspects >= 2 {
-                self.exposure_suspects = 0;
-                return Some(format!("two estimates in a row read λ ≈ {b:.3}, the model {a:.3}"));
-            }
-        } else {
-            self.exposure_suspects = 0;
-        }
-        None
-    }
-
     /// One frame's fit at the configured tier.
     fn fit_frame(
         &mut self,
@@ -860,94 +718,6 @@ impl Calibrator {
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
         model.validate().ok().map(|_| model)
-    }
-
-    /// Aggregate the window's estimates, apply hysteresis, validate.
-    fn aggregate(&mut self, frame: u64, t_s: f64, reason: UpdateReason, started: Instant) -> Option<Update> {
-        let from = t_s - self.cfg.window_s;
-        while self.estimates.front().is_some_and(|e| e.t_s < from) {
-            self.estimates.pop_front();
-        }
-        let mut models: Vec<CameraModel> = self.estimates.iter().map(|e| e.model.clone()).collect();
-        // Presence votes: every identifiable estimate.
-        let count = |f: &dyn Fn(&CameraModel) -> (bool, bool)| {
-            models.iter().fold((0, 0), |(p, i), m| {
-                let (present, identifiable) = f(m);
-                (p + present as usize, i + identifiable as usize)
-            })
-        };
-        let ident = |s: Status| matches!(s, Status::Present | Status::Absent);
-        let (np, ni) = count(&|m| (m.noise.present, ident(m.noise.diagnostics.status)));
-        let (mp, mi) = count(&|m| (m.motion_blur.present, ident(m.motion_blur.diagnostics.status)));
-        let (dp, di) = count(&|m| (m.depth_of_field.present, ident(m.depth_of_field.diagnostics.status)));
-        // Value votes: λ only from estimates that pin it down (± 0.05); a frame with
-        // little motion says "λ near 0 or anything" and would drag the median. The
-        // blind estimator's root search returns the bracket end (0 or 1, with a zero
-        // spread) when its balance has no sign change: no information either.
-        for m in &mut models {
-            let at_bracket_end = m.motion_blur.exposure.is_some_and(|l| !(1e-6..=1.0 - 1e-6).contains(&l));
-            if at_bracket_end || m.motion_blur.diagnostics.stderr.map_or(true, |s| s > 0.05) {
-                m.motion_blur.exposure = None;
-            }
-        }
-        // Where the window holds estimates made with a reference (the accurate fits
-        // on temporal or network references), blind estimates of that effect are
-        // not mixed in: they only bridge the time until the first reference.
-        let with_reference = |d: &crate::model::Diagnostics| d.method.starts_with("accurate");
-        let not_fitted = || crate::model::Diagnostics::not_fitted("superseded by estimates with a reference");
-        if models.iter().any(|m| with_reference(&m.noise.diagnostics) && m.noise.present) {
-            for m in models.iter_mut().filter(|m| !with_reference(&m.noise.diagnostics)) {
-                m.noise = crate::model::Noise::absent(not_fitted());
-            }
-        }
-        if models.iter().any(|m| with_reference(&m.motion_blur.diagnostics) && m.motion_blur.exposure.is_some()) {
-            for m in models.iter_mut().filter(|m| !with_reference(&m.motion_blur.diagnostics)) {
-                m.motion_blur = crate::model::MotionBlur::absent(not_fitted());
-            }
-        }
-        if models.iter().any(|m| with_reference(&m.depth_of_field.diagnostics) && m.depth_of_field.present) {
-            for m in models.iter_mut().filter(|m| !with_reference(&m.depth_of_field.diagnostics)) {
-                let units = m.depth_of_field.units;
-                m.depth_of_field = crate::model::DepthOfField::absent(units, not_fitted());
-            }
-        }
-        let mut agg = fit::aggregate_models(&models).ok()?;
-        let prev = self.published.clone();
-        let on = [self.presence[0].update(np, ni), self.presence[1].update(mp, mi), self.presence[2].update(dp, di)];
-        // Hysteresis holds an effect on while the window's majority has flipped:
-        // keep the aggregate's values if it has any, else the last published ones.
-        if on[0] != agg.noise.present {
-            match (&prev, on[0] && np == 0) {
-                (Some(p), true) => agg.noise = p.noise.clone(),
-                _ => agg.noise.present = on[0] && np > 0,
-            }
-        }
-        if on[1] && agg.motion_blur.exposure.is_none() {
-            // No confident λ in the window (e.g. the head at rest since a change):
-            // keep the last published exposure rather than flicker to none.
-            if let Some(p) = prev.as_ref().filter(|p| p.motion_blur.exposure.is_some()) {
-                agg.motion_blur = p.motion_blur.clone();
-            }
-        }
-        if on[1] != agg.motion_blur.present {
-            agg.motion_blur.present = on[1] && agg.motion_blur.exposure.is_some();
-        }
-        if on[2] != agg.depth_of_field.present {
-            match (&prev, on[2] && dp == 0) {
-                (Some(p), true) => agg.depth_of_field = p.depth_of_field.clone(),
-                _ => agg.depth_of_field.present = on[2] && agg.depth_of_field.curve.is_some(),
-            }
-        }
-        agg.validate().ok()?;
-        self.published = Some(agg.clone());
-        Some(Update {
-            frame,
-            t_s,
-            model: agg,
-            reason,
-            compute_s: started.elapsed().as_secs_f64(),
-            frames_used: self.estimates.iter().map(|e| e.frame).collect(),
-        })
     }
 }
 
