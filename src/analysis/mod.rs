@@ -2,10 +2,10 @@
 //! and references with an effect removed (denoised, motion-deblurred,
 //! defocus-deblurred) — one trait per role, each with interchangeable providers:
 //!
-//! * **headset-native** (`GivenDepth`, `PoseDepthFlow`): the headset's own metric
-//!   depth (on Quest, XR_META_environment_depth reprojected into the camera by
-//!   `reproject`; on desktop, depth files) and flow from head pose + depth, exact
-//!   for a static scene. On a headset these replace the paper's two slowest networks.
+//! * **headset-native**: the headset's own metric depth, delivered with the frame
+//!   (`Frame::depth`; on Quest, XR_META_environment_depth reprojected into the
+//!   camera by `reproject`; on desktop, depth files), and flow from head pose +
+//!   depth (`PoseDepthFlow`), exact for a static scene. On a headset these replace the paper's two slowest networks.
 //! * **classical** (`LucasKanadeFlow`, `GivenFlow`; the blind estimators of `fit`).
 //! * **video as its own reference** (`temporal`): other frames aligned by pose and
 //!   depth give I_noNoise (their mean) and I_noMB (the sharpest of them).
@@ -41,6 +41,7 @@ pub struct Frame {
     /// Linear (or the camera's encoded) RGB in [0, 1].
     pub image: Rgb,
     /// Depth delivered with the frame (headset depth reprojected; a depth file).
+    /// The worker moves it into `Analysed::depth`.
     pub depth: Option<DepthMap>,
     /// Flow delivered with the frame (a flow file), px per frame interval.
     pub flow: Option<Flow>,
@@ -169,20 +170,4 @@ pub trait MotionDeblurrer: Send {
 pub trait DefocusDeblurrer: Send {
     fn name(&self) -> &str;
     fn deblur(&mut self, ctx: &FrameContext, depth: &DepthMap) -> Result<Reference, AnalysisError>;
-}
-
-/// Headset-native depth: the depth delivered with the frame (XR_META_environment_depth
-/// reprojected into the camera on Quest; depth files on desktop).
-#[derive(Default)]
-pub struct GivenDepth;
-
-impl DepthProvider for GivenDepth {
-    fn name(&self) -> &str {
-        "headset depth"
-    }
-    fn depth(&mut self, ctx: &FrameContext) -> Result<DepthMap, AnalysisError> {
-        ctx.current.frame.depth.clone().ok_or_else(|| {
-            AnalysisError::unavailable(ctx.current.frame.index, "headset depth", "no depth with this frame")
-        })
-    }
 }

@@ -173,38 +173,21 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     }
     // Depth may mark invalid pixels with NaN/Inf/≤0 (Middlebury, KITTI): they are
     // skipped, not rejected. Only the size must match.
-    if let Some(z) = inp.depth {
-        if z.width != w || z.height != h {
-            return Err(FitError::SizeMismatch {
-                input: "depth",
-                want_w: w,
-                want_h: h,
-                got_w: z.width,
-                got_h: z.height,
-            });
+    let size = |input: &'static str, got_w: usize, got_h: usize| {
+        if (got_w, got_h) == (w, h) {
+            Ok(())
+        } else {
+            Err(FitError::SizeMismatch { input, want_w: w, want_h: h, got_w, got_h })
         }
+    };
+    if let Some(z) = inp.depth {
+        size("depth", z.width, z.height)?;
     }
     if let Some(v) = inp.reference_valid {
-        if v.width != w || v.height != h {
-            return Err(FitError::SizeMismatch {
-                input: "reference-valid",
-                want_w: w,
-                want_h: h,
-                got_w: v.width,
-                got_h: v.height,
-            });
-        }
+        size("reference-valid", v.width, v.height)?;
     }
     if let Some(f) = inp.flow {
-        if f.width != w || f.height != h {
-            return Err(FitError::SizeMismatch {
-                input: "flow",
-                want_w: w,
-                want_h: h,
-                got_w: f.width,
-                got_h: f.height,
-            });
-        }
+        size("flow", f.width, f.height)?;
         for (i, (&dx, &dy)) in f.dx.iter().zip(&f.dy).enumerate() {
             for (channel, value) in [(0, dx), (1, dy)] {
                 if !value.is_finite() {

@@ -105,7 +105,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     }
     let truth = args.truth.as_deref().map(read_truth).transpose()?;
     let mut providers = Providers::for_tier(tier);
-    if args.flow.is_some() {
+    if args.geometry.flow.is_some() {
         providers = providers.with_given_flow();
     }
     let mut cfg = CalibratorConfig::new(tier, 1.0 / args.fps as f64, intrinsics);
@@ -160,7 +160,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             }),
             None => None,
         };
-        let flow = match &args.flow {
+        let flow = match &args.geometry.flow {
             Some(d) => Some(io::load_flow(&sibling(d, path, "flow")?)?),
             None => None,
         };

@@ -190,10 +190,11 @@ pub struct CalibrateArgs {
     /// of --poses.
     #[arg(long)]
     frames: PathBuf,
-    /// Depth per frame: a folder of files named like the frames (PFM, 16-bit PNG
-    /// scaled by --depth-png-scale, .npy), with their units (--depth-units).
+    /// --depth and --flow: folders of files named like the frames (depth: PFM,
+    /// 16-bit PNG scaled by --depth-png-scale, .npy, read as --depth-units; flow
+    /// instead of flow from poses and depth).
     #[command(flatten)]
-    geometry: CalibrateDepthArgs,
+    geometry: DepthArgs,
     /// poses.csv: `frame,t_s,tx,ty,tz,qx,qy,qz,qw`, world_from_camera, camera in
     /// OpenCV axes (x right, y down, z forward), metres, t_s = middle of exposure.
     #[arg(long)]
@@ -201,10 +202,6 @@ pub struct CalibrateArgs {
     /// Pinhole intrinsics in pixels of the frames: fx,fy,cx,cy (with --poses).
     #[arg(long)]
     intrinsics: Option<String>,
-    /// Flow per frame (a folder of .flo/.npy named like the frames), px per frame
-    /// interval, instead of flow from poses and depth.
-    #[arg(long)]
-    flow: Option<PathBuf>,
     /// fast (the frame alone, every frame) | balanced | accurate (video as its own
     /// reference).
     #[arg(long, default_value = "accurate")]
@@ -227,16 +224,6 @@ pub struct CalibrateArgs {
     /// Known truth (a timeline file, as `synth-video` writes): errors are reported.
     #[arg(long)]
     truth: Option<PathBuf>,
-}
-
-#[derive(clap::Args, Clone)]
-pub struct CalibrateDepthArgs {
-    #[arg(long)]
-    depth: Option<PathBuf>,
-    #[arg(long, value_enum, default_value = "metric-m")]
-    depth_units: DepthUnitsArg,
-    #[arg(long, default_value_t = 0.001)]
-    depth_png_scale: f32,
 }
 
 #[derive(clap::Args)]

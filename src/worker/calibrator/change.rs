@@ -102,7 +102,9 @@ impl Calibrator {
             effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
             ..Default::default()
         };
-        fit::fit(&FitInputs::new(&current.frame.image), &opts).ok().and_then(|o| noise_headline(&o.model))
+        fit::fit(&FitInputs::new(&current.frame.image), &opts)
+            .ok()
+            .and_then(|o| crate::model::compare::noise_headline(&o.model.noise))
     }
 
     /// Two consecutive confident estimates of λ by the same method, both off the

@@ -30,7 +30,7 @@ mod change;
 
 use crate::analysis::timing::{PoseTrack, TimedPose};
 use crate::analysis::{
-    Analysed, DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, Frame, FrameContext, GivenDepth, GivenFlow,
+    Analysed, AnalysisError, DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, Frame, FrameContext, GivenFlow,
     Intrinsics, LucasKanadeFlow, MotionDeblurrer, PoseDepthFlow, TemporalDenoiser, TemporalMotionDeblur,
 };
 use crate::fit::{self, Effects, FitInputs, FitOptions};
@@ -132,7 +132,10 @@ impl CalibratorConfig {
 
 /// The providers per role. `for_tier` picks the defaults; `--onnx` replaces them.
 pub struct Providers {
-    pub depth: Box<dyn DepthProvider>,
+    /// Depth for frames that bring none (a depth network). Frames with depth
+    /// (headset-native: environment depth reprojected, depth files) use their own,
+    /// moved in without a copy.
+    pub depth: Option<Box<dyn DepthProvider>>,
     pub flow: Box<dyn FlowProvider>,
     /// Fallback flow when the primary one cannot serve a frame.
     pub flow_fallback: Option<Box<dyn FlowProvider>>,
@@ -157,7 +160,7 @@ impl Providers {
             _ => None,
         };
         Self {
-            depth: Box::new(GivenDepth),
+            depth: None,
             flow: Box::new(PoseDepthFlow),
             flow_fallback: Some(Box::new(LucasKanadeFlow::default())),
             denoise,
@@ -246,10 +249,6 @@ struct Estimate {
     frame: u64,
     t_s: f64,
     model: CameraModel,
-}
-
-fn noise_headline(m: &CameraModel) -> Option<f32> {
-    crate::model::compare::noise_headline(&m.noise)
 }
 
 /// Variance (px²) of the Gaussian both sides of the temporal motion-blur fit pass
@@ -448,13 +447,19 @@ impl Calibrator {
         };
         let held = self.held();
         let (track, k, dt) = (self.track.as_ref(), self.cfg.intrinsics.as_ref(), self.cfg.frame_interval_s);
-        let depth = self.providers.depth.depth(&FrameContext {
-            current: &analysed,
-            window: &held,
-            poses: track,
-            intrinsics: k,
-            frame_interval_s: dt,
-        });
+        let depth = match (analysed.frame.depth.take(), self.providers.depth.as_mut()) {
+            (Some(d), _) => Ok(d),
+            (None, Some(p)) => p.depth(&FrameContext {
+                current: &analysed,
+                window: &held,
+                poses: track,
+                intrinsics: k,
+                frame_interval_s: dt,
+            }),
+            (None, None) => {
+                Err(AnalysisError::unavailable(index, "depth", "no depth with this frame and no depth provider"))
+            }
+        };
         match depth {
             Ok(d) if (d.depth.width, d.depth.height) == (analysed.frame.image.width, analysed.frame.image.height) => {
                 analysed.depth = Some(d)
