@@ -157,6 +157,11 @@ fn main() {
     // FRAME_BENCH_QUICK=1: only 1680×1760 at 10%, no settings table (for profiling
     // between full runs; BENCHMARKS.md figures come from the full run).
     let quick = std::env::var("FRAME_BENCH_QUICK").is_ok_and(|v| v == "1");
+    // FRAME_BENCH_WORKER=1: only the render-thread frame time with the worker off/on.
+    if std::env::var("FRAME_BENCH_WORKER").is_ok_and(|v| v == "1") {
+        worker_on_off(&ctx, &scene);
+        return;
+    }
     let sizes: &[(u32, u32)] = if quick { &[(1680, 1760)] } else { &[(1680, 1760), (2064, 2208)] };
     let coverages: &[f64] = if quick { &[0.1] } else { &[0.1, 0.5] };
     for &(w, h) in sizes {
@@ -190,6 +195,106 @@ fn main() {
     if !quick {
         near_focus_rows(&ctx, &scene);
         settings_table(&ctx, &scene, &snap);
+        worker_on_off(&ctx, &scene);
+    }
+}
+
+/// The render thread's wall time per frame (render + reading the newest snapshot,
+/// as the frame loop does) with the calibration worker off, then on: a camera
+/// thread delivers a 1280×960 30 Hz video (the Quest camera frame) in real time to
+/// the accurate-tier worker (nice 19), which is then busy all the time (an update
+/// costs ~0.8 s of one core). Eye 840×880 (half the Quest 3 eye per axis) keeps
+/// lavapipe's frame near the 45 Hz budget of this 2-core machine. On lavapipe the
+/// GPU work runs on the same CPU cores as the worker, so this is a worst case: on
+/// the headset the GPU is separate.
+fn worker_on_off(ctx: &GpuContext, scene: &Scene) {
+    use blind_augment::analysis::{timing::TimedPose, DepthMap, Frame};
+    use blind_augment::synth::sequence::{motorcycle, SequenceSpec};
+    use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, ModelChannel, Providers, Worker};
+    let (w, h) = (840u32, 880u32);
+    let f = 743.0 * w as f32 / 1680.0;
+    let mut r = StereoRenderer::new(ctx, scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
+    r.set_background(&vec![128u8; (w * h * 4 * 2) as usize]).expect("background");
+    let (s, _) = setup(scene, &r, f, 0.1);
+    let input = FrameInput { gbuffer: &s.frame, corners_now: &s.now, corners_prev: &s.before };
+    // 45 video frames (1.5 s), rendered before timing starts, looped by time.
+    let video = motorcycle().expect("bundled scene");
+    let spec = SequenceSpec::motorcycle(&video, 1280, 960, 45, None);
+    let frames: Vec<_> = (0..spec.frames).map(|i| spec.frame(&video, i)).collect();
+    let channel = ModelChannel::new(spec.truth.clone()).expect("truth is valid");
+    let n = 90usize;
+    let time_frames = |r: &mut StereoRenderer<'_>| -> Vec<f64> {
+        (0..n + 3)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                let snap = channel.latest();
+                r.render(&snap, &input, true).expect("render");
+                t0.elapsed().as_secs_f64() * 1e3
+            })
+            .skip(3)
+            .collect()
+    };
+    let off = time_frames(&mut r);
+    let tier = CalibrationTier::Accurate;
+    let cal =
+        Calibrator::new(CalibratorConfig::new(tier, 1.0 / spec.fps as f64, Some(spec.view)), Providers::for_tier(tier))
+            .expect("calibrator");
+    let worker = std::sync::Arc::new(Worker::spawn(cal, channel.clone()).expect("worker thread"));
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (w2, stop2) = (worker.clone(), stop.clone());
+    let camera = std::thread::spawn(move || {
+        let started = std::time::Instant::now();
+        let pose = |i: usize| {
+            let t = spec.frame_time_s(i % spec.frames);
+            let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
+            TimedPose { t_ns: (spec.frame_time_s(i) * 1e9).round() as i64, position_m: p, orientation: q }
+        };
+        let mut i = 0usize;
+        while !stop2.load(std::sync::atomic::Ordering::Relaxed) {
+            let t_s = i as f64 / spec.fps as f64;
+            if let Some(wait) = std::time::Duration::from_secs_f64(t_s).checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
+            let fr = &frames[i % frames.len()];
+            let frame = Frame {
+                index: i as u64,
+                t_s,
+                image: fr.image.clone(),
+                depth: Some(DepthMap { depth: fr.depth_m.clone(), units: DepthUnits::MetricM }),
+                flow: None,
+            };
+            w2.submit(frame, &[pose(i)]);
+            i += 1;
+        }
+    });
+    // Let the worker reach its steady state (start-up burst over) before timing.
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let on = time_frames(&mut r);
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let _ = camera.join();
+    let stats = std::sync::Arc::try_unwrap(worker).ok().map(|w| w.stop());
+    let pct = |v: &[f64], q: f64| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q).round() as usize]
+    };
+    println!(
+        "\n## Render thread with the calibration worker off / on ({}, eye {w}×{h}, {n} frames)\n",
+        ctx.device_name()
+    );
+    println!("| worker | median ms | p95 ms | max ms |");
+    println!("|---|---|---|---|");
+    for (name, v) in [("off", &off), ("on (accurate tier, 1280×960 at 30 Hz)", &on)] {
+        println!("| {name} | {} | {} | {} |", ms(pct(v, 0.5)), ms(pct(v, 0.95)), ms(pct(v, 1.0)));
+    }
+    if let Some(st) = stats {
+        println!(
+            "\nWorker meanwhile: {} frames submitted, {} processed, {} dropped (latest-frame slot), {} models published.",
+            st.submitted,
+            st.processed,
+            st.dropped,
+            st.published.len()
+        );
     }
 }
 

@@ -17,6 +17,7 @@
 //! what is missing.
 
 pub mod flow;
+pub mod onnx;
 pub mod reproject;
 pub mod temporal;
 pub mod timing;

@@ -5,7 +5,7 @@
 mod float;
 pub mod poses;
 
-pub use float::{read_npy_f32, read_pfm, write_npy_rgb, write_pfm_rgb};
+pub use float::{read_npy_f32, read_pfm, write_npy, write_npy_rgb, write_pfm_rgb};
 
 use crate::image::{Flow, Plane, Rgb};
 use std::path::{Path, PathBuf};

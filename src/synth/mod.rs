@@ -8,6 +8,7 @@ mod motion_blur;
 mod noise;
 mod rng;
 pub mod sequence;
+pub mod training;
 
 pub use dof::{add_defocus, add_dof, dof_sigma_map, for_each_cascade_interval, DOF_NODE_SPACING_PX};
 pub use motion_blur::{add_motion_blur, MB_MAX_SAMPLE_SPACING_PX, MB_MIN_INTERVALS};

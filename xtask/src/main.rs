@@ -3,11 +3,13 @@
 //! passes) and keeps the raw output for BENCHMARKS.md; `assets` regenerates the
 //! bundled glTF object; `xr-runtime` builds the headless OpenXR test runtime and
 //! prints its manifest's path (for `XR_RUNTIME_JSON`); `apk` builds, signs and
-//! checks the Quest APK without the NDK (apk.rs), `install` puts it on a headset. CI is `.ci/run` alone, the
+//! checks the Quest APK without the NDK (apk.rs), `install` puts it on a headset;
+//! `train-models` trains the shipped ONNX models (models.rs). CI is `.ci/run` alone, the
 //! one definition of the checks.
 
 mod apk;
 mod assets;
+mod models;
 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -120,6 +122,7 @@ fn main() -> Result<()> {
         Some("bench-xr") => xr_bench().map(|_| ()),
         Some("apk") => apk::apk(&root(), args.iter().any(|a| a == "--release")).map(|_| ()),
         Some("install") => apk::install(&root(), args.iter().any(|a| a == "--release")),
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        Some("train-models") => models::train(&root()),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }

@@ -7,7 +7,7 @@
 
 use super::{CalibrateArgs, SynthVideoArgs};
 use anyhow::{bail, ensure, Context, Result};
-use blind_augment::analysis::{DepthMap, Frame, Intrinsics};
+use blind_augment::analysis::{DepthMap, Frame, Intrinsics, Role};
 use blind_augment::io::poses::{format_poses_csv, read_poses_csv, PoseRow};
 use blind_augment::io::{self, BitDepth};
 use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_headline, noise_relative_error};
@@ -107,6 +107,17 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let mut providers = Providers::for_tier(tier);
     if args.geometry.flow.is_some() {
         providers = providers.with_given_flow();
+    }
+    for (role, path) in super::parse_onnx(&args.onnx)? {
+        match role {
+            Role::Depth => {
+                ensure!(args.geometry.depth.is_none(), "--onnx depth=… and --depth both give depth: pick one")
+            }
+            Role::Flow => ensure!(args.geometry.flow.is_none(), "--onnx flow=… and --flow both give flow: pick one"),
+            _ => {}
+        }
+        providers = providers.with_onnx(role, &path)?;
+        eprintln!("{} provider: {}", role.name(), path.display());
     }
     let mut cfg = CalibratorConfig::new(tier, 1.0 / args.fps as f64, intrinsics);
     cfg.effects = super::effects(&args.only);

@@ -2,9 +2,15 @@
 
 use super::FitArgs;
 use anyhow::{Context, Result};
+use blind_augment::analysis::onnx::{OnnxDeblur, OnnxDenoiser, OnnxDepth, OnnxModel};
+use blind_augment::analysis::{
+    Analysed, DefocusDeblurrer, Denoiser, DepthMap, DepthProvider, Frame, FrameContext, MotionDeblurrer, Reference,
+    Role,
+};
 use blind_augment::fit::{aggregate_models, fit, FitInputs, FitOptions, FitOutput};
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::io;
+use blind_augment::model::DepthUnits;
 use std::path::{Path, PathBuf};
 
 const IMAGE_EXTS: [&str; 5] = ["png", "jpg", "jpeg", "pfm", "npy"];
@@ -15,6 +21,7 @@ struct Loaded {
     motion_deblurred: Option<Rgb>,
     defocus_deblurred: Option<Rgb>,
     depth: Option<Plane>,
+    depth_units: DepthUnits,
     flow: Option<Flow>,
 }
 
@@ -63,16 +70,100 @@ pub fn sibling(dir: &Path, frame: &Path, what: &str) -> Result<PathBuf> {
     anyhow::bail!("{what} folder {} has no file named like {}", dir.display(), frame.display())
 }
 
-fn run_one(args: &FitArgs, inp: &Loaded, opts: &FitOptions) -> Result<FitOutput> {
+/// Networks given by `--onnx` (flow needs consecutive frames: `calibrate` runs it).
+#[derive(Default)]
+struct Networks {
+    denoise: Option<OnnxDenoiser>,
+    motion_deblur: Option<OnnxDeblur>,
+    defocus_deblur: Option<OnnxDeblur>,
+    depth: Option<OnnxDepth>,
+}
+
+impl Networks {
+    fn load(args: &FitArgs) -> Result<Networks> {
+        let mut n = Networks::default();
+        for (role, path) in super::parse_onnx(&args.onnx)? {
+            let given = match role {
+                Role::Denoise => args.denoised.is_some(),
+                Role::MotionDeblur => args.motion_deblurred.is_some(),
+                Role::DefocusDeblur => args.defocus_deblurred.is_some(),
+                Role::Depth => args.geometry.depth.is_some(),
+                Role::Flow => anyhow::bail!(
+                    "--onnx flow=…: a flow network needs consecutive frames; use `calibrate`, or give --flow"
+                ),
+            };
+            anyhow::ensure!(!given, "--onnx {}=… and a file for the same role are both given: pick one", role.name());
+            let model = OnnxModel::load(role, &path, None)?;
+            eprintln!("{} provider: {}", role.name(), path.display());
+            match role {
+                Role::Denoise => n.denoise = Some(OnnxDenoiser::new(model)),
+                Role::MotionDeblur => n.motion_deblur = Some(OnnxDeblur { model }),
+                Role::DefocusDeblur => n.defocus_deblur = Some(OnnxDeblur { model }),
+                Role::Depth => n.depth = Some(OnnxDepth { model }),
+                Role::Flow => {}
+            }
+        }
+        Ok(n)
+    }
+
+    /// Fill the references, and depth, the files did not give; the pixels where the
+    /// network references hold (their valid masks, multiplied).
+    fn complete(&mut self, inp: &mut Loaded) -> Result<Option<Plane>> {
+        let frame = Frame { index: 0, t_s: 0.0, image: inp.image.clone(), depth: None, flow: None };
+        let current = Analysed { frame, depth: None, world_from_camera: None, sparse_flow: None };
+        let ctx = FrameContext { current: &current, window: &[], poses: None, intrinsics: None, frame_interval_s: 1.0 };
+        let mut valid: Option<Plane> = None;
+        let mut keep = |r: Reference| {
+            if let Some(v) = r.valid {
+                valid = Some(match valid.take() {
+                    Some(mut a) => {
+                        a.data.iter_mut().zip(&v.data).for_each(|(a, b)| *a *= b);
+                        a
+                    }
+                    None => v,
+                });
+            }
+            r.image
+        };
+        if let Some(d) = self.depth.as_mut() {
+            let map = d.depth(&ctx)?;
+            anyhow::ensure!(
+                map.units == inp.depth_units,
+                "--onnx depth gives {:?} depth but --depth-units says {:?}",
+                map.units,
+                inp.depth_units
+            );
+            inp.depth = Some(map.depth);
+        }
+        if let Some(d) = self.denoise.as_mut() {
+            inp.denoised = Some(keep(d.denoise(&ctx)?));
+        }
+        if let Some(d) = self.motion_deblur.as_mut() {
+            let flow = inp.flow.clone().context("--onnx motion-deblur=… needs --flow")?;
+            inp.motion_deblurred = Some(keep(MotionDeblurrer::deblur(d, &ctx, &flow)?));
+        }
+        if let Some(d) = self.defocus_deblur.as_mut() {
+            let depth = DepthMap {
+                depth: inp.depth.clone().context("--onnx defocus-deblur=… needs depth")?,
+                units: inp.depth_units,
+            };
+            inp.defocus_deblurred = Some(keep(DefocusDeblurrer::deblur(d, &ctx, &depth)?));
+        }
+        Ok(valid)
+    }
+}
+
+fn run_one(inp: &mut Loaded, nets: &mut Networks, opts: &FitOptions) -> Result<FitOutput> {
+    let valid = nets.complete(inp)?;
     let fi = FitInputs {
         image: &inp.image,
         denoised: inp.denoised.as_ref(),
         motion_deblurred: inp.motion_deblurred.as_ref(),
         defocus_deblurred: inp.defocus_deblurred.as_ref(),
         depth: inp.depth.as_ref(),
-        depth_units: args.geometry.depth_units.into(),
+        depth_units: inp.depth_units,
         flow: inp.flow.as_ref(),
-        reference_valid: None,
+        reference_valid: valid.as_ref(),
     };
     Ok(fit(&fi, opts)?)
 }
@@ -80,6 +171,7 @@ fn run_one(args: &FitArgs, inp: &Loaded, opts: &FitOptions) -> Result<FitOutput>
 pub fn run(args: FitArgs) -> Result<()> {
     let opts = FitOptions { tier: super::tier(args.tier), effects: super::effects(&args.only), ..Default::default() };
     let g = &args.geometry;
+    let mut nets = Networks::load(&args)?;
     let output = if let Some(dir) = &args.frames {
         let frames = list_frames(dir)?;
         let bar = frames_bar(frames.len());
@@ -93,7 +185,7 @@ pub fn run(args: FitArgs) -> Result<()> {
                     None => Ok(None),
                 }
             };
-            let inp = Loaded {
+            let mut inp = Loaded {
                 image: io::load_rgb(frame)?.0,
                 denoised: load(&args.denoised, "denoised")?,
                 motion_deblurred: load(&args.motion_deblurred, "motion-deblurred")?,
@@ -102,12 +194,13 @@ pub fn run(args: FitArgs) -> Result<()> {
                     Some(d) => Some(io::load_depth(&sibling(d, frame, "depth")?, g.depth_png_scale)?),
                     None => None,
                 },
+                depth_units: g.depth_units.into(),
                 flow: match &g.flow {
                     Some(d) => Some(io::load_flow(&sibling(d, frame, "flow")?)?),
                     None => None,
                 },
             };
-            let out = run_one(&args, &inp, &opts).with_context(|| format!("fitting {}", frame.display()))?;
+            let out = run_one(&mut inp, &mut nets, &opts).with_context(|| format!("fitting {}", frame.display()))?;
             models.push(out.model.clone());
             last = Some(out);
             bar.inc(1);
@@ -117,15 +210,16 @@ pub fn run(args: FitArgs) -> Result<()> {
         FitOutput { model, plots: last.map(|o| o.plots).unwrap_or_default() }
     } else {
         let image = args.image.as_ref().context("--image or --frames is required")?;
-        let inp = Loaded {
+        let mut inp = Loaded {
             image: io::load_rgb(image)?.0,
             denoised: load_opt_rgb(&args.denoised)?,
             motion_deblurred: load_opt_rgb(&args.motion_deblurred)?,
             defocus_deblurred: load_opt_rgb(&args.defocus_deblurred)?,
             depth: g.depth.as_ref().map(|p| io::load_depth(p, g.depth_png_scale)).transpose()?,
+            depth_units: g.depth_units.into(),
             flow: g.flow.as_ref().map(|p| io::load_flow(p)).transpose()?,
         };
-        run_one(&args, &inp, &opts).with_context(|| format!("fitting {}", image.display()))?
+        run_one(&mut inp, &mut nets, &opts).with_context(|| format!("fitting {}", image.display()))?
     };
     let json = output.model.to_json()?;
     std::fs::write(&args.out, json).with_context(|| format!("writing {}", args.out.display()))?;

@@ -58,6 +58,22 @@ impl From<DepthUnitsArg> for DepthUnits {
     }
 }
 
+/// `--onnx ROLE=PATH` flags, parsed: each role at most once.
+pub fn parse_onnx(flags: &[String]) -> anyhow::Result<Vec<(blind_augment::analysis::Role, PathBuf)>> {
+    use blind_augment::analysis::Role;
+    let mut out: Vec<(Role, PathBuf)> = vec![];
+    for f in flags {
+        let (role, path) = f.split_once('=').with_context(|| format!("--onnx `{f}`: expected ROLE=PATH"))?;
+        let names: Vec<&str> = Role::ALL.iter().map(|r| r.name()).collect();
+        let role = Role::parse(role.trim())
+            .with_context(|| format!("--onnx `{f}`: unknown role `{role}` (roles: {})", names.join(", ")))?;
+        anyhow::ensure!(!path.is_empty(), "--onnx `{f}`: the path is empty");
+        anyhow::ensure!(out.iter().all(|(r, _)| *r != role), "--onnx: role `{}` given twice", role.name());
+        out.push((role, PathBuf::from(path)));
+    }
+    Ok(out)
+}
+
 #[derive(clap::Args, Clone)]
 pub struct DepthArgs {
     /// Depth map: PFM, 16-bit PNG or .npy (H×W). Non-finite or ≤ 0 values are invalid.
@@ -100,6 +116,11 @@ pub struct FitArgs {
     /// Force a tier; by default accurate where a reference is given, fast elsewhere.
     #[arg(long, value_enum)]
     tier: Option<TierArg>,
+    /// Replace a role's provider by an ONNX model (repeatable): ROLE is denoise,
+    /// depth, flow, motion-deblur or defocus-deblur; the model must meet the role's
+    /// contract (README "Your own networks").
+    #[arg(long = "onnx", value_name = "ROLE=PATH")]
+    onnx: Vec<String>,
     /// Output camera model (JSON).
     #[arg(long)]
     out: PathBuf,
@@ -206,6 +227,11 @@ pub struct CalibrateArgs {
     /// reference).
     #[arg(long, default_value = "accurate")]
     tier: String,
+    /// Replace a role's provider by an ONNX model (repeatable): ROLE is denoise,
+    /// depth, flow, motion-deblur or defocus-deblur; the model must meet the role's
+    /// contract (README "Your own networks").
+    #[arg(long = "onnx", value_name = "ROLE=PATH")]
+    onnx: Vec<String>,
     /// Frame rate when --poses does not give times (and the nominal frame interval).
     #[arg(long, default_value_t = 30.0)]
     fps: f32,

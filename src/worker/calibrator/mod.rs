@@ -28,10 +28,11 @@
 mod aggregate;
 mod change;
 
+use crate::analysis::onnx::{OnnxDeblur, OnnxDenoiser, OnnxDepth, OnnxError, OnnxFlow, OnnxModel};
 use crate::analysis::timing::{PoseTrack, TimedPose};
 use crate::analysis::{
     Analysed, AnalysisError, DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, Frame, FrameContext, GivenFlow,
-    Intrinsics, LucasKanadeFlow, MotionDeblurrer, PoseDepthFlow, TemporalDenoiser, TemporalMotionDeblur,
+    Intrinsics, LucasKanadeFlow, MotionDeblurrer, PoseDepthFlow, Role, TemporalDenoiser, TemporalMotionDeblur,
 };
 use crate::fit::{self, Effects, FitInputs, FitOptions};
 use crate::model::{CameraModel, NoiseForm, Status};
@@ -167,6 +168,25 @@ impl Providers {
             motion_deblur,
             defocus_deblur: None,
         }
+    }
+
+    /// Replace `role`'s provider by the ONNX model at `path` (loaded under the role's
+    /// contract, `analysis::onnx`; a breach is an error naming the file). Depth:
+    /// used for frames that bring none. Flow: the network first, Lucas–Kanade when
+    /// it cannot serve a frame (the first one).
+    pub fn with_onnx(mut self, role: Role, path: &std::path::Path) -> Result<Self, OnnxError> {
+        let model = OnnxModel::load(role, path, None)?;
+        match role {
+            Role::Denoise => self.denoise = Some(Box::new(OnnxDenoiser::new(model))),
+            Role::MotionDeblur => self.motion_deblur = Some(Box::new(OnnxDeblur { model })),
+            Role::DefocusDeblur => self.defocus_deblur = Some(Box::new(OnnxDeblur { model })),
+            Role::Depth => self.depth = Some(Box::new(OnnxDepth { model })),
+            Role::Flow => {
+                self.flow = Box::new(OnnxFlow { model });
+                self.flow_fallback = Some(Box::new(LucasKanadeFlow::default()));
+            }
+        }
+        Ok(self)
     }
 
     /// Flow files instead of computed flow.
