@@ -412,7 +412,7 @@ fn cli_fit_and_calibrate_take_onnx_models() {
         "--poses",
         &format!("{d}/poses.csv"),
         "--intrinsics",
-        &std::fs::read_to_string(dir.join("intrinsics.txt")).expect("intrinsics").trim().to_string(),
+        std::fs::read_to_string(dir.join("intrinsics.txt")).expect("intrinsics").trim(),
         "--onnx",
         &onnx,
         "--only",
