@@ -146,6 +146,11 @@ fn main() {
     eprintln!("rendering 60 frames of 1280×960 …");
     let big_frames = frames(&scene, &big, big.frames);
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    // CALIB_BENCH_REFERENCES=1: only the noise-reference comparison (quick).
+    if std::env::var("CALIB_BENCH_REFERENCES").is_ok_and(|v| v == "1") {
+        noise_references(&big, &big_frames, &one);
+        return;
+    }
 
     println!("## Live calibration: the speed/accuracy trade per tier (`cargo bench --bench calibration`)\n");
     println!("Accuracy: 320×240, 150 frames at 30 Hz, the camera changing at {CHANGE_S} s (λ 0.5 → 0.25, noise std ×1.5). Compute: 1280×960, 60 frames (2 s), one thread: per update during the 1 s start-up burst (every effect, every frame) and after it (the tier's schedule), and per frame without an update (analysis and the change probe only). \"Converged\": λ within {CONVERGED_LAMBDA} and noise within {:.0}% at every publication from then on.\n", 100.0 * CONVERGED_NOISE);
@@ -228,4 +233,64 @@ fn main() {
         Ok(()) => eprintln!("wrote {}", path.display()),
         Err(e) => eprintln!("plot: {e}"),
     }
+}
+    noise_references(&big, &big_frames, &one);
+}
+
+/// Noise references compared on single 1280×960 frames of the same video, one
+/// thread: the shipped network (`assets/models/denoise.onnx`, tiled over its sample
+/// regions) feeding the accurate noise fit, against the blind fit of the frame
+/// alone. (The temporal reference's figures are the accurate tier's, above.)
+fn noise_references(spec: &SequenceSpec, frames: &[SequenceFrame], pool: &rayon::ThreadPool) {
+    use blind_augment::analysis::onnx::{OnnxDenoiser, OnnxModel};
+    use blind_augment::analysis::{Analysed, Denoiser, FrameContext, Role};
+    use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/models/denoise.onnx");
+    let mut net = OnnxDenoiser::new(OnnxModel::load(Role::Denoise, &path, None).expect("shipped model"));
+    let only_noise = Effects { noise: true, motion_blur: false, depth_of_field: false };
+    let (mut t_net, mut t_fit, mut t_blind, mut e_net, mut e_blind) = (vec![], vec![], vec![], vec![], vec![]);
+    for f in frames.iter().step_by(10).take(5) {
+        let a = Analysed {
+            frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
+            depth: None,
+            world_from_camera: None,
+            sparse_flow: None,
+        };
+        let ctx = FrameContext { current: &a, window: &[], poses: None, intrinsics: None, frame_interval_s: 1.0 / 30.0 };
+        pool.install(|| {
+            let t0 = Instant::now();
+            let r = net.denoise(&ctx).expect("network denoises");
+            t_net.push(t0.elapsed().as_secs_f64());
+            let mut inp = FitInputs::new(&f.image);
+            inp.denoised = Some(&r.image);
+            inp.reference_valid = r.valid.as_ref();
+            let t0 = Instant::now();
+            let m = fit(&inp, &FitOptions { tier: Some(Tier::Accurate), effects: only_noise, ..Default::default() })
+                .expect("fit");
+            t_fit.push(t0.elapsed().as_secs_f64());
+            e_net.push(noise_relative_error(&m.model.noise, &spec.truth.noise).map_or(f64::NAN, |e| e as f64));
+            let t0 = Instant::now();
+            let b = fit(&FitInputs::new(&f.image), &FitOptions { tier: Some(Tier::Fast), effects: only_noise, ..Default::default() })
+                .expect("fit");
+            t_blind.push(t0.elapsed().as_secs_f64());
+            e_blind.push(noise_relative_error(&b.model.noise, &spec.truth.noise).map_or(f64::NAN, |e| e as f64));
+        });
+    }
+    let med = |v: &[f64]| median(v.to_vec()).unwrap_or(f64::NAN);
+    let regions = net.regions(spec.view.width, spec.view.height);
+    println!(
+        "\n## Noise references on single 1280×960 frames (one thread, median of {} frames)\n",
+        t_net.len()
+    );
+    println!("| reference | reference ms | noise fit ms | noise error (median level-std error) |");
+    println!("|---|---|---|---|");
+    println!(
+        "| shipped network, {} regions of 240² ({} px) | {:.0} | {:.0} | {:.1}% |",
+        regions.len(),
+        regions.iter().map(|r| r.width * r.height).sum::<usize>(),
+        med(&t_net) * 1e3,
+        med(&t_fit) * 1e3,
+        med(&e_net) * 100.0
+    );
+    println!("| none (blind fit of the frame) | — | {:.0} | {:.1}% |", med(&t_blind) * 1e3, med(&e_blind) * 100.0);
 }
