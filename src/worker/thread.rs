@@ -1,5 +1,6 @@
 //! The calibrator on its own thread at background priority (nice 19 on desktop
-//! Linux and Android: `setpriority` per thread, through `thread-priority`), fed
+//! Linux and Android: `setpriority` per thread, through `thread-priority`; its
+//! data-parallel fits on a pool of its own whose threads are lowered too), fed
 //! through a latest-frame slot: `submit` replaces a frame the worker has not
 //! taken yet (counted as dropped), so a slow fit never queues frames without
 //! bound and the submitting thread (camera callback, frame loop) only ever holds
@@ -85,6 +86,24 @@ impl Worker {
             if let Some(e) = &stats.priority_error {
                 log::warn!("calibration thread: could not lower its priority ({e}); running at normal priority");
             }
+            // The fits are data-parallel (rayon). Run on the global pool they would
+            // execute on its threads at normal priority, whatever this thread's; so
+            // the calibrator gets its own pool whose threads lower themselves too.
+            let pool = rayon::ThreadPoolBuilder::new()
+                .thread_name(|i| format!("calibration-{i}"))
+                .start_handler(|_| {
+                    if let Err(e) = thread_priority::set_current_thread_priority(thread_priority::ThreadPriority::Min) {
+                        log::warn!("calibration pool thread: could not lower its priority ({e:?})");
+                    }
+                })
+                .build();
+            let pool = match pool {
+                Ok(p) => Some(p),
+                Err(e) => {
+                    log::warn!("calibration: no background thread pool ({e}); fits run on the shared pool");
+                    None
+                }
+            };
             loop {
                 let (frame, poses) = {
                     let mut slot = lock(&s.slot);
@@ -110,7 +129,11 @@ impl Worker {
                 }
                 let Some(frame) = frame else { continue };
                 let index = frame.index;
-                match calibrator.push_frame(frame) {
+                let result = match &pool {
+                    Some(p) => p.install(|| calibrator.push_frame(frame)),
+                    None => calibrator.push_frame(frame),
+                };
+                match result {
                     Ok(events) => {
                         stats.processed += 1;
                         for e in &events {
