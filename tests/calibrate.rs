@@ -119,7 +119,7 @@ fn fast_tier_publishes_every_frame_and_presence_does_not_flicker() {
 
 /// The worker thread: frames submitted far faster than it fits are dropped (the
 /// slot holds one), models arrive through the channel in generation order, the
-/// thread runs at lowered priority, and stopping it joins.
+/// thread and its fit pool run at lowered priority, and stopping it joins.
 #[test]
 fn worker_thread_drops_frames_and_publishes_through_the_channel() {
     let (spec, frames) = sequence();
@@ -135,6 +135,24 @@ fn worker_thread_drops_frames_and_publishes_through_the_channel() {
         worker.submit(frame(f), &[pose(spec, f.index + 2)]);
     }
     assert!(worker.wait_idle(std::time::Duration::from_secs(120)));
+    // Every calibration thread — the worker and its fit pool — runs at nice 19; a
+    // fit on the shared pool would run at normal priority beside the frame loop.
+    #[cfg(target_os = "linux")]
+    {
+        let mut nices = vec![];
+        for t in std::fs::read_dir("/proc/self/task").expect("/proc").flatten() {
+            let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
+            if comm.trim().starts_with("calibration") {
+                let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
+                // Fields after the parenthesised name: state is field 3, nice field 19.
+                let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+                let nice: i32 = rest.split_whitespace().nth(16).and_then(|v| v.parse().ok()).unwrap_or(0);
+                nices.push((comm.trim().to_string(), nice));
+            }
+        }
+        assert!(nices.len() >= 2, "worker and pool threads: {nices:?}");
+        assert!(nices.iter().all(|(_, n)| *n == 19), "calibration threads not at nice 19: {nices:?}");
+    }
     let stats = worker.stop();
     eprintln!(
         "submitted {}, dropped {}, processed {}, published {}, priority error {:?}",
