@@ -233,7 +233,6 @@ fn main() {
         Ok(()) => eprintln!("wrote {}", path.display()),
         Err(e) => eprintln!("plot: {e}"),
     }
-}
     noise_references(&big, &big_frames, &one);
 }
 
@@ -256,7 +255,8 @@ fn noise_references(spec: &SequenceSpec, frames: &[SequenceFrame], pool: &rayon:
             world_from_camera: None,
             sparse_flow: None,
         };
-        let ctx = FrameContext { current: &a, window: &[], poses: None, intrinsics: None, frame_interval_s: 1.0 / 30.0 };
+        let ctx =
+            FrameContext { current: &a, window: &[], poses: None, intrinsics: None, frame_interval_s: 1.0 / 30.0 };
         pool.install(|| {
             let t0 = Instant::now();
             let r = net.denoise(&ctx).expect("network denoises");
@@ -270,18 +270,18 @@ fn noise_references(spec: &SequenceSpec, frames: &[SequenceFrame], pool: &rayon:
             t_fit.push(t0.elapsed().as_secs_f64());
             e_net.push(noise_relative_error(&m.model.noise, &spec.truth.noise).map_or(f64::NAN, |e| e as f64));
             let t0 = Instant::now();
-            let b = fit(&FitInputs::new(&f.image), &FitOptions { tier: Some(Tier::Fast), effects: only_noise, ..Default::default() })
-                .expect("fit");
+            let b = fit(
+                &FitInputs::new(&f.image),
+                &FitOptions { tier: Some(Tier::Fast), effects: only_noise, ..Default::default() },
+            )
+            .expect("fit");
             t_blind.push(t0.elapsed().as_secs_f64());
             e_blind.push(noise_relative_error(&b.model.noise, &spec.truth.noise).map_or(f64::NAN, |e| e as f64));
         });
     }
     let med = |v: &[f64]| median(v.to_vec()).unwrap_or(f64::NAN);
     let regions = net.regions(spec.view.width, spec.view.height);
-    println!(
-        "\n## Noise references on single 1280×960 frames (one thread, median of {} frames)\n",
-        t_net.len()
-    );
+    println!("\n## Noise references on single 1280×960 frames (one thread, median of {} frames)\n", t_net.len());
     println!("| reference | reference ms | noise fit ms | noise error (median level-std error) |");
     println!("|---|---|---|---|");
     println!(
