@@ -276,6 +276,40 @@ fn run_tiled(model: &OnnxModel, img: &Rgb, regions: &[Region], margin: usize) ->
     Ok((out, valid))
 }
 
+/// The current frame through an image-to-image model over `regions`, as a
+/// reference valid where the tiles' interiors fell; unavailable for a frame
+/// smaller than one tile.
+fn tiled_reference(
+    model: &OnnxModel,
+    ctx: &FrameContext,
+    regions: &[Region],
+    provider: &'static str,
+) -> Result<Reference, AnalysisError> {
+    let frame = &ctx.current.frame;
+    let (th, tw) = model.hw;
+    if frame.image.width < tw || frame.image.height < th {
+        return Err(AnalysisError::unavailable(
+            frame.index,
+            provider,
+            format!(
+                "the {}×{} frame is smaller than the model's {tw}×{th} tile",
+                frame.image.width, frame.image.height
+            ),
+        ));
+    }
+    let (image, valid) = run_tiled(model, &frame.image, regions, TILE_MARGIN_PX)?;
+    Ok(Reference {
+        image,
+        valid: Some(valid),
+        // The ratio is for noise *independent* of the frame's (a mean of other
+        // frames). What a network leaves is its input's own noise, which shrinks the
+        // residual instead; it is measured (tests/onnx.rs, BENCHMARKS.md), not
+        // corrected for.
+        noise_variance_ratio: 0.0,
+        sources: vec![frame.index],
+    })
+}
+
 /// Pixels the network's zero padding can reach from a tile edge: the shipped
 /// denoiser's receptive field is 11 px (radius 5); 8 leaves room for user models
 /// of a few more layers.
@@ -330,26 +364,7 @@ impl super::Denoiser for OnnxDenoiser {
     }
     fn denoise(&mut self, ctx: &FrameContext) -> Result<Reference, AnalysisError> {
         let img = &ctx.current.frame.image;
-        let (th, tw) = self.model.hw;
-        if img.width < tw || img.height < th {
-            return Err(AnalysisError::unavailable(
-                ctx.current.frame.index,
-                "onnx denoise",
-                format!("the {}×{} frame is smaller than the model's {tw}×{th} tile", img.width, img.height),
-            ));
-        }
-        let regions = self.regions(img.width, img.height);
-        let (image, valid) = run_tiled(&self.model, img, &regions, TILE_MARGIN_PX)?;
-        Ok(Reference {
-            image,
-            valid: Some(valid),
-            // The ratio is for noise *independent* of the frame's (a mean of other
-            // frames). What a network leaves is its input's own noise, which shrinks
-            // the residual instead; it is measured (tests/onnx.rs, BENCHMARKS.md),
-            // not corrected for.
-            noise_variance_ratio: 0.0,
-            sources: vec![ctx.current.frame.index],
-        })
+        tiled_reference(&self.model, ctx, &self.regions(img.width, img.height), "onnx denoise")
     }
 }
 
@@ -361,17 +376,8 @@ pub struct OnnxDeblur {
 impl OnnxDeblur {
     fn reference(&self, ctx: &FrameContext) -> Result<Reference, AnalysisError> {
         let img = &ctx.current.frame.image;
-        let (th, tw) = self.model.hw;
-        if img.width < tw || img.height < th {
-            return Err(AnalysisError::unavailable(
-                ctx.current.frame.index,
-                "onnx deblur",
-                format!("the {}×{} frame is smaller than the model's {tw}×{th} tile", img.width, img.height),
-            ));
-        }
         let whole = [Region { x0: 0, y0: 0, width: img.width, height: img.height }];
-        let (image, valid) = run_tiled(&self.model, img, &whole, TILE_MARGIN_PX)?;
-        Ok(Reference { image, valid: Some(valid), noise_variance_ratio: 0.0, sources: vec![ctx.current.frame.index] })
+        tiled_reference(&self.model, ctx, &whole, "onnx deblur")
     }
 }
 

@@ -128,8 +128,28 @@ fn needs<'a>(ctx: &'a FrameContext, provider: &'static str) -> Result<&'a Intrin
     Ok(k)
 }
 
-fn valid_fraction(valid: &Plane) -> f32 {
-    valid.data.iter().filter(|v| **v > 0.5).count() as f32 / valid.data.len().max(1) as f32
+/// The mean of `picked` aligned to the current frame as a reference, refused when
+/// the aligned frames cover less than a quarter of it (`what` names them).
+fn mean_reference(
+    ctx: &FrameContext,
+    picked: &[&Arc<Analysed>],
+    k: &Intrinsics,
+    provider: &'static str,
+    what: &str,
+) -> Result<Reference, AnalysisError> {
+    let f = ctx.current.frame.index;
+    let (image, valid) = aligned_mean(ctx.current, picked, k)
+        .ok_or_else(|| AnalysisError::unavailable(f, provider, "alignment failed"))?;
+    let covered = valid.data.iter().filter(|v| **v > 0.5).count() as f32 / valid.data.len().max(1) as f32;
+    if covered < 0.25 {
+        return Err(AnalysisError::unavailable(f, provider, format!("{what} overlap less than 25% of this one")));
+    }
+    Ok(Reference {
+        image,
+        valid: Some(valid),
+        noise_variance_ratio: 1.0 / picked.len() as f32,
+        sources: picked.iter().map(|a| a.frame.index).collect(),
+    })
 }
 
 /// I_noNoise from the mean of aligned frames with matching motion.
@@ -180,17 +200,7 @@ impl Denoiser for TemporalDenoiser {
                 ),
             ));
         }
-        let (image, valid) = aligned_mean(ctx.current, &picked, k)
-            .ok_or_else(|| AnalysisError::unavailable(f, P, "alignment failed"))?;
-        if valid_fraction(&valid) < 0.25 {
-            return Err(AnalysisError::unavailable(f, P, "the aligned frames overlap less than 25% of this one"));
-        }
-        Ok(Reference {
-            image,
-            valid: Some(valid),
-            noise_variance_ratio: 1.0 / picked.len() as f32,
-            sources: picked.iter().map(|a| a.frame.index).collect(),
-        })
+        mean_reference(ctx, &picked, k, P, "the aligned frames")
     }
 }
 
@@ -235,17 +245,7 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         // Sharpest first; ties to the newest.
         sharp.sort_by(|a, b| a.1.total_cmp(&b.1).then(b.0.frame.t_s.total_cmp(&a.0.frame.t_s)));
         let picked: Vec<&Arc<Analysed>> = sharp.iter().take(self.frames).map(|(a, _)| *a).collect();
-        let (image, valid) = aligned_mean(ctx.current, &picked, k)
-            .ok_or_else(|| AnalysisError::unavailable(f, P, "alignment failed"))?;
-        if valid_fraction(&valid) < 0.25 {
-            return Err(AnalysisError::unavailable(f, P, "the sharp frames overlap less than 25% of this one"));
-        }
-        Ok(Reference {
-            image,
-            valid: Some(valid),
-            noise_variance_ratio: 1.0 / picked.len() as f32,
-            sources: picked.iter().map(|a| a.frame.index).collect(),
-        })
+        mean_reference(ctx, &picked, k, P, "the sharp frames")
     }
 }
 

@@ -78,8 +78,8 @@ pub fn denoise_pairs(photos: &[Rgb], count: usize, patch_px: usize, seed: u64) -
         PatchPairs { count, patch_px, clean: Vec::with_capacity(count * per), noisy: Vec::with_capacity(count * per) };
     let border = 16usize;
     let big = patch_px + 2 * border;
+    let usable: Vec<&Rgb> = photos.iter().filter(|p| p.width >= big && p.height >= big).collect();
     for _ in 0..count {
-        let usable: Vec<&Rgb> = photos.iter().filter(|p| p.width >= big && p.height >= big).collect();
         if usable.is_empty() {
             break;
         }
@@ -91,11 +91,10 @@ pub fn denoise_pairs(photos: &[Rgb], count: usize, patch_px: usize, seed: u64) -
             let mut p = Plane::new(big, big, 0.0);
             for y in 0..big {
                 for x in 0..big {
-                    let (mut sx, mut sy) = if transpose { (y, x) } else { (x, y) };
+                    let (mut sx, sy) = if transpose { (y, x) } else { (x, y) };
                     if flip {
                         sx = big - 1 - sx;
                     }
-                    sy = sy.min(big - 1);
                     p.data[y * big + x] = gain * photo.channels[c][(y0 + sy) * photo.width + x0 + sx];
                 }
             }
