@@ -45,6 +45,7 @@ fn case(w: usize, h: usize) -> Case {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
         depth_range: [0.5, 4.0],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("truth"),
     };
     truth.noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);

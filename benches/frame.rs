@@ -51,6 +51,7 @@ fn model() -> CameraModel {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 23.04, focus_depth: 3.143, c0: 0.2 }),
         depth_range: [0.3, 10.0],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("bench"),
     };
     m

@@ -62,6 +62,7 @@ fn main() {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
         depth_range: [0.5, 4.0],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("bench"),
     };
     for (w, h) in [(1680usize, 1760usize), (2064, 2208)] {

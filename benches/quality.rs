@@ -112,6 +112,7 @@ fn main() {
             units: DepthUnits::MetricM,
             curve: Some(*c),
             depth_range: [0.5, 4.0],
+            kernel: blind_augment::model::DofKernel::Gaussian,
             diagnostics: Diagnostics::not_fitted("truth"),
         })
         .collect();

@@ -86,6 +86,7 @@ fn fast_dof_within_stated_tolerance() {
             units: DepthUnits::MetricM,
             curve: Some(curve),
             depth_range: [0.5, 4.0],
+            kernel: blind_augment::model::DofKernel::Gaussian,
             diagnostics: Diagnostics::not_fitted("truth"),
         };
         let blurred = quantize8(&add_dof(&img, &depth, &truth));

@@ -177,6 +177,7 @@ fn confined_gbuffer_leaves_no_ghost() {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 20.0, focus_depth: 1.0, c0: 0.2 }),
         depth_range: [0.3, 10.0],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("test"),
     };
     let snap = Snapshot::new(1, model);

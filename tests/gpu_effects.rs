@@ -117,6 +117,7 @@ fn dof_pass_matches_cpu_reference() {
             units: DepthUnits::MetricM,
             curve: Some(DofCurve::ThinLens { k, focus_depth: 1.2, c0: 0.1 }),
             depth_range: [0.5, 4.0],
+            kernel: blind_augment::model::DofKernel::Gaussian,
             diagnostics: Diagnostics::not_fitted("test"),
         };
         let sigma = dof_sigma_map(&depth, &dof);

@@ -65,6 +65,7 @@ fn model(dof: bool, mb: bool, noise: bool) -> CameraModel {
             // (2.5 m) by ~1.1 px.
             curve: Some(DofCurve::ThinLens { k: 4.0, focus_depth: 1.5, c0: 0.0 }),
             depth_range: [0.3, 10.0],
+            kernel: blind_augment::model::DofKernel::Gaussian,
             diagnostics: Diagnostics::not_fitted("test"),
         };
     }
@@ -321,6 +322,55 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
         let cpu = twin(adaptive.mb_taps_per_px);
         check(&format!("mb_adaptive_eye{e}"), &out[e * n..(e + 1) * n], &cpu);
         assert!(changed(&cpu, &twin(0.0)) > 1e-5, "adaptive taps changed nothing");
+    }
+    let msgs = ctx.take_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// The disc kernel (`DofKernel::Disc`): `layer_dof_disc` against its twin
+/// `synth::layer::disc_scatter`, at full and half resolution, same tolerance as the
+/// Gaussian's. Focused at 1.5 m with k = 8: the square (0.8 m) blurs by ~4.7 px and
+/// the disc (2.5 m) by ~2.1 px, both drawn as discs (σ ≥ 1). Not vacuous: the disc
+/// result differs from the Gaussian of the same σ at p99 by more than twice the
+/// tolerance, and spreads alpha.
+#[test]
+fn layer_disc_dof_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("layer_disc_dof") else { return };
+    let layers = [test_layer(0), test_layer(1)];
+    let bg = vec![[0.3f32, 0.5, 0.7, 1.0]; W * H];
+    let rig = rig(&ctx, &layers, &bg);
+    let mut gaussian = model(true, false, false);
+    gaussian.depth_of_field.curve = Some(DofCurve::ThinLens { k: 8.0, focus_depth: 1.5, c0: 0.0 });
+    let mut m = gaussian.clone();
+    m.depth_of_field.kernel = DofKernel::Disc;
+    let full = Rect::full(W, H);
+    for half_res in [false, true] {
+        let settings = LayerSettings { dof_half_res: half_res, ..LayerSettings::default() };
+        let fxs = chain(&ctx, &rig, settings);
+        let fx = run(&ctx, &rig, &fxs, &m, 1);
+        assert!(fx.dof && fx.dof_disc);
+        let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
+        let step = settings.dof_step_px;
+        for e in 0..2 {
+            let n = W * H;
+            let (cpu, cpu_gauss) = if half_res {
+                let rh = ((fx.dof_radius_px + 1) / 2 + step - 1) / step * step;
+                (
+                    defocus_layer_half(&layers[e], &m.depth_of_field, fx.ppr_ratio, rh, step, full),
+                    defocus_layer_half(&layers[e], &gaussian.depth_of_field, fx.ppr_ratio, rh, step, full),
+                )
+            } else {
+                (
+                    defocus_layer(&layers[e], &m.depth_of_field, fx.ppr_ratio, fx.dof_radius_px, step, full),
+                    defocus_layer(&layers[e], &gaussian.depth_of_field, fx.ppr_ratio, fx.dof_radius_px, step, full),
+                )
+            };
+            check(&format!("disc_half{half_res}_eye{e}"), &dof_out[e * n..(e + 1) * n], &cpu);
+            // A GPU drawing the Gaussian instead would fail the check above.
+            let (_, p99_g) = stats(&format!("disc_vs_gauss_half{half_res}_eye{e}"), &cpu_gauss, &cpu);
+            assert!(p99_g > 8.0 / 255.0, "half {half_res}: disc too close to the Gaussian (p99 {p99_g})");
+            assert!(cpu[40 * W + 18][3] > 0.05, "half {half_res}: no alpha spread");
+        }
     }
     let msgs = ctx.take_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");

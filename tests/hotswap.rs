@@ -31,6 +31,7 @@ fn model_for(g: u64) -> CameraModel {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 1.0 + x, focus_depth: 0.5 + x, c0: 0.1 * x }),
         depth_range: [0.3, 5.0 + x],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("test"),
     };
     m.noise = Noise {

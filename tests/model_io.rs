@@ -23,6 +23,7 @@ fn sample_model() -> CameraModel {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 2.0, focus_depth: 1.5, c0: 0.1 }),
         depth_range: [0.3, 5.0],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("x"),
     };
     m
@@ -35,6 +36,23 @@ fn json_round_trip_and_schema_tag() {
     assert!(text.contains("\"schema\": \"blind-augment/camera-model/1\""));
     assert!(text.contains("\"form\": \"thin_lens\""));
     assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
+}
+
+/// The DoF kernel shape round-trips; files written before it existed (no `kernel`)
+/// read as the Gaussian they meant; an unknown shape is refused.
+#[test]
+fn dof_kernel_shape_round_trips_and_defaults_to_gaussian() {
+    let mut m = sample_model();
+    m.depth_of_field.kernel = DofKernel::Disc;
+    let text = m.to_json().expect("valid");
+    assert!(text.contains("\"kernel\": \"disc\""), "{text}");
+    assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
+    let mut v = serde_json::to_value(&m).expect("serialises");
+    v["depth_of_field"].as_object_mut().expect("object").remove("kernel");
+    let old = CameraModel::from_json(&v.to_string()).expect("old file parses");
+    assert_eq!(old.depth_of_field.kernel, DofKernel::Gaussian);
+    v["depth_of_field"]["kernel"] = serde_json::json!("hexagon");
+    assert!(CameraModel::from_json(&v.to_string()).is_err());
 }
 
 /// Each bad value is rejected with an error naming its field.

@@ -8,7 +8,7 @@ mod common;
 
 use blind_augment::image::{discrete_gaussian_kernel, laplacian_pyramid, Flow, Plane, Rgb};
 use blind_augment::model::*;
-use blind_augment::synth::{self, add_defocus, add_motion_blur, noise_field};
+use blind_augment::synth::{self, add_defocus, add_defocus_disc, add_dof, add_motion_blur, noise_field};
 use common::*;
 
 /// Laplacian collapse is exact for every size (1e-5: f32 rounding over 4 levels).
@@ -54,6 +54,63 @@ fn defocus_kernel_has_the_requested_variance() {
     }
     // The discrete Gaussian itself: variance exact (see image::blur tests).
     assert_eq!(discrete_gaussian_kernel(0.0).len(), 1);
+}
+
+/// The disc kernel on an impulse: mass 1, per-axis variance σ² (within 3.3% for
+/// radii under 4 px, 0.6% above: the lattice effect bounded in model::kernels), a
+/// flat top (every pixel well inside the disc has the same weight, unlike any
+/// Gaussian) and nothing beyond the radius; below 1 px it is the Gaussian.
+#[test]
+fn disc_defocus_kernel_is_a_disc_of_the_requested_second_moment() {
+    let n = 65;
+    let c0 = 32;
+    let mut img = Rgb::new(n, n, [0.0; 3]);
+    for c in 0..3 {
+        img.channels[c][c0 * n + c0] = 1.0;
+    }
+    for sigma in [1.0f32, 2.75, 4.5, 9.9] {
+        let out = add_defocus_disc(&img, &Plane::new(n, n, sigma));
+        let ch = &out.channels[0];
+        let sum: f64 = ch.iter().map(|&v| v as f64).sum();
+        let var_x: f64 = (0..n * n).map(|i| ch[i] as f64 * ((i % n) as f64 - c0 as f64).powi(2)).sum::<f64>() / sum;
+        let r = kernels::disc_radius_px(sigma);
+        let bound = if r >= 4.0 { 0.006 } else { 0.033 };
+        assert!((sum - 1.0).abs() < 1e-4, "σ {sigma}: mass {sum}");
+        assert!((var_x / (sigma as f64).powi(2) - 1.0).abs() < bound, "σ {sigma}: variance {var_x}");
+        let at = |dx: i32, dy: i32| ch[((c0 as i32 + dy) * n as i32 + c0 as i32 + dx) as usize];
+        let inner = (r - 1.0).floor() as i32;
+        if inner >= 1 {
+            assert!((at(inner, 0) - at(0, 0)).abs() < 1e-6, "σ {sigma}: not flat inside");
+        }
+        let outer = (r + 1.0).ceil() as i32;
+        assert_eq!(at(outer, 0), 0.0, "σ {sigma}: weight beyond the radius");
+    }
+    // Below DISC_MIN_SIGMA_PX the Gaussian, exactly.
+    let s = Plane::new(n, n, 0.6);
+    assert_eq!(add_defocus_disc(&img, &s), add_defocus(&img, &s));
+}
+
+/// add_dof draws the model's kernel shape: the same δ(Z) gives a disc or a Gaussian.
+#[test]
+fn add_dof_follows_the_kernel_shape() {
+    let img = crop(&photo("chelsea.png"), 0, 0, 96, 80);
+    let depth = Plane::new(96, 80, 1.0);
+    let mut dof = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::Constant { c: 3.0 }),
+        depth_range: [0.5, 2.0],
+        kernel: DofKernel::Gaussian,
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    let gauss = add_dof(&img, &depth, &dof);
+    assert_eq!(gauss, add_defocus(&img, &Plane::new(96, 80, 3.0)));
+    dof.kernel = DofKernel::Disc;
+    let disc = add_dof(&img, &depth, &dof);
+    assert_eq!(disc, add_defocus_disc(&img, &Plane::new(96, 80, 3.0)));
+    let diff: f32 = disc.channels[1].iter().zip(&gauss.channels[1]).map(|(a, b)| (a - b).abs()).sum::<f32>()
+        / disc.channels[1].len() as f32;
+    assert!(diff > 1e-3, "disc and Gaussian agree (mean |Δ| {diff})");
 }
 
 /// Motion blur of a vertical edge moving horizontally is a linear ramp of exactly

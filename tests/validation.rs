@@ -78,6 +78,7 @@ fn truth_dof(units: DepthUnits, curve: DofCurve, range: [f32; 2]) -> DepthOfFiel
         units,
         curve: Some(curve),
         depth_range: range,
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("truth"),
     }
 }

@@ -111,6 +111,7 @@ fn model(exposure: f32) -> CameraModel {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 1.5, focus_depth: 3.0, c0: 0.2 }),
         depth_range: [0.3, 10.0],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("test"),
     };
     m

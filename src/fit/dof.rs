@@ -96,6 +96,7 @@ fn finish(
         units,
         curve: Some(fit.curve),
         depth_range: range,
+        kernel: crate::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted(""),
     };
     let max_sigma =

@@ -135,6 +135,21 @@ pub enum DofCurve {
     Constant { c: f32 },
 }
 
+/// The shape of the defocus point-spread function (the image of the aperture).
+/// δ(Z) is always the std of the Gaussian with the same second moment, so a model
+/// switches shape without changing its curve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DofKernel {
+    /// Discrete Gaussian of std δ (the paper's addDoF).
+    #[default]
+    Gaussian,
+    /// Uniform disc (a round aperture, what real lenses draw: Neural Cameras fig. 5),
+    /// radius `kernels::disc_radius_px(δ)` ≈ 2δ, pixel-area anti-aliased; below
+    /// `kernels::DISC_MIN_SIGMA_PX` the Gaussian of the same δ.
+    Disc,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DepthOfField {
@@ -144,6 +159,10 @@ pub struct DepthOfField {
     pub curve: Option<DofCurve>,
     /// Depth range fitted on; evaluation clamps Z into it.
     pub depth_range: [f32; 2],
+    /// Kernel shape; absent in files written before it existed (read as Gaussian,
+    /// which is what those files meant), so the schema version is unchanged.
+    #[serde(default)]
+    pub kernel: DofKernel,
     pub diagnostics: Diagnostics,
 }
 
@@ -263,7 +282,7 @@ impl DofCurve {
 
 impl DepthOfField {
     pub fn absent(units: DepthUnits, diagnostics: Diagnostics) -> Self {
-        Self { present: false, units, curve: None, depth_range: [0.0, 0.0], diagnostics }
+        Self { present: false, units, curve: None, depth_range: [0.0, 0.0], kernel: DofKernel::Gaussian, diagnostics }
     }
 
     /// δ(Z) in reference pixels; 0 for absent effects and invalid depth. Z is clamped

@@ -1,5 +1,6 @@
 //! The production effect chain on the virtual layer, recorded into one frame's
-//! command buffer after the G-buffer pass: DoF (separable scatter, `layer_dof_h/v`)
+//! command buffer after the G-buffer pass: DoF (separable scatter, `layer_dof_h/v`,
+//! or the 2-D disc scatter `layer_dof_disc` when the model's kernel is a disc)
 //! → MB (McGuire 2012 tile-max / neighbour-max reconstruction, `layer_mb_*`) →
 //! grain (the paper's Laplacian synthesis at the content's luma, `GrainRecorder`)
 //! → composite over the background with the blurred alpha (`composite.comp`).
@@ -26,6 +27,7 @@ const DOF_DOWN: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_down
 const DOF_UP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_up.spv"));
 const DOF_H: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_h.spv"));
 const DOF_V: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_v.spv"));
+const DOF_DISC: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_disc.spv"));
 const DOF_REACH: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_dof_reach.spv"));
 const MB_TILES: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_tiles.spv"));
 const MB_NEIGHBOUR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_neighbour.spv"));
@@ -138,6 +140,9 @@ impl Default for LayerSettings {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameEffects {
     pub dof: bool,
+    /// The model's DoF kernel is a disc: one 2-D scatter (`layer_dof_disc`) instead
+    /// of the Gaussian's h/v pair.
+    pub dof_disc: bool,
     pub motion_blur: bool,
     pub noise: bool,
     /// Eye-buffer / camera `pixels_per_radian`.
@@ -203,6 +208,7 @@ impl FrameEffects {
         }
         Self {
             dof: dof && dof_radius_px > 0,
+            dof_disc: dof_model.kernel == crate::model::DofKernel::Disc,
             motion_blur: exposure_ratio > 0.0 && exposure_ratio.is_finite(),
             noise: model.noise.present && settings.grain,
             ppr_ratio,
@@ -233,6 +239,7 @@ pub struct LayerEffects<'a> {
     settings: LayerSettings,
     dof_h: ComputePipeline<'a>,
     dof_v: ComputePipeline<'a>,
+    dof_disc: ComputePipeline<'a>,
     mb_tiles: ComputePipeline<'a>,
     mb_neighbour: ComputePipeline<'a>,
     mb_gather: ComputePipeline<'a>,
@@ -323,6 +330,7 @@ impl<'a> LayerEffects<'a> {
             // Set 0: full resolution, set 1: half resolution.
             dof_h: ComputePipeline::with_layout(ctx, DOF_H, &[st, st, st, st, st], push, 2, "layer dof h")?,
             dof_v: ComputePipeline::with_layout(ctx, DOF_V, &[st, st, st, st], push, 2, "layer dof v")?,
+            dof_disc: ComputePipeline::with_layout(ctx, DOF_DISC, &[st, st, st, st], push, 2, "layer dof disc")?,
             dof_sigma: ComputePipeline::with_layout(ctx, DOF_SIGMA, &[ub, st, st, st], push, 1, "layer dof sigma")?,
             dof_reach: ComputePipeline::with_layout(ctx, DOF_REACH, &[st, st], push, 1, "layer dof reach")?,
             dof_down: ComputePipeline::with_layout(
@@ -369,6 +377,7 @@ impl<'a> LayerEffects<'a> {
             &[I(colour), I(&me.sigma_full), I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_reach_sigma)],
         )?;
         me.dof_v.bind_resources(0, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_out), I(&me.dof_reach_sigma)])?;
+        me.dof_disc.bind_resources(0, &[I(colour), I(&me.sigma_full), I(&me.dof_out), I(&me.dof_reach_sigma)])?;
         me.dof_down.bind_resources(
             0,
             &[B(&me.params), I(colour), I(motion), I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tile_sigma)],
@@ -378,6 +387,10 @@ impl<'a> LayerEffects<'a> {
             &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_reach_sigma)],
         )?;
         me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half), I(&me.dof_reach_sigma)])?;
+        me.dof_disc.bind_resources(
+            1,
+            &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_half), I(&me.dof_reach_sigma)],
+        )?;
         me.dof_up.bind_resources(0, &[I(&me.dof_half), I(&me.dof_out)])?;
         me.mb_tiles.bind_resources(0, &[I(motion), I(&me.tiles)])?;
         me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;
@@ -478,14 +491,22 @@ impl<'a> LayerEffects<'a> {
                 self.dof_down.record(cmd, bytemuck::bytes_of(&push), groups(hgw, hgh));
                 // One invocation per 8×8 block of the scatter grid.
                 self.dof_reach.record(cmd, bytemuck::bytes_of(&hp), groups((hgw + 7) / 8, (hgh + 7) / 8));
-                self.dof_h.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
-                self.dof_v.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
+                if fx.dof_disc {
+                    self.dof_disc.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
+                } else {
+                    self.dof_h.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
+                    self.dof_v.record_set(cmd, 1, bytemuck::bytes_of(&hp), groups(hgw, hgh));
+                }
                 self.dof_up.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             } else {
                 self.dof_sigma.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
                 self.dof_reach.record(cmd, bytemuck::bytes_of(&push), groups((gw + 7) / 8, (gh + 7) / 8));
-                self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
-                self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+                if fx.dof_disc {
+                    self.dof_disc.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+                } else {
+                    self.dof_h.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+                    self.dof_v.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
+                }
             }
             source = 1;
         }
@@ -555,6 +576,7 @@ mod tests {
             units: DepthUnits::MetricM,
             curve: Some(DofCurve::ThinLens { k: 23.04, focus_depth: 3.143, c0: 0.2 }),
             depth_range: [0.3, 10.0],
+            kernel: crate::model::DofKernel::Gaussian,
             diagnostics: Diagnostics::not_fitted("test"),
         };
         m

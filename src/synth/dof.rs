@@ -8,9 +8,15 @@
 //! blended kernel's variance exactly σ². Exact at σ = 0 (S_0 is the image) and at
 //! every node; between nodes the kernel is a two-Gaussian mixture of the right
 //! variance. Cost grows like σ_max^1.5, not σ_max².
+//!
+//! A disc kernel (`DofKernel::Disc`, a round aperture) is not separable and has no
+//! semigroup law: `add_defocus_disc` gathers each pixel's own pixel-area-sampled
+//! disc of radius `kernels::disc_radius_px(σ)` directly (clamp-to-edge, like the
+//! Gaussian), with the Gaussian below `kernels::DISC_MIN_SIGMA_PX`.
 
 use crate::image::{blur_separable, discrete_gaussian_kernel, Plane, Rgb};
-use crate::model::{DepthOfField, MAX_DOF_SIGMA_PX};
+use crate::model::kernels::{disc_radius_px, disc_tap, DISC_MIN_SIGMA_PX};
+use crate::model::{DepthOfField, DofKernel, MAX_DOF_SIGMA_PX};
 use rayon::prelude::*;
 
 pub use crate::model::DOF_NODE_SPACING_PX;
@@ -69,10 +75,79 @@ pub fn add_defocus(sharp: &Rgb, sigma_px: &Plane) -> Rgb {
     Rgb { width: sharp.width, height: sharp.height, channels: [next(), next(), next()] }
 }
 
-/// addDoF(I, δ, Z).
+/// Blur each pixel with its own disc of second-moment std σ from `sigma_px`
+/// (clamped to [0, MAX_DOF_SIGMA_PX]); σ below `DISC_MIN_SIGMA_PX` takes the
+/// Gaussian of `add_defocus`. A gather: pixel p averages the image over its own
+/// disc, weights = pixel-area coverage / πR² (mass 1 exactly, `kernels::disc_tap`).
+pub fn add_defocus_disc(sharp: &Rgb, sigma_px: &Plane) -> Rgb {
+    let sig: Vec<f32> =
+        sigma_px.data.iter().map(|&s| if s.is_finite() { s.clamp(0.0, MAX_DOF_SIGMA_PX) } else { 0.0 }).collect();
+    let small = Plane::from_vec(
+        sigma_px.width,
+        sigma_px.height,
+        sig.iter().map(|&s| if s < DISC_MIN_SIGMA_PX { s } else { 0.0 }).collect(),
+    );
+    let mut out = add_defocus(sharp, &small);
+    let (w, h) = (sharp.width, sharp.height);
+    let rows: Vec<(usize, Vec<[f32; 3]>)> = (0..h)
+        .into_par_iter()
+        .filter_map(|y| {
+            // Kernel cache per row: constant-depth regions reuse one kernel.
+            let mut cached: (f32, Vec<(isize, isize, f32)>) = (f32::NAN, vec![]);
+            let mut row = vec![];
+            for x in 0..w {
+                let s = sig[y * w + x];
+                if s < DISC_MIN_SIGMA_PX {
+                    continue;
+                }
+                if s.to_bits() != cached.0.to_bits() {
+                    let r = disc_radius_px(s).ceil() as isize + 1;
+                    let taps = (-r..=r)
+                        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+                        .filter_map(|(dx, dy)| {
+                            let k = disc_tap(dx as f32, dy as f32, 0.5, s);
+                            (k > 0.0).then_some((dx, dy, k))
+                        })
+                        .collect();
+                    cached = (s, taps);
+                }
+                let mut acc = [0.0f32; 3];
+                for &(dx, dy, k) in &cached.1 {
+                    let xs = (x as isize + dx).clamp(0, w as isize - 1) as usize;
+                    let ys = (y as isize + dy).clamp(0, h as isize - 1) as usize;
+                    let i = ys * w + xs;
+                    for (c, a) in acc.iter_mut().enumerate() {
+                        *a += k * sharp.channels[c][i];
+                    }
+                }
+                row.push(acc);
+            }
+            (!row.is_empty()).then_some((y, row))
+        })
+        .collect();
+    for (y, row) in rows {
+        let mut it = row.into_iter();
+        for x in 0..w {
+            if sig[y * w + x] >= DISC_MIN_SIGMA_PX {
+                if let Some(acc) = it.next() {
+                    for (c, a) in acc.iter().enumerate() {
+                        out.channels[c][y * w + x] = *a;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// addDoF(I, δ, Z) with the model's kernel shape.
 pub fn add_dof(sharp: &Rgb, depth: &Plane, dof: &DepthOfField) -> Rgb {
     if !dof.present {
         return sharp.clone();
     }
-    add_defocus(sharp, &dof_sigma_map(depth, dof))
+    let sigma = dof_sigma_map(depth, dof);
+    match dof.kernel {
+        DofKernel::Gaussian => add_defocus(sharp, &sigma),
+        DofKernel::Disc => add_defocus_disc(sharp, &sigma),
+    }
 }

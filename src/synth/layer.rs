@@ -6,7 +6,8 @@
 
 use crate::image::LUMA_WEIGHTS;
 pub use crate::model::{half_rect, tile_rect, Rect};
-use crate::model::{DepthOfField, DepthUnits, MAX_DOF_SIGMA_PX};
+use crate::model::kernels::{disc_tap, DISC_MIN_SIGMA_PX};
+use crate::model::{DepthOfField, DepthUnits, DofKernel, MAX_DOF_SIGMA_PX};
 
 /// One eye of the virtual layer: premultiplied RGBA and (motion x, motion y in px
 /// per render frame, depth in m, coverage) per pixel, row-major.
@@ -148,8 +149,89 @@ pub fn separable_scatter(
     out
 }
 
-/// Full-resolution defocus of one eye over `rect`: σ plane, then the separable
-/// scatter. Pixels outside `rect` keep their input.
+/// Tap of the disc scatter (`shaders/dof_disc.glsl`): a source of std `sigma`
+/// spreads its disc (`kernels::disc_tap`, cells of half-size `h`) or, below
+/// `DISC_MIN_SIGMA_PX`, the separable Gaussian's product of 1-D taps.
+pub fn disc_scatter_tap(dx: f32, dy: f32, h: f32, sigma: f32) -> f32 {
+    if sigma < DISC_MIN_SIGMA_PX {
+        return tap(dx, h, sigma) * tap(dy, h, sigma);
+    }
+    disc_tap(dx, dy, h, sigma)
+}
+
+/// 2-D scatter-as-gather of a disc kernel over `rect` (`layer_dof_disc.comp`): each
+/// source pixel (σ ≥ 0) spreads its own disc over the receivers within `radius`
+/// (taps every `step` px). A disc is not separable, so one 2-D pass replaces the
+/// Gaussian's two 1-D passes. Pixels outside `rect` keep `colour`.
+pub fn disc_scatter(
+    colour: &[[f32; 4]],
+    sigma: &[f32],
+    width: usize,
+    radius: i32,
+    step: i32,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    let (w, step) = (width as i32, step.max(1));
+    let h = 0.5 * step as f32;
+    let idx = |x: i32, y: i32| (y * w + x) as usize;
+    let mut out = colour.to_vec();
+    for y in rect.y..rect.y + rect.h {
+        for x in rect.x..rect.x + rect.w {
+            let mut acc = [0.0f32; 4];
+            let mut dy = -radius;
+            while dy <= radius {
+                let sy = y + dy;
+                let ody = dy;
+                dy += step;
+                if sy < rect.y || sy >= rect.y + rect.h {
+                    continue;
+                }
+                let mut dx = -radius;
+                while dx <= radius {
+                    let sx = x + dx;
+                    let odx = dx;
+                    dx += step;
+                    if sx < rect.x || sx >= rect.x + rect.w {
+                        continue;
+                    }
+                    let sg = sigma[idx(sx, sy)];
+                    if sg < 0.0 {
+                        continue;
+                    }
+                    let k = disc_scatter_tap(odx as f32, ody as f32, h, sg);
+                    if k == 0.0 {
+                        continue;
+                    }
+                    let c = colour[idx(sx, sy)];
+                    for i in 0..4 {
+                        acc[i] += k * c[i];
+                    }
+                }
+            }
+            out[idx(x, y)] = acc;
+        }
+    }
+    out
+}
+
+/// The scatter of the model's kernel shape.
+fn scatter(
+    kernel: DofKernel,
+    colour: &[[f32; 4]],
+    sigma: &[f32],
+    width: usize,
+    radius: i32,
+    step: i32,
+    rect: Rect,
+) -> Vec<[f32; 4]> {
+    match kernel {
+        DofKernel::Gaussian => separable_scatter(colour, sigma, width, radius, step, rect),
+        DofKernel::Disc => disc_scatter(colour, sigma, width, radius, step, rect),
+    }
+}
+
+/// Full-resolution defocus of one eye over `rect`: σ plane, then the scatter of the
+/// model's kernel shape. Pixels outside `rect` keep their input.
 pub fn defocus_layer(
     layer: &Layer,
     dof: &DepthOfField,
@@ -159,10 +241,10 @@ pub fn defocus_layer(
     rect: Rect,
 ) -> Vec<[f32; 4]> {
     let sigma = dof_sigma_plane(layer, dof, ppr_ratio, rect);
-    separable_scatter(&layer.colour, &sigma, layer.width, radius, step, rect)
+    scatter(dof.kernel, &layer.colour, &sigma, layer.width, radius, step, rect)
 }
 
-/// Half-resolution defocus (`layer_dof_down.comp` → separable scatter at half
+/// Half-resolution defocus (`layer_dof_down.comp` → the kernel's scatter at half
 /// resolution with σ/2 and radius `radius_half` → `layer_dof_up.comp`): 2×2 box
 /// average of the premultiplied colour and the alpha-weighted σ/2 of the covered
 /// pixels, the scatter, then a bilinear upsample (clamped to the half rectangle).
@@ -206,7 +288,7 @@ pub fn defocus_layer_half(
             sigma[j] = if sw > 0.0 { ss / sw } else { -1.0 };
         }
     }
-    let blurred = separable_scatter(&colour, &sigma, hw, radius_half, step, hr);
+    let blurred = scatter(dof.kernel, &colour, &sigma, hw, radius_half, step, hr);
     let mut out = layer.colour.clone();
     let fetch = |x: i32, y: i32| {
         let xc = x.clamp(hr.x, hr.x + hr.w - 1);
@@ -231,7 +313,7 @@ pub fn defocus_layer_half(
 }
 
 /// The unapproximated reference: every covered pixel scatters a 2-D Gaussian of its
-/// own σ (pixel-integrated, 4σ reach) over the whole eye. The production pass's
+/// own σ (pixel-integrated, 4σ reach) — or its disc — over the whole eye. The production pass's
 /// quality settings are measured against this.
 pub fn defocus_layer_exact(layer: &Layer, dof: &DepthOfField, ppr_ratio: f32) -> Vec<[f32; 4]> {
     let (w, h) = (layer.width as i32, layer.height as i32);
@@ -247,6 +329,7 @@ pub fn defocus_layer_exact(layer: &Layer, dof: &DepthOfField, ppr_ratio: f32) ->
             let r = (4.0 * sigma).ceil() as i32;
             let c = layer.colour[i];
             let kx: Vec<f32> = (-r..=r).map(|d| tap(d as f32, 0.5, sigma)).collect();
+            let disc = dof.kernel == DofKernel::Disc && sigma >= DISC_MIN_SIGMA_PX;
             for dy in -r..=r {
                 let y = sy + dy;
                 if y < 0 || y >= h {
@@ -258,7 +341,7 @@ pub fn defocus_layer_exact(layer: &Layer, dof: &DepthOfField, ppr_ratio: f32) ->
                     if x < 0 || x >= w {
                         continue;
                     }
-                    let k = ky * kx[(dx + r) as usize];
+                    let k = if disc { disc_tap(dx as f32, dy as f32, 0.5, sigma) } else { ky * kx[(dx + r) as usize] };
                     let o = &mut out[(y * w + x) as usize];
                     for ch in 0..4 {
                         o[ch] += k * c[ch];

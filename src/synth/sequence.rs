@@ -329,6 +329,7 @@ impl SequenceSpec {
             // 1.2 px per dioptre away from 3.1 m at the 320-px view, scaled with it.
             curve: Some(DofCurve::ThinLens { k: 1.2 * scale * 3.0, focus_depth: 3.1, c0: 0.3 * scale }),
             depth_range: [lo, hi],
+            kernel: crate::model::DofKernel::Gaussian,
             diagnostics: Diagnostics::not_fitted("ground truth"),
         };
         let change = change_at_s.map(|t| {

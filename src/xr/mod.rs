@@ -281,6 +281,7 @@ pub fn default_camera() -> CameraModel {
         units: DepthUnits::MetricM,
         curve: Some(DofCurve::ThinLens { k: 1.5, focus_depth: 1.5, c0: 0.2 }),
         depth_range: [0.3, 10.0],
+        kernel: crate::model::DofKernel::Gaussian,
         diagnostics: placeholder(),
     };
     m

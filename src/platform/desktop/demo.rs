@@ -84,6 +84,7 @@ fn truth_model(w: usize, h: usize, depth: &Plane) -> CameraModel {
             c0: 0.2,
         }),
         depth_range: [lo, hi],
+        kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("ground truth"),
     };
     m
