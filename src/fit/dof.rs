@@ -29,7 +29,7 @@
 
 use super::curve::fit_dof_curve;
 use crate::image::{blur_separable, discrete_gaussian_kernel, gradient_sq, Plane, Rgb};
-use crate::model::{DepthOfField, DepthUnits, Diagnostics, Status};
+use crate::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, DofKernel, Status};
 use std::sync::OnceLock;
 use std::time::Instant;
 
@@ -327,10 +327,33 @@ pub fn fit_accurate(
     finish("accurate", zs.clone(), sig, units, started, st, residual_at)
 }
 
-/// Raw Zhuo–Sim estimate → true σ, from a 1-D simulation (see module docs).
-fn zhuo_sim_table() -> &'static Vec<(f32, f32)> {
-    static T: OnceLock<Vec<(f32, f32)>> = OnceLock::new();
-    T.get_or_init(|| {
+/// Edge-spread function of a unit step at distance `d` (px) blurred by `kernel` of
+/// second-moment std `sigma`: erf for the Gaussian; for the disc of radius R the
+/// integral of its line-spread function (2/(πR²))·√(R² − t²).
+fn edge_spread(kernel: DofKernel, d: f32, sigma: f32) -> f32 {
+    if sigma < 1e-3 {
+        return (d > 0.0) as u8 as f32;
+    }
+    match kernel {
+        DofKernel::Gaussian => 0.5 * (1.0 + erf(d / (sigma * std::f32::consts::SQRT_2))),
+        DofKernel::Disc => {
+            let r = crate::model::kernels::disc_radius_px(sigma).max(1e-3);
+            let t = (d / r).clamp(-1.0, 1.0);
+            0.5 + (t * (1.0 - t * t).sqrt() + t.asin()) / std::f32::consts::PI
+        }
+    }
+}
+
+/// Raw Zhuo–Sim estimate → true σ for each kernel shape, from a 1-D simulation
+/// (see module docs).
+fn zhuo_sim_table(kernel: DofKernel) -> &'static Vec<(f32, f32)> {
+    static GAUSSIAN: OnceLock<Vec<(f32, f32)>> = OnceLock::new();
+    static DISC: OnceLock<Vec<(f32, f32)>> = OnceLock::new();
+    let cell = match kernel {
+        DofKernel::Gaussian => &GAUSSIAN,
+        DofKernel::Disc => &DISC,
+    };
+    cell.get_or_init(|| {
         let n = 96usize;
         let k0 = discrete_gaussian_kernel(ZS_SIGMA0 * ZS_SIGMA0);
         let mut table = vec![];
@@ -339,18 +362,10 @@ fn zhuo_sim_table() -> &'static Vec<(f32, f32)> {
             let mut raw_sum = 0.0;
             let phases = [0.0f32, 0.25, 0.5, 0.75];
             for &ph in &phases {
-                // Pixel-integrated step at n/2 + ph blurred by a Gaussian of std σ,
-                // sampled at pixel centres (erf profile).
-                let data: Vec<f32> = (0..n)
-                    .map(|x| {
-                        let d = x as f32 - (n as f32 / 2.0 + ph);
-                        if sigma < 1e-3 {
-                            (d > 0.0) as u8 as f32
-                        } else {
-                            0.5 * (1.0 + erf(d / (sigma * std::f32::consts::SQRT_2)))
-                        }
-                    })
-                    .collect();
+                // Step at n/2 + ph blurred by the kernel of std σ, sampled at pixel
+                // centres.
+                let data: Vec<f32> =
+                    (0..n).map(|x| edge_spread(kernel, x as f32 - (n as f32 / 2.0 + ph), sigma)).collect();
                 let p = Plane::from_vec(n, 1, data);
                 let re = blur_separable(&p, &k0);
                 let g =
@@ -376,8 +391,8 @@ fn erf(x: f32) -> f32 {
     y.copysign(x)
 }
 
-fn calibrate(raw: f32) -> f32 {
-    let t = zhuo_sim_table();
+fn calibrate(raw: f32, kernel: DofKernel) -> f32 {
+    let t = zhuo_sim_table(kernel);
     // The table is monotone in σ; interpolate raw → σ.
     if raw <= t[0].0 {
         return 0.0;
@@ -441,10 +456,91 @@ pub fn fit_fast(
             if r <= 1.0 {
                 continue;
             }
-            let raw = ZS_SIGMA0 / (r * r - 1.0).sqrt();
-            sig.push(calibrate(raw).min(opts.dof_max_sigma_px));
+            sig.push(ZS_SIGMA0 / (r * r - 1.0).sqrt());
             zs.push(z);
         }
     }
-    finish("fast", zs, sig, units, started, st, |_| None)
+    st.lap("edges");
+    // Kernel shape (and a uniformly defocused frame's blur) from the spectrum, over
+    // tiles whose depth is valid.
+    let tile_ok = |x0: usize, y0: usize, t: usize| {
+        (y0..y0 + t).step_by(8).all(|yy| (x0..x0 + t).step_by(8).all(|x| valid_depth(depth.get(x, yy), units)))
+    };
+    let spectrum = super::defocus_spectrum::disc_signature(&y, tile_ok);
+    st.lap("spectrum");
+    let kernel = match &spectrum {
+        Some(s) if s.is_disc => DofKernel::Disc,
+        _ => DofKernel::Gaussian,
+    };
+    let shape_note = match &spectrum {
+        Some(s) => format!(
+            "kernel {} (spectrum over {} tiles of {} px: cepstral ring z {:.1} at R {:.2} px, second-notch contrast {:.3}; \
+             a disc needs z ≥ {} and contrast ≥ {})",
+            if s.is_disc { "disc" } else { "gaussian" },
+            s.tiles,
+            s.tile_px,
+            s.ring_z,
+            s.radius_px,
+            s.notch_contrast,
+            super::defocus_spectrum::RING_MIN_Z,
+            super::defocus_spectrum::NOTCH_MIN_CONTRAST
+        ),
+        None => "kernel gaussian (too few textured tiles with valid depth for the spectrum)".into(),
+    };
+    // One depth across the frame: the spectrum's disc is the answer (edge ratios are
+    // biased by thin strokes and texture; the ring measures the aperture itself).
+    if let (Some(s), Some(range)) = (spectrum.as_ref().filter(|s| s.is_disc), constant_depth(depth, units)) {
+        let c = s.sigma_px.min(opts.dof_max_sigma_px);
+        let present = c >= 0.1 && c > 3.0 * s.stderr_px;
+        let dof = DepthOfField {
+            present,
+            units,
+            curve: Some(DofCurve::Constant { c }),
+            depth_range: range,
+            kernel,
+            diagnostics: Diagnostics {
+                status: if present { Status::Present } else { Status::Absent },
+                reason: format!(
+                    "one depth across the frame: constant δ {c:.3} px from the disc radius ({} px, second moment); \
+                     {shape_note}; {} edge samples not used",
+                    s.radius_px,
+                    sig.len()
+                ),
+                method: "fast".into(),
+                residual_before: None,
+                residual_after: None,
+                samples_used: s.tiles as u64,
+                fit_time_s: started.elapsed().as_secs_f64(),
+                stderr: Some(s.stderr_px as f64),
+                stages_s: st.done(),
+            },
+        };
+        return (dof, None);
+    }
+    let sig: Vec<f32> = sig.into_iter().map(|raw| calibrate(raw, kernel).min(opts.dof_max_sigma_px)).collect();
+    let (mut dof, plot) = finish("fast", zs, sig, units, started, st, |_| None);
+    if dof.curve.is_some() {
+        dof.kernel = kernel;
+        dof.diagnostics.reason = format!("{}; {shape_note}", dof.diagnostics.reason);
+    }
+    (dof, plot)
+}
+
+/// The depth range when the frame holds one depth (inverse depth's 5–95% spread
+/// within 2% of its median, over every 4th pixel), else `None`.
+fn constant_depth(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
+    let mut z: Vec<f32> = (0..depth.height)
+        .step_by(4)
+        .flat_map(|y| (0..depth.width).step_by(4).map(move |x| (x, y)))
+        .map(|(x, y)| depth.get(x, y))
+        .filter(|&v| valid_depth(v, units))
+        .collect();
+    if z.len() < MIN_SAMPLES {
+        return None;
+    }
+    z.sort_by(f32::total_cmp);
+    let n = z.len();
+    let (lo, mid, hi) = (z[n / 20], z[n / 2], z[n - 1 - n / 20]);
+    let (ul, um, uh) = (units.inverse_depth(lo), units.inverse_depth(mid), units.inverse_depth(hi));
+    ((uh - ul).abs() <= 0.02 * um.abs().max(1e-6)).then_some([z[0], z[n - 1]])
 }

@@ -11,6 +11,7 @@
 
 mod aggregate;
 mod curve;
+pub mod defocus_spectrum;
 mod dof;
 mod motion_blur;
 mod noise;
