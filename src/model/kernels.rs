@@ -149,7 +149,9 @@ mod tests {
     /// discretisation, ≤ perimeter/400 per unit area ≈ 1%).
     #[test]
     fn disc_cell_area_matches_point_count() {
-        for &(dx, dy, r) in &[(0.0f32, 0.0f32, 0.7f32), (3.0, 0.0, 3.2), (2.0, 2.0, 3.0), (0.0, 5.0, 5.3), (4.0, 1.0, 4.4)] {
+        for &(dx, dy, r) in
+            &[(0.0f32, 0.0f32, 0.7f32), (3.0, 0.0, 3.2), (2.0, 2.0, 3.0), (0.0, 5.0, 5.3), (4.0, 1.0, 4.4)]
+        {
             let n = 400;
             let mut inside = 0u32;
             for j in 0..n {

@@ -387,10 +387,8 @@ impl<'a> LayerEffects<'a> {
             &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_reach_sigma)],
         )?;
         me.dof_v.bind_resources(1, &[I(&me.dof_tmp), I(&me.sigma_tmp), I(&me.dof_half), I(&me.dof_reach_sigma)])?;
-        me.dof_disc.bind_resources(
-            1,
-            &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_half), I(&me.dof_reach_sigma)],
-        )?;
+        me.dof_disc
+            .bind_resources(1, &[I(&me.colour_half), I(&me.sigma_half), I(&me.dof_half), I(&me.dof_reach_sigma)])?;
         me.dof_up.bind_resources(0, &[I(&me.dof_half), I(&me.dof_out)])?;
         me.mb_tiles.bind_resources(0, &[I(motion), I(&me.tiles)])?;
         me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;

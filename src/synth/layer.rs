@@ -5,8 +5,8 @@
 //! unapproximated reference the quality settings are measured against.
 
 use crate::image::LUMA_WEIGHTS;
-pub use crate::model::{half_rect, tile_rect, Rect};
 use crate::model::kernels::{disc_tap, DISC_MIN_SIGMA_PX};
+pub use crate::model::{half_rect, tile_rect, Rect};
 use crate::model::{DepthOfField, DepthUnits, DofKernel, MAX_DOF_SIGMA_PX};
 
 /// One eye of the virtual layer: premultiplied RGBA and (motion x, motion y in px
