@@ -218,7 +218,7 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
             *s += (c.norm_sqr() + 1e-10).ln();
         }
     }
-    let halves = [(tiles.len() + 1) / 2, tiles.len() / 2];
+    let halves = [tiles.len().div_ceil(2), tiles.len() / 2];
     let mut analyse = |log_spec: &[f32]| -> Option<(f32, f32, Vec<f32>)> {
         for (b, &v) in buf.iter_mut().zip(log_spec) {
             *b = Complex32::new(v, 0.0);
