@@ -21,15 +21,17 @@
 //!    Gaussian's smooth fall gives ≈ 0. The first zero is not used: it sits where the
 //!    scene's own spectrum bends most.
 //!
-//! Measured on synthetic discs and Gaussians over the two bundled photographs
-//! (8-bit, noise 0.01; prototype in NumPy, figures in tests/real_blur.rs): discs of
-//! R 5.5–15 give rings of z 7.6–40 and notch contrasts 0.21–1.63; Gaussians of σ 1–8
-//! notch contrasts ≤ 0.07 (rings up to z 12 at σ 3–5: the knee), sharp frames ≤ 0.14.
-//! Discs under R ≈ 2.7 px put the second notch past Nyquist: undecidable, reported
-//! as such (a blur that small looks the same drawn either way).
+//! Measured (tests/real_blur.rs: 8-bit, noise std 0.01, the two bundled
+//! photographs): discs of σ 1.5–8 px on the 512² astronaut and σ 3–4.5 px on the
+//! 451×300 cat give rings of z 7.2–85 and notch contrasts 0.23–2.2; Gaussians of σ
+//! 1–8 px and the sharp frames give notch contrasts ≤ 0.17 (rings up to z 14.7 at
+//! σ 5: the knee); the real defocused photograph z 31, contrast 0.22. The contrast
+//! threshold sits in a thin gap — stated, not hidden. Discs under R ≈ 2.7 px
+//! (σ ≈ 1.4) put the second notch past Nyquist: undecidable, reported as Gaussian
+//! (a blur that small looks nearly the same drawn either way).
 //!
 //! Size: 2R = dip + 0.5 (the parabola's offset of the broad cepstral dip, measured
-//! 0.1–1.3 px over R 3–15 on the astronaut photo), σ = √(R²/4 + 1/12) (the
+//! 0.1–1.3 px over R 3–15 on the astronaut photo in a NumPy prototype), σ = √(R²/4 + 1/12) (the
 //! pixel-sampled disc's second moment, `model::kernels::disc_radius_px`). Its
 //! standard error is the split-half one: the radius from even and from odd tiles.
 
