@@ -11,25 +11,8 @@ use blind_augment::synth::{add_defocus, add_defocus_disc};
 use common::*;
 
 fn q8(img: &Rgb, seed: u64) -> Rgb {
-    // 8-bit with a little sensor noise (std 0.01), like a real frame.
-    let mut s = seed;
-    let mut out = img.clone();
-    for c in 0..3 {
-        for v in out.channels[c].iter_mut() {
-            // Box–Muller on a splitmix64 stream.
-            let mut next = || {
-                s = s.wrapping_add(0x9E37_79B9_7F4A_7C15);
-                let mut z = s;
-                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-                ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-            };
-            let (u1, u2) = (next().max(1e-12), next());
-            let n = (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos();
-            *v = ((*v + 0.01 * n as f32).clamp(0.0, 1.0) * 255.0).round() / 255.0;
-        }
-    }
-    out
+    // 8-bit with a little white sensor noise (std 0.01), like a real frame.
+    quantize8(&add_sensor_noise(img, [1e-4; 3], [0.0; 3], seed))
 }
 
 /// Blind DoF of the fast tier with one constant depth (the photo's depth is unknown:
@@ -67,11 +50,11 @@ fn real_defocused_photo_reads_as_a_disc_of_the_measured_size() {
 
 /// Known answers with the project's disc and Gaussian kernels on the two bundled
 /// photographs (8-bit, noise std 0.01). Discs are recognised and sized within 10% of
-/// their σ (measured: −6% … +0.7%) where the frame holds enough 256-px tiles (the
-/// 512² astronaut: σ 1.5–8) or, on the 451×300 cat (128-px tiles only), up to
-/// σ 4.5 (larger rings fall below z 4 there: reported as Gaussian, measured
-/// z 3.9 at σ 6.5); Gaussians of σ 1–8 and the sharp frames never read as discs
-/// (measured notch contrasts ≤ 0.17 against the 0.18 threshold; discs ≥ 0.23).
+/// their σ (measured: −5.0% … +1.0%) where the frame holds enough 256-px tiles (the
+/// 512² astronaut: σ 1.5–8) or, on the 451×300 cat (128-px tiles only), σ 3–4.5
+/// (larger rings fall below z 4 there: reported as Gaussian, measured z 3.8 at
+/// σ 6.5); Gaussians of σ 1–8 and the sharp frames never read as discs (measured
+/// notch contrasts ≤ 0.13 against the 0.18 threshold; discs ≥ 0.29).
 #[test]
 fn synthetic_discs_and_gaussians_are_told_apart() {
     for (name, disc_sigmas) in [("astronaut.png", &[1.5f32, 3.0, 4.5, 6.5, 8.0][..]), ("chelsea.png", &[3.0, 4.5][..])]

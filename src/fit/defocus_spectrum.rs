@@ -23,10 +23,10 @@
 //!
 //! Measured (tests/real_blur.rs: 8-bit, noise std 0.01, the two bundled
 //! photographs): discs of σ 1.5–8 px on the 512² astronaut and σ 3–4.5 px on the
-//! 451×300 cat give rings of z 7.2–85 and notch contrasts 0.23–2.2; Gaussians of σ
-//! 1–8 px and the sharp frames give notch contrasts ≤ 0.17 (rings up to z 14.7 at
-//! σ 5: the knee); the real defocused photograph z 31, contrast 0.22. The contrast
-//! threshold sits in a thin gap — stated, not hidden. Discs under R ≈ 2.7 px
+//! 451×300 cat give rings of z 7.0–96 and notch contrasts 0.29–2.2; Gaussians of σ
+//! 1–8 px and the sharp frames give notch contrasts ≤ 0.13 (rings up to z 12.2 at
+//! σ 8: the knee); the real defocused photograph z 31, contrast 0.22. The real
+//! photograph clears the 0.18 threshold by a thin margin — stated, not hidden. Discs under R ≈ 2.7 px
 //! (σ ≈ 1.4) put the second notch past Nyquist: undecidable, reported as Gaussian
 //! (a blur that small looks nearly the same drawn either way).
 //!
