@@ -42,6 +42,8 @@ fn model_for(g: u64) -> CameraModel {
             .collect(),
         lowpass: None,
         luminance_range: [0.02, 0.98],
+        bins: vec![],
+        blocking: None,
         diagnostics: Diagnostics::not_fitted("test"),
     };
     m

@@ -178,6 +178,8 @@ fn noise_synthesis_matches_the_model_per_level() {
         levels: (0..NOISE_LEVELS).map(level).collect(),
         lowpass: None,
         luminance_range: [0.0, 1.0],
+        bins: vec![],
+        blocking: None,
         diagnostics: Diagnostics::not_fitted("test"),
     };
     let field = noise_field(&Plane::new(n, n, 0.4), &noise, 11);
@@ -200,6 +202,8 @@ fn synthesis_is_deterministic_per_seed() {
         levels: vec![NoiseLevel { slope: [1e-4; 3], intercept: [1e-5; 3] }; NOISE_LEVELS],
         lowpass: None,
         luminance_range: [0.0, 1.0],
+        bins: vec![],
+        blocking: None,
         diagnostics: Diagnostics::not_fitted("test"),
     };
     let a = synth::apply_camera_model(&img, &model, None, None, 1);

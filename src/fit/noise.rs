@@ -21,9 +21,10 @@
 //!   extreme value in any channel of I) are excluded; the luma range of the used
 //!   samples is recorded.
 //!
-//! Blind (`fit_fast`): level-0 statistics of I alone at its flattest samples per luma
-//! bin, coarser levels by white-noise band ratios; the low-pass is not identifiable
-//! from one frame (it is the image itself) and is left out.
+//! Blind (`fit_fast`): every band-pass level measured on I alone, at its flattest
+//! samples per luma bin (flatness judged two levels coarser); a confidence per luma
+//! bin and codec blocking are reported; the low-pass is not identifiable from one
+//! frame (it is the image itself) and is left out.
 //!
 //! Present when the level-0 std at mid-range luma exceeds 3 standard errors and
 //! 1e-4 (0.026/255: far below visibility).
@@ -51,6 +52,13 @@ const BLIND_FLAT_FRACTION: f64 = 0.2;
 const BLIND_STRIDE_PX: usize = 4;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
+/// Largest std ratio of a level to the next finer one that still reads as noise.
+/// Measured: white noise 0.25 (level 1/0), 0.45, 0.50; the vtest clip's codec noise
+/// 0.50, 0.65, 0.67 (temporal reference); the flattest samples of textured frames
+/// 1.1–3 (the astronaut's level 2 over level 1, the vtest frame's levels 1–3).
+const MAX_LEVEL_STD_RATIO: f32 = 0.8;
+/// Fewest flat samples a bin is measured on (a median of fewer scatters by > 25% at level 3).
+const BLIND_MIN_FLAT: usize = 12;
 
 /// Regression data of one level: window moments of luma B(Y), B(Y²), per-channel
 /// local variance, optional per-sample weights.
@@ -326,6 +334,14 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
 /// any white level, while unclipped float frames (over- and undershoot included)
 /// have no repeated extreme and lose nothing.
 fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
+    clip_mask_of(img, block, valid, &[0, 1, 2])
+}
+
+/// `clip_mask` counting clipped values in `channels` only (the blind tier measures
+/// each channel where that channel is unclipped: on the vtest clip the dark grass's
+/// blue channel sits at 0 in 8% of the pixels, which would otherwise take the green
+/// and red noise of the whole lawn with it).
+fn clip_mask_of(img: &Rgb, block: usize, valid: Option<&Plane>, channels: &[usize]) -> ClipMask {
     let n = img.len();
     let min_count = (n / 2000).max(2);
     // One pass per channel: extremes and how often each occurs.
@@ -370,7 +386,7 @@ fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
     let (bw, bh) = (img.width.div_ceil(block), img.height.div_ceil(block));
     let mut blocks = Plane::new(bw, bh, 0.0);
     for i in 0..n {
-        let clipped = (0..3).any(|c| {
+        let clipped = channels.iter().any(|&c| {
             let v = img.channels[c][i];
             limits[c].0 == Some(v) || limits[c].1 == Some(v)
         });
@@ -472,6 +488,8 @@ fn finish(
         levels,
         lowpass,
         luminance_range: luma_range,
+        bins: vec![],
+        blocking: None,
         diagnostics: Diagnostics::not_fitted(""),
     };
     // Uncertainty of the level-0 std at mid-range luma, from the affine-variance
@@ -583,148 +601,390 @@ pub fn fit_accurate(
     (noise, plot_data(&points))
 }
 
-/// Median / mean of level-0 local variances (9×9, σ = 4 window) of white noise:
-/// texture leaking into the "flat" set only ever adds variance, and a median
-/// ignores a minority of such samples where a mean does not. Measured once on a
-/// 256×256×3 field (relative standard error ≈ 0.3%).
-fn white_noise_median_to_mean() -> f32 {
-    static R: std::sync::OnceLock<f32> = std::sync::OnceLock::new();
-    *R.get_or_init(|| {
-        let n = 256usize;
-        let mut v = vec![];
-        let mut sum = 0.0f64;
-        let win = window(0);
+/// Median / mean of level-`l` local variances (9×9 window of σ = 4/2^l) of white
+/// noise's band l: texture leaking into the "flat" set only ever adds variance, and
+/// a median ignores a minority of such samples where a mean does not. The window
+/// holds fewer independent samples at coarser levels (σ = 0.5 px at level 3), so
+/// the ratio falls with l. Measured once on a 512×512×3 field (relative standard
+/// error ≤ 0.3% at level 0, ≤ 1.5% at level 3).
+fn white_noise_median_to_mean(level: usize) -> f32 {
+    static R: std::sync::OnceLock<[f32; NOISE_LEVELS]> = std::sync::OnceLock::new();
+    R.get_or_init(|| {
+        let n = 512usize;
+        let mut v: Vec<Vec<f32>> = vec![vec![]; NOISE_LEVELS];
+        let mut sums = [0.0f64; NOISE_LEVELS];
         for c in 0..3u32 {
             let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c, 0xb1d)).collect();
-            let band = laplacian_pyramid(&Plane::from_vec(n, n, data), 1).bands.swap_remove(0);
-            for y in grid(n, 4) {
-                for x in grid(n, 4) {
-                    let m = local_mean_sq(&band, x, y, &win);
-                    sum += m as f64;
-                    v.push(m);
+            let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
+            for (l, band) in pyr.bands.iter().enumerate() {
+                let win = window(l);
+                let stride = (4 >> l).max(1);
+                for y in grid(band.height, stride) {
+                    for x in grid(band.width, stride) {
+                        let m = local_mean_sq(band, x, y, &win);
+                        sums[l] += m as f64;
+                        v[l].push(m);
+                    }
                 }
             }
         }
-        let mean = (sum / v.len() as f64) as f32;
-        percentile(&mut v, 0.5) / mean
+        std::array::from_fn(|l| {
+            let mean = (sums[l] / v[l].len() as f64) as f32;
+            percentile(&mut v[l], 0.5) / mean
+        })
+    })[level.min(NOISE_LEVELS - 1)]
+}
+
+/// One luma bin's blind measurement at one level.
+struct BinMeasure {
+    y: f32,
+    y2: f32,
+    var: [f32; 3],
+    n: usize,
+    /// Relative standard error of the bin's std (mean over channels).
+    rel_se: f32,
+}
+
+/// Periodic block-grid discontinuities of a block-transform codec (JPEG, MPEG-4,
+/// H.264 at 8 px): the mean absolute luma step across each column (row) phase mod 8,
+/// over the flatter half of the frame (where blocking shows and texture does not
+/// mask it). Blocking is reported when one phase exceeds the median of the other
+/// seven by `BLOCKING_RATIO` in both directions; unblocked frames measured here stay
+/// below 1.05 (the astronaut, the cat, synthetic noise), the vtest clip's DivX
+/// frames reach ~1.3 (tests/real_noise.rs).
+fn detect_blocking(luma: &Plane, structure: &Plane, scale: usize) -> Option<crate::model::Blocking> {
+    const PERIOD: usize = 8;
+    let (w, h) = (luma.width, luma.height);
+    if w < 4 * PERIOD || h < 4 * PERIOD {
+        return None;
+    }
+    // Flat pixels: structure magnitude below its median (structure is a signed band
+    // at 1/scale resolution).
+    let mut s: Vec<f32> = structure.data.iter().map(|v| v.abs()).collect();
+    let med = percentile(&mut s, 0.5);
+    let flat = |x: usize, y: usize| structure.get_clamped((x / scale) as isize, (y / scale) as isize).abs() <= med;
+    let (mut col, mut ncol, mut row, mut nrow) =
+        ([0.0f64; PERIOD], [0usize; PERIOD], [0.0f64; PERIOD], [0usize; PERIOD]);
+    for y in 0..h - 1 {
+        for x in 0..w - 1 {
+            if !flat(x, y) {
+                continue;
+            }
+            let v = luma.data[y * w + x];
+            col[x % PERIOD] += (luma.data[y * w + x + 1] - v).abs() as f64;
+            ncol[x % PERIOD] += 1;
+            row[y % PERIOD] += (luma.data[(y + 1) * w + x] - v).abs() as f64;
+            nrow[y % PERIOD] += 1;
+        }
+    }
+    let peak = |sum: &[f64; PERIOD], n: &[usize; PERIOD]| -> Option<(usize, f32)> {
+        let m: Vec<f64> = (0..PERIOD).map(|i| sum[i] / n[i].max(1) as f64).collect();
+        let k = (0..PERIOD).max_by(|&a, &b| m[a].total_cmp(&m[b]))?;
+        let mut rest: Vec<f32> = (0..PERIOD).filter(|&i| i != k).map(|i| m[i] as f32).collect();
+        let base = percentile(&mut rest, 0.5) as f64;
+        (base > 0.0).then(|| (k, (m[k] / base) as f32))
+    };
+    let (px, rx) = peak(&col, &ncol)?;
+    let (py, ry) = peak(&row, &nrow)?;
+    let strength = rx.min(ry);
+    (strength >= BLOCKING_RATIO).then_some(crate::model::Blocking {
+        period_px: PERIOD as u32,
+        phase_px: [px as u32, py as u32],
+        strength,
     })
 }
 
+/// Smallest boundary/interior step ratio reported as blocking (see `detect_blocking`).
+const BLOCKING_RATIO: f32 = 1.15;
+
 /// Fast tier: the frame alone.
 ///
-/// Only level 0 is measured: coarser bands of a textured frame are dominated by the
-/// scene, and one frame cannot tell coarse noise from texture. Flat samples are the
-/// 20% with the least level-2 luma band energy in their luma bin (their median
-/// variance, calibrated by `white_noise_median_to_mean`); that band is
-/// (nearly) uncorrelated with level-0 noise, so selecting on it does not bias the
-/// level-0 variance the way picking the lowest variances would. Levels 1–3 follow
-/// from level 0 by the white-noise band ratios c_l/c_0 (`synth::unit_band_std`): an
-/// assumption (ISP-correlated noise breaks it) stated in the README.
+/// Every band-pass level is measured on the frame itself (real noise is shaped by
+/// demosaicing, in-camera denoising, sharpening and compression, so coarse levels do
+/// not follow from level 0 by white-noise ratios — on the vtest clip level 1 holds
+/// 0.45× level 0's std where white noise would hold 0.49×, and level 3 1.6× the white
+/// prediction). At level l, per luma bin (16 bins of the smoothed luma), the flat
+/// samples are the `BLIND_FLAT_FRACTION` with the least luma energy two levels
+/// coarser (band l+2: structure that spans the level-l window, and nearly
+/// uncorrelated with level-l noise, so selecting on it does not bias the level-l
+/// variance the way picking the lowest variances would); their median local
+/// variance, calibrated by `white_noise_median_to_mean(l)`, is the bin's value.
+/// Binning by luma means dark bins are measured on dark samples: shadows are never
+/// judged flat or textured by the bright parts' standard. Bins more than 30% above
+/// their level's fitted line are texture and dropped (one-sided). The low-pass is
+/// not identifiable from one frame (it is the image itself) and is left out.
 pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    // Only level 0 of each channel is needed: band = x − expand(reduce(x)).
-    let bands: Vec<Plane> =
-        (0..3).into_par_iter().map(|c| laplacian_pyramid(&image.plane(c), 1).bands.swap_remove(0)).collect();
-    // Luma Gaussian pyramid 0..=3: level 1 (expanded) is the smoothed luma used for
-    // binning, since I's own luma carries the noise; band 2 = G2 − expand(G3) is the
-    // structure measure.
-    let gp = gaussian_pyramid(&image.luma(), 3);
-    let luma0 = crate::image::expand(&gp[1], gp[0].width, gp[0].height);
-    let mut band2 = crate::image::expand(&gp[3], gp[2].width, gp[2].height);
-    for (b, g) in band2.data.iter_mut().zip(&gp[2].data) {
-        *b = g - *b;
-    }
-    st.lap("blur");
-    // About 20 000 grid points whatever the frame size (4 px at 512², 8 px at 1280×960).
-    let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as usize).max(BLIND_STRIDE_PX);
-    let clip = clip_mask(image, 8, None);
-    let win0 = window(0);
-    let win2 = window(2);
-    // Phase 1, cheap: (B(Y), B(Y²), structure) at level-0 grid points with
-    // unclipped footprints. Phase 2 computes the three channel variances only for
-    // the flattest BLIND_FLAT_FRACTION of each luma bin.
-    let mut pts: Vec<(usize, usize, f32, f32, f32)> = vec![];
-    for y in grid(image.height, stride0) {
-        for x in grid(image.width, stride0) {
-            if clip.touches(x, y, 5 * 4 + 8, false) {
-                continue;
+    let bands: Vec<Vec<Plane>> =
+        (0..3).into_par_iter().map(|c| laplacian_pyramid(&image.plane(c), NOISE_LEVELS).bands).collect();
+    // Luma Gaussian pyramid 0..=L+2: level l+1 (expanded) is the smoothed luma used
+    // for binning level l (I's own luma carries the noise); band l+2 =
+    // G_{l+2} − expand(G_{l+3}) is level l's structure measure.
+    let gp = gaussian_pyramid(&image.luma(), NOISE_LEVELS + 2);
+    let smooth: Vec<Plane> = (0..NOISE_LEVELS)
+        .into_par_iter()
+        .map(|l| crate::image::expand(&gp[l + 1], gp[l].width, gp[l].height))
+        .collect();
+    let structure: Vec<Plane> = (2..NOISE_LEVELS + 2)
+        .into_par_iter()
+        .map(|k| {
+            let mut b = crate::image::expand(&gp[k + 1], gp[k].width, gp[k].height);
+            for (v, g) in b.data.iter_mut().zip(&gp[k].data) {
+                *v = g - *v;
             }
-            let structure = local_mean_sq(&band2, (x / 4).min(band2.width - 1), (y / 4).min(band2.height - 1), &win2);
-            pts.push((x, y, local_mean(&luma0, x, y, &win0), local_mean_sq(&luma0, x, y, &win0), structure));
-        }
-    }
+            b
+        })
+        .collect();
+    st.lap("blur");
+    let blocking = detect_blocking(&gp[0], &structure[0], 4);
+    // About 20 000 level-0 grid points whatever the frame size (4 px at 512², 8 px at
+    // 1280×960); coarser levels halve the stride until every sample is used.
+    let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as usize).max(BLIND_STRIDE_PX);
+    let clip: [ClipMask; 3] = std::array::from_fn(|c| clip_mask_of(image, 8, None, &[c]));
+    let measured: Vec<Vec<BinMeasure>> = (0..NOISE_LEVELS)
+        .into_par_iter()
+        .map(|l| measure_level(l, &bands, &smooth[l], &structure[l], &clip, stride0))
+        .collect();
     st.lap("search");
-    let median_to_mean = white_noise_median_to_mean();
-    let (mut ys, mut y2s, mut vs, mut ws) = (vec![], vec![], [vec![], vec![], vec![]], vec![]);
-    for b in 0..BLIND_BINS {
-        let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
-        let mut bin: Vec<&(usize, usize, f32, f32, f32)> = pts.iter().filter(|p| p.2 >= lo && p.2 < hi).collect();
-        if bin.len() < BLIND_MIN_PER_BIN {
+    // Levels with fewer than 3 usable bins (tiny or fully textured frames) cannot be
+    // fitted on their own: they follow the finest measured level by white-noise band
+    // ratios, and the reason says so.
+    // Levels are measured finest first. A level stops being identifiable where the
+    // frame's flattest samples are texture rather than noise: with fewer than 3 flat
+    // bins, or when its median std over the bins it shares with the finer level
+    // exceeds `MAX_LEVEL_STD_RATIO` times that level's (camera noise falls toward
+    // coarse levels, texture does not). It and every coarser level then follow the
+    // finest measured level by the measured per-level decay (the two finest measured
+    // levels' excess over white, see below) or, with one level, the white-noise
+    // ratios; the reason names them.
+    let (mut points, mut measured_levels, mut derived): (Vec<LevelPoints>, Vec<usize>, Vec<usize>) =
+        (vec![], vec![], vec![]);
+    let mut prev: Option<Vec<&BinMeasure>> = None;
+    for (l, bins) in measured.iter().enumerate() {
+        let bins = trim_textured(bins);
+        let grows = prev.as_ref().is_some_and(|p| median_std_ratio(&bins, p).map_or(true, |r| r > MAX_LEVEL_STD_RATIO));
+        // Level 0 may stand on fewer than 3 bins (a narrow-luma frame); coarser ones not.
+        let too_few = bins.is_empty() || (l > 0 && bins.len() < 3);
+        if !derived.is_empty() || grows || too_few {
+            derived.push(l);
             continue;
         }
-        bin.sort_by(|a, b| a.4.total_cmp(&b.4));
-        let flat = &bin[..(bin.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize];
-        let n = flat.len() as f32;
-        ys.push(flat.iter().map(|p| p.2).sum::<f32>() / n);
-        y2s.push(flat.iter().map(|p| p.3).sum::<f32>() / n);
-        ws.push(n);
-        for c in 0..3 {
-            let mut v: Vec<f32> = flat.iter().map(|p| local_mean_sq(&bands[c], p.0, p.1, &win0)).collect();
-            vs[c].push(percentile(&mut v, 0.5) / median_to_mean);
-        }
+        measured_levels.push(l);
+        points.push(LevelPoints {
+            y: bins.iter().map(|b| b.y).collect(),
+            y2: bins.iter().map(|b| b.y2).collect(),
+            var: std::array::from_fn(|c| bins.iter().map(|b| b.var[c]).collect()),
+            weights: Some(bins.iter().map(|b| b.n as f32).collect()),
+        });
+        prev = Some(bins);
     }
-    // One-sided trimming: texture leaking into a bin only raises it, so bins more
-    // than 30% above the affine-variance line (any channel) are dropped and the
-    // line refitted, up to 3 rounds, keeping at least 3 bins.
-    for _ in 0..3 {
-        if ys.len() <= 3 {
-            break;
-        }
-        let lines: Vec<_> = (0..3).filter_map(|c| ols(&ys, &vs[c], Some(&ws))).collect();
-        if lines.len() < 3 {
-            break;
-        }
-        let keep: Vec<bool> = (0..ys.len())
-            .map(|i| (0..3).all(|c| vs[c][i] as f64 <= 1.3 * (lines[c].0 + lines[c].1 * ys[i] as f64).max(1e-12)))
-            .collect();
-        if keep.iter().all(|&k| k) || keep.iter().filter(|&&k| k).count() < 3 {
-            break;
-        }
-        let filt = |v: &Vec<f32>| v.iter().zip(&keep).filter(|(_, &k)| k).map(|(x, _)| *x).collect::<Vec<f32>>();
-        ys = filt(&ys);
-        y2s = filt(&y2s);
-        ws = filt(&ws);
-        vs = [filt(&vs[0]), filt(&vs[1]), filt(&vs[2])];
-    }
-    let samples_used = ws.iter().sum::<f32>() as usize;
-    let points = vec![LevelPoints { y: ys, y2: y2s, var: vs, weights: Some(ws) }];
-    let fitted = if points[0].y.is_empty() { None } else { fit_levels(&points) };
+    let fitted = if measured_levels.first() == Some(&0) { fit_levels(&points) } else { None };
     let fitted = fitted.map(|(form, lv, covs, rel)| {
         let unit = crate::synth::unit_band_std();
+        let last = lv.len() - 1;
+        // Beyond the finest measured levels: white noise's per-level ratios, scaled
+        // by how much slower than white the two finest measured levels decayed
+        // (correlated noise decays slower; at most `MAX_LEVEL_STD_RATIO` per level).
+        let excess = if lv.len() >= 2 {
+            let s = |i: usize| (0..3).map(|c| lv[i].std(form, c, 0.5 * range_mid(&points[i].y))).sum::<f32>();
+            let (m1, m0) = (measured_levels[last], measured_levels[last - 1]);
+            (s(last) / s(last - 1).max(1e-12)) / (unit[m1] / unit[m0])
+        } else {
+            1.0
+        };
         let levels = (0..NOISE_LEVELS)
-            .map(|l| {
-                let r = unit[l] / unit[0];
-                let k = if form == NoiseForm::LinearStd { r } else { r * r };
-                NoiseLevel { slope: lv[0].slope.map(|v| v * k), intercept: lv[0].intercept.map(|v| v * k) }
+            .map(|l| match measured_levels.iter().position(|&m| m == l) {
+                Some(i) => lv[i],
+                None => {
+                    let from = measured_levels[last];
+                    let r: f32 =
+                        (from + 1..=l).map(|k| (excess * unit[k] / unit[k - 1]).min(MAX_LEVEL_STD_RATIO)).product();
+                    let k = if form == NoiseForm::LinearStd { r } else { r * r };
+                    NoiseLevel { slope: lv[last].slope.map(|v| v * k), intercept: lv[last].intercept.map(|v| v * k) }
+                }
             })
             .collect();
         (form, levels, covs, rel)
     });
-    let y = &points[0].y;
-    let range = if y.is_empty() {
+    // The luma range is what level 0's used bins cover: no value outside it.
+    let y0 = points.first().map(|p| p.y.clone()).unwrap_or_default();
+    let range = if y0.is_empty() {
         [0.0, 1.0]
     } else {
-        let lo = y.iter().cloned().fold(1.0f32, f32::min);
-        let hi = y.iter().cloned().fold(0.0f32, f32::max);
+        let lo = y0.iter().cloned().fold(1.0f32, f32::min);
+        let hi = y0.iter().cloned().fold(0.0f32, f32::max);
         [lo, hi.max(lo)]
     };
-    let level0 = LevelSamples { y: y.clone(), y2: points[0].y2.clone(), var: points[0].var.clone() };
+    let samples: Vec<LevelSamples> =
+        points.iter().map(|p| LevelSamples { y: p.y.clone(), y2: p.y2.clone(), var: p.var.clone() }).collect();
     st.lap("least_squares");
-    let mut noise = finish("fast", started, fitted, &[level0], range, false);
+    let samples_used: usize = points.iter().flat_map(|p| p.weights.iter().flatten()).map(|&w| w as usize).sum();
+    let mut noise = finish("fast", started, fitted, &samples, range, false);
     noise.diagnostics.samples_used = samples_used as u64;
     noise.diagnostics.stages_s = st.done();
+    // Confidence per luma bin (level 0): every measured bin, whether the fit used it.
+    let used0: Vec<f32> = points.first().map(|p| p.y.clone()).unwrap_or_default();
+    noise.bins = measured[0]
+        .iter()
+        .map(|b| crate::model::NoiseBin {
+            luma: b.y,
+            samples: b.n as u32,
+            std: b.var.map(|v| v.max(0.0).sqrt()),
+            relative_stderr: b.rel_se,
+            used: used0.contains(&b.y),
+        })
+        .collect();
+    if noise.present && !derived.is_empty() {
+        noise.diagnostics.reason += &format!(
+            "; levels {derived:?} not identifiable from this frame (texture exceeds the noise there, or too few flat luma bins): \
+             they continue the finest measured level by the measured per-level decay"
+        );
+    }
+    if let Some(b) = blocking {
+        noise.diagnostics.reason += &format!(
+            "; compression blocking: {} px grid at phase ({}, {}), boundary steps {:.2}× the interior's — the fine levels hold codec artefacts, not only sensor noise",
+            b.period_px, b.phase_px[0], b.phase_px[1], b.strength
+        );
+    }
+    noise.blocking = blocking;
     (noise, plot_data(&points))
+}
+
+/// Twice the middle of the lumas `y` covers (so that `0.5 ·` it is the middle).
+fn range_mid(y: &[f32]) -> f32 {
+    let lo = y.iter().cloned().fold(1.0f32, f32::min);
+    let hi = y.iter().cloned().fold(0.0f32, f32::max);
+    lo + hi
+}
+
+/// Median over the luma bins two levels share of the coarse level's std over the
+/// fine level's (channel-pooled); `None` when they share no bin.
+fn median_std_ratio(coarse: &[&BinMeasure], fine: &[&BinMeasure]) -> Option<f32> {
+    let std = |b: &BinMeasure| (b.var.iter().sum::<f32>() / 3.0).max(0.0).sqrt();
+    let mut r: Vec<f32> = coarse
+        .iter()
+        .filter_map(|c| {
+            let bin = (c.y * BLIND_BINS as f32) as usize;
+            fine.iter().find(|f| (f.y * BLIND_BINS as f32) as usize == bin).map(|f| std(c) / std(f).max(1e-12))
+        })
+        .collect();
+    (!r.is_empty()).then(|| percentile(&mut r, 0.5))
+}
+
+/// Per-bin measurements of level `l` (see `fit_fast`).
+fn measure_level(
+    l: usize,
+    bands: &[Vec<Plane>],
+    luma: &Plane,
+    structure: &Plane,
+    clip: &[ClipMask; 3],
+    stride0: usize,
+) -> Vec<BinMeasure> {
+    let scale = 1usize << l;
+    let stride = (stride0 >> l).max(1);
+    let win = window(l);
+    let win_s = window((l + 2).min(3));
+    // Footprint of the measured band in level-0 pixels (as in `collect_samples`); clipping
+    // under the structure band only makes a sample look textured, it biases nothing.
+    let radius = 5 * scale + 8;
+    let (w, h) = (luma.width, luma.height);
+    // (x, y, B(Y), B(Y²), structure, unclipped-channel bits)
+    let mut pts: Vec<(usize, usize, f32, f32, f32, u8)> = vec![];
+    for y in grid(h, stride) {
+        for x in grid(w, stride) {
+            let ok = (0..3).fold(0u8, |m, c| m | ((!clip[c].touches(x * scale, y * scale, radius, l >= 2) as u8) << c));
+            if ok == 0 {
+                continue;
+            }
+            let s =
+                local_mean_sq(structure, (x / 4).min(structure.width - 1), (y / 4).min(structure.height - 1), &win_s);
+            pts.push((x, y, local_mean(luma, x, y, &win), local_mean_sq(luma, x, y, &win), s, ok));
+        }
+    }
+    let m2m = white_noise_median_to_mean(l);
+    let mut out = vec![];
+    for b in 0..BLIND_BINS {
+        let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
+        let mut bin: Vec<&(usize, usize, f32, f32, f32, u8)> = pts.iter().filter(|p| p.2 >= lo && p.2 < hi).collect();
+        bin.sort_by(|a, b| a.4.total_cmp(&b.4));
+        // Each channel's flat set: the flattest fraction of the bin's samples where
+        // that channel is unclipped; the bin counts when every channel has one.
+        let flats: [Vec<_>; 3] = std::array::from_fn(|c| {
+            let mine: Vec<_> = bin.iter().filter(|p| p.5 & (1 << c) != 0).copied().collect();
+            let k = (mine.len() as f64 * BLIND_FLAT_FRACTION / (1 << l.min(1)) as f64).ceil() as usize;
+            if mine.len() < BLIND_MIN_PER_BIN || k < BLIND_MIN_FLAT {
+                vec![]
+            } else {
+                mine[..k].to_vec()
+            }
+        });
+        if flats.iter().any(|f| f.is_empty()) {
+            continue;
+        }
+        let flat = &flats[1];
+        let n = flat.len() as f32;
+        let mut var = [0.0f32; 3];
+        let mut rel_se = 0.0f32;
+        for c in 0..3 {
+            let n = flats[c].len() as f32;
+            let mut v: Vec<f32> = flats[c].iter().map(|p| local_mean_sq(&bands[c][l], p.0, p.1, &win)).collect();
+            let med = percentile(&mut v, 0.5);
+            let iqr = percentile(&mut v, 0.75) - percentile(&mut v, 0.25);
+            var[c] = med / m2m;
+            // SE of a median: 1.2533·sd/√n with sd from the IQR; half of it in std terms.
+            rel_se += if med > 0.0 { 1.2533 * iqr / 1.349 / n.sqrt() / (2.0 * med) / 3.0 } else { 1.0 / 3.0 };
+        }
+        out.push(BinMeasure {
+            y: flat.iter().map(|p| p.2).sum::<f32>() / n,
+            y2: flat.iter().map(|p| p.3).sum::<f32>() / n,
+            var,
+            n: flat.len(),
+            rel_se,
+        });
+    }
+    out
+}
+
+/// One-sided robust line: texture leaking into a bin only raises it, so the noise is
+/// the *lower envelope* of the bins. Every line through two bins (channel-pooled
+/// variance) is scored by the bins it explains — within [1/1.2, 1.2]× — and rejected
+/// outright when a bin lies below 0.7× it (noise cannot be lower than itself); the
+/// best line's inliers are kept (ties: the lower line). A plain refit-and-trim loop
+/// fails on real frames whose dark half is all texture (the vtest lawn: its bins
+/// pull the first line up so far that the flat road's bins look like outliers).
+/// Fewer than 4 bins are kept as they are.
+fn trim_textured(bins: &[BinMeasure]) -> Vec<&BinMeasure> {
+    if bins.len() < 4 {
+        return bins.iter().collect();
+    }
+    let v: Vec<f64> = bins.iter().map(|b| b.var.iter().map(|&x| x as f64).sum::<f64>() / 3.0).collect();
+    let y: Vec<f64> = bins.iter().map(|b| b.y as f64).collect();
+    let mut best: Option<(usize, f64, Vec<bool>)> = None;
+    for i in 0..bins.len() {
+        for j in i..bins.len() {
+            // j == i: the flat line through one bin.
+            let slope = if j == i || (y[j] - y[i]).abs() < 1e-6 { 0.0 } else { (v[j] - v[i]) / (y[j] - y[i]) };
+            let line = |k: usize| v[i] + slope * (y[k] - y[i]);
+            if (0..bins.len()).any(|k| line(k) <= 0.0 || v[k] < 0.7 * line(k)) {
+                continue;
+            }
+            let inl: Vec<bool> = (0..bins.len()).map(|k| v[k] <= 1.2 * line(k) && v[k] >= line(k) / 1.2).collect();
+            let count = inl.iter().filter(|&&x| x).count();
+            let level: f64 = (0..bins.len()).map(line).sum();
+            let better = match &best {
+                None => true,
+                Some((c, l, _)) => count > *c || (count == *c && level < *l),
+            };
+            if better {
+                best = Some((count, level, inl));
+            }
+        }
+    }
+    match best {
+        Some((count, _, inl)) if count >= 3 => bins.iter().zip(inl).filter(|(_, k)| *k).map(|(b, _)| b).collect(),
+        _ => bins.iter().collect(),
+    }
 }
 
 #[cfg(test)]

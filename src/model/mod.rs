@@ -86,7 +86,43 @@ pub struct Noise {
     /// Luma range fitted on; evaluation clamps Y into it (no extrapolation into
     /// clipped highlights or crushed blacks).
     pub luminance_range: [f32; 2],
+    /// The blind fit's level-0 measurement per luma bin, with its confidence (empty
+    /// for the accurate tier and for models written by hand).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bins: Vec<NoiseBin>,
+    /// Block-transform compression seen in the frame (`null`: none found or not
+    /// looked for). Its fine levels then hold codec artefacts as well as noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blocking: Option<Blocking>,
     pub diagnostics: Diagnostics,
+}
+
+/// One luma bin of a blind noise measurement (level 0).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseBin {
+    /// Mean smoothed luma of the bin's flat samples.
+    pub luma: f32,
+    /// Flat samples the bin was measured on.
+    pub samples: u32,
+    /// Measured level-0 std per channel.
+    pub std: [f32; 3],
+    /// Relative standard error of `std` (mean over channels): the bin's confidence.
+    pub relative_stderr: f32,
+    /// Whether the fit used the bin (false: rejected as texture).
+    pub used: bool,
+}
+
+/// A periodic block grid in the frame (JPEG / MPEG-style codecs).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Blocking {
+    pub period_px: u32,
+    /// Column and row phase of the block boundaries (x mod period, y mod period).
+    pub phase_px: [u32; 2],
+    /// Mean luma step across the boundary phase over the median of the other phases
+    /// (the weaker of the two directions).
+    pub strength: f32,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -252,6 +288,8 @@ impl Noise {
             levels: vec![NoiseLevel::ZERO; NOISE_LEVELS],
             lowpass: None,
             luminance_range: [0.0, 1.0],
+            bins: vec![],
+            blocking: None,
             diagnostics,
         }
     }

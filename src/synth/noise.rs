@@ -254,6 +254,8 @@ pub fn white_sensor_noise(a: [f32; 3], b: [f32; 3], luminance_range: [f32; 2]) -
         levels: (0..NOISE_LEVELS).map(level).collect(),
         lowpass: Some(level(NOISE_LEVELS)),
         luminance_range,
+        bins: vec![],
+        blocking: None,
         diagnostics: crate::model::Diagnostics::not_fitted("white Poisson–Gaussian sensor noise"),
     }
 }
