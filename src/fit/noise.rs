@@ -787,7 +787,11 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
         // by how much slower than white the two finest measured levels decayed
         // (correlated noise decays slower; at most `MAX_LEVEL_STD_RATIO` per level).
         let excess = if lv.len() >= 2 {
-            let s = |i: usize| (0..3).map(|c| lv[i].std(form, c, 0.5 * range_mid(&points[i].y))).sum::<f32>();
+            let s = |i: usize| {
+                (0..3)
+                    .map(|c| lv[i].std(form, c, luma_span(&points[i].y).map_or(0.5, |[lo, hi]| 0.5 * (lo + hi))))
+                    .sum::<f32>()
+            };
             let (m1, m0) = (measured_levels[last], measured_levels[last - 1]);
             (s(last) / s(last - 1).max(1e-12)) / (unit[m1] / unit[m0])
         } else {
@@ -809,13 +813,7 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     });
     // The luma range is what level 0's used bins cover: no value outside it.
     let y0 = points.first().map(|p| p.y.clone()).unwrap_or_default();
-    let range = if y0.is_empty() {
-        [0.0, 1.0]
-    } else {
-        let lo = y0.iter().cloned().fold(1.0f32, f32::min);
-        let hi = y0.iter().cloned().fold(0.0f32, f32::max);
-        [lo, hi.max(lo)]
-    };
+    let range = luma_span(&y0).unwrap_or([0.0, 1.0]);
     let samples: Vec<LevelSamples> =
         points.iter().map(|p| LevelSamples { y: p.y.clone(), y2: p.y2.clone(), var: p.var.clone() }).collect();
     st.lap("least_squares");
@@ -851,11 +849,11 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     (noise, plot_data(&points))
 }
 
-/// Twice the middle of the lumas `y` covers (so that `0.5 ·` it is the middle).
-fn range_mid(y: &[f32]) -> f32 {
-    let lo = y.iter().cloned().fold(1.0f32, f32::min);
-    let hi = y.iter().cloned().fold(0.0f32, f32::max);
-    lo + hi
+/// The lowest and highest of the lumas `y` (`None` when empty).
+fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
+    let lo = y.iter().cloned().reduce(f32::min)?;
+    let hi = y.iter().cloned().reduce(f32::max)?;
+    Some([lo, hi])
 }
 
 /// Median over the luma bins two levels share of the coarse level's std over the
@@ -912,7 +910,7 @@ fn measure_level(
         // that channel is unclipped; the bin counts when every channel has one.
         let flats: [Vec<_>; 3] = std::array::from_fn(|c| {
             let mine: Vec<_> = bin.iter().filter(|p| p.5 & (1 << c) != 0).copied().collect();
-            let k = (mine.len() as f64 * BLIND_FLAT_FRACTION / (1 << l.min(1)) as f64).ceil() as usize;
+            let k = (mine.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize;
             if mine.len() < BLIND_MIN_PER_BIN || k < BLIND_MIN_FLAT {
                 vec![]
             } else {
