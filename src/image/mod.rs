@@ -11,7 +11,7 @@ mod pyramid;
 pub mod yuv;
 
 pub use blur::{blur_separable, discrete_gaussian_kernel};
-pub use pyramid::{expand, gaussian_pyramid, laplacian_pyramid, reduce, LaplacianPyramid};
+pub use pyramid::{expand, gaussian_pyramid, laplacian_pyramid, reduce, reduce_slice, LaplacianPyramid};
 
 /// One channel of floats.
 #[derive(Clone, Debug, PartialEq)]
