@@ -108,5 +108,41 @@ fn bench(cr: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// The fast tier at 1280×960, all three effects, one thread: median wall time of 11
+/// fits and each effect's stage timers (`diagnostics.stages_s`, medians), as a
+/// markdown table for BENCHMARKS.md (issue 10, item 5: ≤ 30 ms).
+fn fast_stages(_: &mut Criterion) {
+    let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");
+    let c = case(1280, 960);
+    let inp = inputs(&c, &c.all);
+    let opts = only(true, true, true, Tier::Fast);
+    let mut totals = vec![];
+    let mut stages: std::collections::BTreeMap<(usize, String), Vec<f64>> = Default::default();
+    for _ in 0..11 {
+        let t = std::time::Instant::now();
+        let m = single.install(|| fit(&inp, &opts).expect("fit")).model;
+        totals.push(t.elapsed().as_secs_f64() * 1e3);
+        for (e, d) in
+            [&m.noise.diagnostics, &m.motion_blur.diagnostics, &m.depth_of_field.diagnostics].into_iter().enumerate()
+        {
+            for (k, v) in &d.stages_s {
+                stages.entry((e, k.clone())).or_default().push(v * 1e3);
+            }
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let total = median(&mut totals);
+    println!("\n### fast tier, 1280×960, all three effects, 1 thread: median {total:.1} ms of 11 fits\n");
+    println!("| effect | stage | median | share of the total |\n|---|---|---|---|");
+    for ((e, k), v) in stages.iter_mut() {
+        let ms = median(v);
+        let name = ["noise", "motion blur", "depth of field"][*e];
+        println!("| {name} | {k} | {ms:.1} ms | {:.0}% |", 100.0 * ms / total);
+    }
+}
+
+criterion_group!(benches, bench, fast_stages);
 criterion_main!(benches);

@@ -459,15 +459,14 @@ fn calibrate(raw: f32, kernel: DofKernel) -> f32 {
 
 /// Fast tier: the frame and Z (Zhuo & Sim 2011 edge re-blur ratio).
 pub fn fit_fast(
-    image: &Rgb,
+    y: &Plane,
     depth: &Plane,
     units: DepthUnits,
     opts: &super::FitOptions,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let y = image.luma();
-    let re = reblur_half(&y);
+    let re = reblur_half(y);
     st.lap("blur");
     let (w, h) = (y.width, y.height);
     let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {
@@ -483,7 +482,7 @@ pub fn fit_fast(
             if !valid_depth(z, units) {
                 continue;
             }
-            let (gx, gy) = grad(&y, px, py);
+            let (gx, gy) = grad(y, px, py);
             let m = (gx * gx + gy * gy).sqrt();
             if m < 0.03 {
                 continue;
@@ -491,7 +490,7 @@ pub fn fit_fast(
             // Non-maximum suppression along the (rounded) gradient direction.
             let (sx, sy) = ((gx / m).round() as isize, (gy / m).round() as isize);
             let mag = |x: isize, yy: isize| {
-                let (a, b) = grad(&y, x as usize, yy as usize);
+                let (a, b) = grad(y, x as usize, yy as usize);
                 (a * a + b * b).sqrt()
             };
             let (xi, yi) = (px as isize, py as isize);
@@ -517,7 +516,7 @@ pub fn fit_fast(
     let tile_ok = |x0: usize, y0: usize, t: usize| {
         (y0..y0 + t).step_by(8).all(|yy| (x0..x0 + t).step_by(8).all(|x| valid_depth(depth.get(x, yy), units)))
     };
-    let spectrum = super::defocus_spectrum::disc_signature(&y, tile_ok);
+    let spectrum = super::defocus_spectrum::disc_signature(y, tile_ok);
     st.lap("search.spectrum");
     let kernel = match &spectrum {
         Some(s) if s.is_disc => DofKernel::Disc,

@@ -323,7 +323,16 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     (noise, Some(data))
 }
 
-fn fit_motion_blur(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (MotionBlur, Option<MbPlotData>) {
+/// The frame's luma, computed once for the blind fits that read it (motion blur and
+/// DoF): a 1280×960 luma plane costs ~3 ms to build, mostly memory traffic.
+type SharedLuma = std::sync::OnceLock<Plane>;
+
+fn fit_motion_blur(
+    inp: &FitInputs,
+    opts: &FitOptions,
+    tier: Tier,
+    luma: &SharedLuma,
+) -> (MotionBlur, Option<MbPlotData>) {
     if !opts.effects.motion_blur {
         return (MotionBlur::absent(Diagnostics::not_fitted("not requested (--only)")), None);
     }
@@ -337,11 +346,16 @@ fn fit_motion_blur(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (MotionBlu
         (Some(flow), Tier::Accurate, Some(sharp)) => {
             motion_blur::fit_accurate(inp.image, sharp, flow, inp.reference_valid, opts.mb_max_samples)
         }
-        (Some(flow), _, _) => motion_blur::fit_fast(inp.image, flow),
+        (Some(flow), _, _) => motion_blur::fit_fast(luma.get_or_init(|| inp.image.luma()), flow),
     }
 }
 
-fn fit_depth_of_field(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (DepthOfField, Option<DofPlotData>) {
+fn fit_depth_of_field(
+    inp: &FitInputs,
+    opts: &FitOptions,
+    tier: Tier,
+    luma: &SharedLuma,
+) -> (DepthOfField, Option<DofPlotData>) {
     if !opts.effects.depth_of_field {
         return (DepthOfField::absent(inp.depth_units, Diagnostics::not_fitted("not requested (--only)")), None);
     }
@@ -356,7 +370,7 @@ fn fit_depth_of_field(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (DepthO
             None,
         ),
         (Some(depth), Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
-        (Some(depth), _, _) => dof::fit_fast(inp.image, depth, inp.depth_units, opts),
+        (Some(depth), _, _) => dof::fit_fast(luma.get_or_init(|| inp.image.luma()), depth, inp.depth_units, opts),
     }
 }
 
@@ -382,9 +396,10 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     let noise_tier = tier(fx.noise, inp.denoised, "noise", "denoised")?;
     let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
     let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
+    let luma = SharedLuma::new();
     let ((noise, mb), dof) = rayon::join(
-        || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier)),
-        || fit_depth_of_field(inp, opts, dof_tier),
+        || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier, &luma)),
+        || fit_depth_of_field(inp, opts, dof_tier, &luma),
     );
     (model.noise, plots.noise) = noise;
     (model.motion_blur, plots.motion_blur) = mb;

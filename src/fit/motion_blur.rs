@@ -273,10 +273,9 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
 /// parallel) bias it; sample pixels are picked by gradient *magnitude* only, so the
 /// selection does not prefer any direction. Standard error: spread of the root over
 /// `FAST_SUBSETS` interleaved subsets / √subsets.
-pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
+pub fn fit_fast(y: &Plane, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let y = image.luma();
     let (w, h) = (y.width, y.height);
     let mut cand = vec![];
     for py in (2..h.saturating_sub(2)).step_by(2) {
@@ -305,7 +304,7 @@ pub fn fit_fast(image: &Rgb, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
         let (vx, vy) = (-uy, ux);
         let (x, yy) = (px as f32, py as f32);
         for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
-            push_profile(&mut prof, &y, x + ox, yy + oy, (vx * speed, vy * speed));
+            push_profile(&mut prof, y, x + ox, yy + oy, (vx * speed, vy * speed));
         }
         prof.target.push(0.0);
     }
