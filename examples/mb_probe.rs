@@ -1,0 +1,104 @@
+use blind_augment::analysis::timing::*;
+use blind_augment::analysis::*;
+use blind_augment::fit::*;
+use blind_augment::model::DepthUnits;
+use blind_augment::synth;
+use blind_augment::synth::sequence::*;
+use std::sync::Arc;
+fn main() {
+    let scene = motorcycle().unwrap();
+    let spec = SequenceSpec::motorcycle(&scene, 320, 240, 60, None);
+    let poses: Vec<TimedPose> = (0..40)
+        .map(|i| {
+            let t = spec.frame_time_s(i);
+            let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
+            TimedPose { t_ns: (t * 1e9).round() as i64, position_m: p, orientation: q }
+        })
+        .collect();
+    let track = PoseTrack::new(poses).unwrap();
+    let an = |i: usize| {
+        let f = spec.frame(&scene, i);
+        let a = Analysed {
+            frame: Frame {
+                index: i as u64,
+                t_s: f.t_s,
+                image: f.image.clone(),
+                depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
+                flow: None,
+            },
+            depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
+            world_from_camera: Some(f.world_from_camera),
+            sparse_flow: None,
+        };
+        (a, f)
+    };
+    let mut held = vec![];
+    for i in 8..12 {
+        let (mut a, _) = an(i);
+        let ctx = FrameContext {
+            current: &a.clone(),
+            window: &[],
+            poses: Some(&track),
+            intrinsics: Some(&spec.view),
+            frame_interval_s: 1.0 / 30.0,
+        };
+        a.sparse_flow = PoseDepthFlow::sparse(&ctx).ok();
+        held.push(Arc::new(a));
+    }
+    let opts = FitOptions {
+        tier: Some(Tier::Accurate),
+        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+        ..Default::default()
+    };
+    for i in [18usize, 20, 24] {
+        let (a, f) = an(i);
+        let ctx = FrameContext {
+            current: &a,
+            window: &held,
+            poses: Some(&track),
+            intrinsics: Some(&spec.view),
+            frame_interval_s: 1.0 / 30.0,
+        };
+        let pf = PoseDepthFlow.flow(&ctx).unwrap();
+        let ferr = pf.dx.iter().zip(&f.flow.dx).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        let fmag = f.flow.dx.iter().map(|a| a.abs()).fold(0.0f32, f32::max);
+        let r = TemporalMotionDeblur::default().deblur(&ctx, &pf).unwrap();
+        let mut only_dof = f.truth.clone();
+        only_dof.motion_blur.present = false;
+        only_dof.noise.present = false;
+        let sharp = synth::apply_camera_model(&f.clean, &only_dof, Some(&f.depth_m), Some(&f.flow), 0);
+        let valid_frac = r.valid.as_ref().unwrap().data.iter().filter(|v| **v > 0.5).count() as f32 / 76800.0;
+        let l = |s: &blind_augment::image::Rgb,
+                 fl: &blind_augment::image::Flow,
+                 v: Option<&blind_augment::image::Plane>| {
+            fit(
+                &FitInputs {
+                    motion_deblurred: Some(s),
+                    flow: Some(fl),
+                    reference_valid: v,
+                    ..FitInputs::new(&f.image)
+                },
+                &opts,
+            )
+            .unwrap()
+            .model
+            .motion_blur
+            .exposure
+        };
+        // reference error vs true sharp in valid region
+        let mut e2 = 0.0;
+        let mut n = 0.0;
+        for k in 0..76800 {
+            if r.valid.as_ref().unwrap().data[k] > 0.5 {
+                e2 += (r.image.channels[1][k] - sharp.channels[1][k]).powi(2);
+                n += 1.0;
+            }
+        }
+        println!(
+            "frame {i}: flow err max {ferr:.3} of {fmag:.2}; ref rms err {:.4} valid {valid_frac:.2} sources {:?}",
+            (e2 / n as f32).sqrt(),
+            r.sources
+        );
+        println!("  truth flow+true ref {:?}; pose flow+true ref {:?}; truth flow + temporal ref {:?}; pose flow+temporal {:?}", l(&sharp, &f.flow, None), l(&sharp, &pf, None), l(&r.image, &f.flow, r.valid.as_ref()), l(&r.image, &pf, r.valid.as_ref()));
+    }
+}

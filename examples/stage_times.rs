@@ -1,0 +1,53 @@
+//! Per-effect fit times (from each fit's own `fit_time_s`, single thread) at
+//! 1280×960, for profiling the fast tier between `cargo bench` runs.
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use blind_augment::fit::{fit, FitInputs, FitOptions, Tier};
+use blind_augment::image::{Flow, Plane};
+use blind_augment::model::DepthUnits;
+
+fn main() {
+    let (w, h) = (1280usize, 960usize);
+    let img = common::mirror_tile(&common::photo("astronaut.png"), w, h);
+    let depth = Plane::new(w, h, 2.0);
+    let flow = Flow::uniform(w, h, 6.0, 2.0);
+    let inp = FitInputs {
+        image: &img,
+        denoised: None,
+        motion_deblurred: None,
+        defocus_deblurred: None,
+        depth: Some(&depth),
+        depth_units: DepthUnits::MetricM,
+        flow: Some(&flow),
+        reference_valid: None,
+    };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    for _ in 0..3 {
+        let t = std::time::Instant::now();
+        let out = pool
+            .install(|| fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: effects(), ..Default::default() }))
+            .expect("fit");
+        let m = &out.model;
+        println!("total {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        for (name, d) in [
+            ("noise", &m.noise.diagnostics),
+            ("mb", &m.motion_blur.diagnostics),
+            ("dof", &m.depth_of_field.diagnostics),
+        ] {
+            let stages: Vec<String> = d.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect();
+            println!("  {name}: {:.1} ms [{}]", d.fit_time_s * 1e3, stages.join(", "));
+        }
+    }
+}
+
+/// `ONLY=noise|mb|dof` profiles one effect.
+fn effects() -> blind_augment::fit::Effects {
+    let only = std::env::var("ONLY").unwrap_or_default();
+    let all = only.is_empty();
+    blind_augment::fit::Effects {
+        noise: all || only == "noise",
+        motion_blur: all || only == "mb",
+        depth_of_field: all || only == "dof",
+    }
+}
