@@ -75,7 +75,7 @@ fn fast_exposure_within_stated_tolerance() {
 /// Blind δ(Z) (Zhuo–Sim re-blur ratio + the same robust curve fit). It measures the
 /// total edge blur, including the photograph's own softness (astronaut's in-focus
 /// edges read as ~1 px), so it is biased up where the truth is small. Measured RMSE
-/// 0.28 px (quadratic) and 0.41–0.42 px (thin lens) since the re-blur runs at half
+/// 0.28 px (quadratic) and 0.42 px (thin lens) since the re-blur runs at half
 /// resolution (0.27 / 0.38 at full resolution, 8 ms slower at 1280×960); tolerance
 /// 0.5 px.
 #[test]
