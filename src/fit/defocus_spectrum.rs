@@ -84,9 +84,19 @@ fn hann(n: usize) -> Vec<f32> {
 /// consumer here is a radial average or a round trip through this same function, both
 /// blind to the transpose, so the transpose back is skipped. (Column FFTs through a
 /// strided gather cost ~0.4 ms per 256² array, more than the FFTs themselves.)
-fn fft2(buf: &mut [Complex32], tmp: &mut [Complex32], t: usize, fft: &std::sync::Arc<dyn rustfft::Fft<f32>>) {
-    let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
-    fft.process_with_scratch(buf, &mut scratch);
+fn fft2(
+    buf: &mut [Complex32],
+    tmp: &mut [Complex32],
+    scratch: &mut Vec<Complex32>,
+    t: usize,
+    fft: &std::sync::Arc<dyn rustfft::Fft<f32>>,
+) {
+    // One scratch buffer for every transform of the frame (grown to the largest plan).
+    if scratch.len() < fft.get_inplace_scratch_len() {
+        scratch.resize(fft.get_inplace_scratch_len(), Complex32::new(0.0, 0.0));
+    }
+    let scratch = &mut scratch[..fft.get_inplace_scratch_len()];
+    fft.process_with_scratch(buf, scratch);
     const B: usize = 16;
     for by in (0..t).step_by(B) {
         for bx in (0..t).step_by(B) {
@@ -97,7 +107,7 @@ fn fft2(buf: &mut [Complex32], tmp: &mut [Complex32], t: usize, fft: &std::sync:
             }
         }
     }
-    fft.process_with_scratch(tmp, &mut scratch);
+    fft.process_with_scratch(tmp, scratch);
     buf.copy_from_slice(tmp);
 }
 
@@ -211,7 +221,7 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     // Mean log power spectra: all tiles, even tiles, odd tiles (split half).
     let mut sums = [vec![0.0f32; t * t], vec![0.0f32; t * t]];
     let mut buf = vec![Complex32::new(0.0, 0.0); t * t];
-    let mut tmp = buf.clone();
+    let (mut tmp, mut scratch) = (buf.clone(), vec![]);
     for (k, &(x0, y0)) in tiles.iter().enumerate() {
         let mut mean = 0.0f64;
         for y in 0..t {
@@ -225,7 +235,7 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
                 buf[y * t + x] = Complex32::new((luma.get(x0 + x, y0 + y) - mean) * win[x] * win[y], 0.0);
             }
         }
-        fft2(&mut buf, &mut tmp, t, &fwd);
+        fft2(&mut buf, &mut tmp, &mut scratch, t, &fwd);
         // A real tile's power spectrum is point-symmetric, P(−f) = P(f): one
         // logarithm per symmetric pair, added to both (half the `ln` calls, which
         // otherwise cost as much as the FFTs).
@@ -251,7 +261,7 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
             *b = Complex32::new(v, 0.0);
         }
         // The log spectrum is transposed (see `fft2`); the inverse transposes it back.
-        fft2(&mut buf, &mut tmp, t, &inv);
+        fft2(&mut buf, &mut tmp, &mut scratch, t, &inv);
         let cep: Vec<f32> = buf.iter().map(|c| c.re / (t * t) as f32).collect();
         let (dip, z) = ring(&radial(&cep, t))?;
         Some((dip, z, radial(log_spec, t)))

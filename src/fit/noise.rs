@@ -78,20 +78,12 @@ pub struct NoisePlotData {
     pub levels: Vec<(Vec<f32>, [Vec<f32>; 3])>,
 }
 
-/// 9×9 window weights with σ = 4/2^l, normalised.
+/// 9×9 window weights with σ = 4/2^l, normalised: the outer product of
+/// `window_1d(level)` (a separable Gaussian, so whole-plane window sums can use
+/// `blur_separable` with the 1-D factor and agree with these per-sample sums).
 fn window(level: usize) -> [[f32; 9]; 9] {
-    let s = 4.0 / (1u32 << level) as f32;
-    let mut w = [[0.0f32; 9]; 9];
-    let mut sum = 0.0;
-    for (j, row) in w.iter_mut().enumerate() {
-        for (i, v) in row.iter_mut().enumerate() {
-            let (dx, dy) = (i as f32 - 4.0, j as f32 - 4.0);
-            *v = (-(dx * dx + dy * dy) / (2.0 * s * s)).exp();
-            sum += *v;
-        }
-    }
-    w.iter_mut().flatten().for_each(|v| *v /= sum);
-    w
+    let w1 = window_1d(level);
+    std::array::from_fn(|j| std::array::from_fn(|i| w1[j] * w1[i]))
 }
 
 /// Window-weighted sum of f(value) around (x, y); direct slices in the interior,
@@ -144,8 +136,8 @@ fn local_moments(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> (f32, f32)
     (local_mean(p, x, y, w), local_mean_sq(p, x, y, w))
 }
 
-/// The normalised 1-D factor of `window(level)` (the 2-D window is its outer
-/// product), for whole-plane window sums by a separable blur.
+/// The normalised 1-D Gaussian (σ = 4/2^level px, 9 taps) whose outer product is
+/// `window(level)`.
 fn window_1d(level: usize) -> [f32; 9] {
     let s = 4.0 / (1u32 << level) as f32;
     let mut w: [f32; 9] = std::array::from_fn(|i| (-((i as f32 - 4.0).powi(2)) / (2.0 * s * s)).exp());
