@@ -1,13 +1,14 @@
-//! The blind tier on real blur: a real photograph defocused by a round aperture
-//! (vendored, tests/data/ATTRIBUTION.md) and synthetic disc/Gaussian known answers.
+//! The blind tier on real blur: real photographs defocused by a round aperture and
+//! motion-blurred along a stated line (vendored, tests/data/ATTRIBUTION.md), and
+//! synthetic known answers (disc/Gaussian kernels, motion blur under defocus).
 
 mod common;
 
 use blind_augment::fit::defocus_spectrum::disc_signature;
-use blind_augment::fit::{fit, FitInputs, FitOptions, Tier};
-use blind_augment::image::{Plane, Rgb};
-use blind_augment::model::{DepthOfField, DofCurve, DofKernel};
-use blind_augment::synth::{add_defocus, add_defocus_disc};
+use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
+use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, DofKernel, Status};
+use blind_augment::synth::{add_defocus, add_defocus_disc, add_dof, add_motion_blur};
 use common::*;
 
 fn q8(img: &Rgb, seed: u64) -> Rgb {
@@ -89,4 +90,121 @@ fn fast_fit_carries_the_kernel_shape() {
     assert!((c / 3.5 - 1.0).abs() <= 0.10, "disc δ {c}");
     let gauss = fit_constant_depth(&q8(&add_defocus(&img, &Plane::new(w, h, 3.5)), 5));
     assert_eq!(gauss.kernel, DofKernel::Gaussian, "{:?}", gauss.diagnostics);
+}
+
+/// The issue's real defocused photograph: OpenCV's `text_defocus.jpg` ("compact
+/// digital photo camera, no artificial distortion"), restored in OpenCV's
+/// `deconvolution.py` with `--circle --d 19`: a disc of diameter 19 px, R = 9.5,
+/// second-moment σ = √(R²/4 + 1/12) = 4.76 px. Tolerance: 25% of σ (the issue's).
+/// Measured: disc, R 9.17 px, σ 4.60 px (−3.4%), ring z 26, notch 0.86.
+#[test]
+fn real_text_defocus_reads_as_the_stated_disc() {
+    let img = photo("defocus_text_opencv.jpg");
+    let truth_sigma = (9.5f32 * 9.5 / 4.0 + 1.0 / 12.0).sqrt();
+    let dof = fit_constant_depth(&img);
+    assert!(dof.present, "{:?}", dof.diagnostics);
+    assert_eq!(dof.kernel, DofKernel::Disc);
+    let Some(DofCurve::Constant { c }) = dof.curve else { panic!("{:?}", dof.curve) };
+    assert!((c / truth_sigma - 1.0).abs() <= 0.25, "σ {c} vs {truth_sigma}");
+}
+
+/// Blind exposure of the fast tier on a frame with a uniform flow of `speed_px`
+/// along `deg` (image axes, y down); returns the motion-blur result.
+fn fast_mb(img: &Rgb, deg: f32, speed_px: f32) -> blind_augment::model::MotionBlur {
+    let a = deg.to_radians();
+    let flow = Flow::uniform(img.width, img.height, speed_px * a.cos(), speed_px * a.sin());
+    let inp = FitInputs { flow: Some(&flow), ..FitInputs::new(img) };
+    let opts = FitOptions {
+        tier: Some(Tier::Fast),
+        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+        ..FitOptions::default()
+    };
+    fit(&inp, &opts).expect("fit").model.motion_blur
+}
+
+/// The issue's two real motion-blurred photographs, with the linear PSFs OpenCV's
+/// `deconvolution.py` restores them with (its docstring): `licenseplate_motion.jpg`
+/// `--angle 135 --d 22` and `text_motion.jpg` `--angle 86 --d 31`. The flow
+/// direction is given (as the issue says) with a nominal 50 px/frame, so the streak
+/// is λ·50 px. Tolerance: 15% of the stated length (the issue's).
+///
+/// Measured: the license plate reads 21.6 px (−2%) from the streak's spectral zeros
+/// (correlation 0.55 ≥ 0.45). The text page is NOT met: its zeros are not
+/// identified (the text lines' own periodic spectrum along the flow correlates as
+/// well with the wrong templates: 0.31), and gradient-energy isotropy reads 16.3 px
+/// (−48%): a page of text is far from isotropic. The test pins both: the plate
+/// within 15% by the spectral path, and the text never read by the spectral path
+/// (a wrong streak with a small standard error would be worse than the isotropy
+/// fallback whose bias is stated).
+#[test]
+fn real_motion_photos_with_stated_streaks() {
+    let plate = fast_mb(&photo("motion_licenseplate_opencv.jpg"), 135.0, 50.0);
+    let got = plate.exposure.expect("identified") * 50.0;
+    println!("plate: {got:.1} px vs 22 — {}", plate.diagnostics.reason);
+    assert!(plate.present);
+    assert!(plate.diagnostics.reason.contains("spectral zeros"), "{}", plate.diagnostics.reason);
+    assert!((got / 22.0 - 1.0).abs() <= 0.15, "streak {got} px vs 22");
+
+    let text = fast_mb(&photo("motion_text_opencv.jpg"), 86.0, 50.0);
+    println!("text: {:?} vs 31 px — {}", text.exposure.map(|l| l * 50.0), text.diagnostics.reason);
+    assert!(!text.diagnostics.reason.contains("from the streak's spectral zeros"), "{}", text.diagnostics.reason);
+}
+
+/// Motion blur under depth-varying defocus, the case that drove the isotropy
+/// estimator to λ = 0 (BENCHMARKS.md): the astronaut mirror-tiled to 640×480, a
+/// depth ramp 0.5–4 m through a thin lens (σ up to 3.8 px), flow varying across the
+/// frame, 8-bit. With 24 px/frame flow (streak 12 px at λ 0.5) the streak's zeros
+/// read it (measured 0.481 for 0.5); with 8 px/frame (a 4 px streak, zeros too
+/// shallow under that defocus) the fast tier must not claim a confident λ = 0 — it
+/// reports not identifiable (measured: 10.7% more gradient energy along the flow
+/// than across). Tolerance: 0.05 in λ (the live-calibration issue's fast target).
+#[test]
+fn motion_blur_under_varying_defocus() {
+    let (w, h) = (640usize, 480usize);
+    let clean = mirror_tile(&photo("astronaut.png"), w, h);
+    let depth = Plane::from_vec(
+        w,
+        h,
+        (0..w * h).map(|i| 0.5 + 3.5 * (0.7 * (i / w) as f32 / h as f32 + 0.3 * (i % w) as f32 / w as f32)).collect(),
+    );
+    let dof = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
+        depth_range: [0.5, 4.0],
+        kernel: DofKernel::Gaussian,
+        diagnostics: Diagnostics::not_fitted("truth"),
+    };
+    for (speed, expect_identified) in [(24.0f32, true), (8.0, false)] {
+        let mut flow = Flow::uniform(w, h, 0.0, 0.0);
+        for y in 0..h {
+            for x in 0..w {
+                flow.dx[y * w + x] = speed * (0.8 - 0.9 * (y as f32 / h as f32 - 0.5));
+                flow.dy[y * w + x] = speed * (0.3 + 0.9 * (x as f32 / w as f32 - 0.5));
+            }
+        }
+        let img = quantize8(&add_dof(&add_motion_blur(&clean, &flow, 0.5), &depth, &dof));
+        let inp = FitInputs { flow: Some(&flow), ..FitInputs::new(&img) };
+        let opts = FitOptions {
+            tier: Some(Tier::Fast),
+            effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+            ..FitOptions::default()
+        };
+        let mb = fit(&inp, &opts).expect("fit").model.motion_blur;
+        println!("{speed} px/frame: {:?} — {}", mb.exposure, mb.diagnostics.reason);
+        if expect_identified {
+            assert!(mb.present, "{}", mb.diagnostics.reason);
+            let got = mb.exposure.expect("present");
+            assert!((got - 0.5).abs() <= 0.05, "λ {got}");
+        } else {
+            // Either right within tolerance or honestly not identifiable; never a
+            // confident wrong answer.
+            match mb.exposure {
+                Some(l) if mb.diagnostics.status != Status::NotIdentifiable => {
+                    assert!((l - 0.5).abs() <= 0.05, "λ {l}: {}", mb.diagnostics.reason)
+                }
+                _ => assert_eq!(mb.diagnostics.status, Status::NotIdentifiable),
+            }
+        }
+    }
 }

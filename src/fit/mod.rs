@@ -15,6 +15,7 @@ pub mod defocus_spectrum;
 mod dof;
 mod motion_blur;
 mod noise;
+pub mod streak_spectrum;
 
 pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};

@@ -14,7 +14,9 @@
 //! Fewer than 64 → not identifiable. Present when λ > 3·stderr and λ ≥ 0.005
 //! (a 0.1 px streak at 20 px/frame: invisible).
 //!
-//! Blind (`fit_fast`): gradient-energy isotropy — see its documentation.
+//! Blind (`fit_fast`): the streak's spectral zeros along the flow where they are
+//! identified, else gradient-energy isotropy with its bias risk in the standard
+//! error — see its documentation.
 
 use crate::image::{Flow, Plane, Rgb};
 use crate::model::{Diagnostics, MotionBlur, Status};
@@ -260,63 +262,142 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
     prof.offsets.push(prof.f.len());
 }
 
-/// Fast tier: frame and flow only, from gradient-energy isotropy.
+/// Fast tier: frame and flow only. Two estimators, the first that can answer wins:
 ///
-/// Assume the sharp scene is statistically isotropic around the sampled pixels
-/// (textures have no preferred direction relative to the flow). A box streak of
-/// length L* = λ*|F| along u = F/|F| leaves the frame I. Blur I once more, by a box
-/// of length L along the perpendicular v, and compare the directional gradient
-/// energies C(L) = E[(∂_u B_v(L) I)²] and D(L) = E[(∂_v B_v(L) I)²]. By isotropy
-/// they are equal exactly when both axes carry the same box, i.e. at L = L*; C < D
-/// for L < L*. λ is the root of C − D on [0, 1] (bisection), with L = λ|F| per
-/// pixel. Isotropic blur (DoF, optics) cancels out. Anisotropic scenes (all edges
-/// parallel) bias it; sample pixels are picked by gradient *magnitude* only, so the
-/// selection does not prefer any direction. Standard error: spread of the root over
-/// `FAST_SUBSETS` interleaved subsets / √subsets.
+/// 1. **Streak zeros** (`streak_spectrum`): the box streak's spectral zeros along the
+///    flow, read against the across-flow spectrum. Neither texture anisotropy nor
+///    defocus moves them, so where they are identified (correlation ≥
+///    `streak_spectrum::MIN_SCORE`, interleaved subsets agreeing within 10%) λ is
+///    theirs. Streaks under ~3 px (first zero past Nyquist), heavy defocus or noise
+///    that fills the zeros leave them unidentified.
+/// 2. **Gradient-energy isotropy** otherwise. Assume the sharp scene is
+///    statistically isotropic around the sampled pixels. A box streak of length
+///    L* = λ*|F| along u = F/|F| leaves the frame I. Blur I once more, by a box of
+///    length L along the perpendicular v, and compare the directional gradient
+///    energies C(L) = E[(∂_u B_v(L) I)²] and D(L) = E[(∂_v B_v(L) I)²]. By isotropy
+///    they are equal exactly when both axes carry the same box, i.e. at L = L*, at
+///    every scale. λ is the root of C − D on [0, 1] (bisection), with L = λ|F| per
+///    pixel. Anisotropic texture biases it (measured: a text page −48%, and an
+///    isotropic defocus that weakens the streak's signal lets a 14% texture
+///    anisotropy drive λ to 0 — BENCHMARKS.md). The **bias risk** enters the
+///    standard error: the root is taken at two scales (±1 px on the frame and ±1 px
+///    on its half-resolution reduction); an isotropic scene gives both the same root,
+///    an anisotropic one biases them by different amounts, so their difference is
+///    added in quadrature to the spread of the root over `FAST_SUBSETS` interleaved
+///    subsets / √subsets.
 pub fn fit_fast(y: &Plane, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let (w, h) = (y.width, y.height);
+    let streak = super::streak_spectrum::streak_signature(y, flow, |_, _| true);
+    st.lap("search.spectrum");
+    if let Some(sig) = streak.as_ref().filter(|s| s.identified) {
+        let lambda = sig.lambda.clamp(0.0, 1.0);
+        let mut mb = decide("fast", lambda, sig.stderr as f64, None, sig.lines, started);
+        mb.diagnostics.reason = format!(
+            "λ = {lambda:.4} ± {:.4} from the streak's spectral zeros along the flow ({} lines, correlation {:.2}, \
+             next best {:.2}); {}",
+            sig.stderr,
+            sig.lines,
+            sig.score,
+            sig.runner_up,
+            if mb.present { "present" } else { "absent" }
+        );
+        mb.diagnostics.stages_s = st.done();
+        return (mb, None);
+    }
+    let y1 = crate::image::reduce(y);
+    let (fine, coarse) = (isotropy_root(y, flow, 1), isotropy_root(&y1, flow, 2));
+    st.lap("search.isotropy");
+    let Some(IsotropyRoot { lambda, spread, n, along_excess, along_excess_se }) = fine else {
+        let n = coarse.map_or(0, |c| c.n);
+        let reason = format!(
+            "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}), and no streak zeros along the \
+             flow: exposure not identifiable blindly"
+        );
+        let mut d = super::not_identifiable("fast", reason, started);
+        d.samples_used = n as u64;
+        return (MotionBlur::absent(d), None);
+    };
+    let streak_note = match &streak {
+        Some(s) => format!("not identified (correlation {:.2}, λ {:.3} ± {:.3})", s.score, s.lambda, s.stderr),
+        None => "not measurable (no line along the flow fits the frame)".into(),
+    };
+    if lambda == 0.0 && along_excess > 0.02 && along_excess > 3.0 * along_excess_se {
+        // The root sits at 0 because the texture itself carries more gradient
+        // energy along the flow (a streak can only lower it): an isotropic scene
+        // without blur and an anisotropic one with blur look alike here.
+        let reason = format!(
+            "the frame has {:.1}% (± {:.1}%) more gradient energy along the flow than across before any streak — \
+             anisotropic texture, so gradient-energy isotropy cannot separate it from motion blur; streak zeros \
+             {streak_note}: exposure not identifiable blindly",
+            100.0 * along_excess,
+            100.0 * along_excess_se
+        );
+        let mut d = super::not_identifiable("fast", reason, started);
+        d.samples_used = n as u64;
+        d.stages_s = st.done();
+        return (MotionBlur::absent(d), None);
+    }
+    let bias = coarse.map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
+    let stderr = (spread * spread + bias * bias).sqrt();
+    let mut mb = decide("fast", lambda, stderr, None, n, started);
+    mb.diagnostics.reason = format!(
+        "λ = {lambda:.4} ± {stderr:.4} by gradient-energy isotropy from {n} pixels (subset spread {spread:.4}, \
+         two-scale disagreement {bias:.4}: the bias risk of anisotropic texture); streak zeros {streak_note}; {}",
+        if mb.present { "present" } else { "absent" }
+    );
+    mb.diagnostics.stages_s = st.done();
+    (mb, None)
+}
+
+/// The isotropy root on plane `p` at `scale` (1: the frame; 2: its reduction, whose
+/// pixel (x, y) sits at frame pixel (2x, 2y)): (λ, subset spread, samples), `None`
+/// below `MIN_SAMPLES`. Samples are frame pixels with flow ≥ 3 px/frame and a
+/// gradient, picked by gradient *magnitude* only, so the selection prefers no
+/// direction.
+fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Option<IsotropyRoot> {
+    let (w, h) = (flow.width, flow.height);
+    let s = scale as f32;
     let mut cand = vec![];
-    for py in (2..h.saturating_sub(2)).step_by(2) {
-        for px in (2..w.saturating_sub(2)).step_by(2) {
+    let step = 2 * scale;
+    for py in (2 * scale..h.saturating_sub(2 * scale)).step_by(step) {
+        for px in (2 * scale..w.saturating_sub(2 * scale)).step_by(step) {
+            let (qx, qy) = (px / scale, py / scale);
+            if qx + 1 >= p.width || qy + 1 >= p.height || qx == 0 || qy == 0 {
+                continue;
+            }
             let i = py * w + px;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
             // Flow below 3 px/frame: the ±1 px derivative cannot resolve the box.
-            if fx * fx + fy * fy < 9.0 {
+            let speed_sq = fx * fx + fy * fy;
+            if speed_sq.is_nan() || speed_sq < 9.0 {
                 continue;
             }
-            let gx = 0.5 * (y.get(px + 1, py) - y.get(px - 1, py));
-            let gy = 0.5 * (y.get(px, py + 1) - y.get(px, py - 1));
+            let gx = 0.5 * (p.get(qx + 1, qy) - p.get(qx - 1, qy));
+            let gy = 0.5 * (p.get(qx, qy + 1) - p.get(qx, qy - 1));
             if gx * gx + gy * gy >= 1e-4 {
                 cand.push((px, py));
             }
         }
     }
     let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
-    // Per sample: profiles along v (length |F|) at p+u, p−u, p+v, p−v.
+    // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
     for &(px, py) in cand.iter().step_by(keep) {
         let i = py * w + px;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
-        let speed = (fx * fx + fy * fy).sqrt();
-        let (ux, uy) = (fx / speed, fy / speed);
+        let speed = (fx * fx + fy * fy).sqrt() / s;
+        let (ux, uy) = (fx / (speed * s), fy / (speed * s));
         let (vx, vy) = (-uy, ux);
-        let (x, yy) = (px as f32, py as f32);
+        let (x, yy) = ((px / scale) as f32, (py / scale) as f32);
         for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
-            push_profile(&mut prof, y, x + ox, yy + oy, (vx * speed, vy * speed));
+            push_profile(&mut prof, p, x + ox, yy + oy, (vx * speed, vy * speed));
         }
         prof.target.push(0.0);
     }
-    st.lap("blur");
     let n = prof.len();
     if n < MIN_SAMPLES {
-        let reason = format!(
-            "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}): exposure not identifiable blindly"
-        );
-        let mut d = super::not_identifiable("fast", reason, started);
-        d.samples_used = n as u64;
-        return (MotionBlur::absent(d), None);
+        return None;
     }
     // C − D over the samples in `subset` (k-th of `of` interleaved subsets).
     let imbalance = |lambda: f32, subset: usize, of: usize| -> f64 {
@@ -348,12 +429,40 @@ pub fn fit_fast(y: &Plane, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
         0.5 * (lo + hi)
     };
     let lambda = root(0, 1);
-    let parts: Vec<f64> = (0..FAST_SUBSETS).map(|k| root(k, FAST_SUBSETS) as f64).collect();
     let k = FAST_SUBSETS as f64;
-    let mean = parts.iter().sum::<f64>() / k;
-    let stderr = (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt();
-    st.lap("search");
-    let mut mb = decide("fast", lambda, stderr, None, n, started);
-    mb.diagnostics.stages_s = st.done();
-    (mb, None)
+    let mean_se = |parts: &[f64]| -> (f64, f64) {
+        let mean = parts.iter().sum::<f64>() / k;
+        (mean, (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt())
+    };
+    let parts: Vec<f64> = (0..FAST_SUBSETS).map(|j| root(j, FAST_SUBSETS) as f64).collect();
+    // C(0)/D(0) − 1 per subset: D(0) = Σ(∂_v I)², C(0) − D(0) = imbalance(0).
+    let excess: Vec<f64> = (0..FAST_SUBSETS)
+        .map(|j| {
+            let d0: f64 = (j..n)
+                .step_by(FAST_SUBSETS)
+                .map(|s| (0.5 * (prof.blurred(4 * s + 2, 0.0) - prof.blurred(4 * s + 3, 0.0)) as f64).powi(2))
+                .sum();
+            if d0 > 0.0 {
+                imbalance(0.0, j, FAST_SUBSETS) / d0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let (along_excess, along_excess_se) = mean_se(&excess);
+    Some(IsotropyRoot { lambda, spread: mean_se(&parts).1, n, along_excess, along_excess_se })
+}
+
+/// What `isotropy_root` measured.
+#[derive(Clone, Copy, Debug)]
+struct IsotropyRoot {
+    lambda: f32,
+    /// Spread of the root over interleaved subsets / √subsets.
+    spread: f64,
+    n: usize,
+    /// C(0)/D(0) − 1 (mean over subsets) and its standard error. A streak only
+    /// lowers C, so a clearly positive excess proves texture with more gradient
+    /// energy along the flow than across: isotropy is violated.
+    along_excess: f64,
+    along_excess_se: f64,
 }
