@@ -75,7 +75,8 @@ pub struct DiscSignature {
     pub is_disc: bool,
 }
 
-fn hann(n: usize) -> Vec<f32> {
+/// The symmetric Hann window of `n` samples.
+pub(crate) fn hann(n: usize) -> Vec<f32> {
     (0..n).map(|i| 0.5 - 0.5 * (2.0 * std::f32::consts::PI * i as f32 / (n - 1) as f32).cos()).collect()
 }
 

@@ -105,8 +105,7 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     let (w, h) = (y.width, y.height);
     let n = LINE_PX;
     let half = (n / 2) as f32;
-    let win: Vec<f32> =
-        (0..n).map(|i| 0.5 - 0.5 * (2.0 * std::f32::consts::PI * i as f32 / (n - 1) as f32).cos()).collect();
+    let win = super::defocus_spectrum::hann(n);
     let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
     let mut buf = vec![Complex32::new(0.0, 0.0); n];
     let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
@@ -122,26 +121,22 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
             if !speed.is_finite() || speed < MIN_SPEED_PX || !valid(cx, cy) {
                 continue;
             }
+            // A line of n samples through the centre along (dx, dy): its start, when
+            // both ends lie inside the frame and the valid mask.
+            let start = |dx: f32, dy: f32| -> Option<(f32, f32)> {
+                let (x0, y0) = (cx as f32 - half * dx, cy as f32 - half * dy);
+                let (x1, y1) = (x0 + (n - 1) as f32 * dx, y0 + (n - 1) as f32 * dy);
+                let ok = inside(x0, y0)
+                    && inside(x1, y1)
+                    && valid(x0 as usize, y0 as usize)
+                    && valid(x1 as usize, y1 as usize);
+                ok.then_some((x0, y0))
+            };
             let (ux, uy) = (fx / speed, fy / speed);
-            let (x0, y0) = (cx as f32 - half * ux, cy as f32 - half * uy);
-            let (x1, y1) = (x0 + (n - 1) as f32 * ux, y0 + (n - 1) as f32 * uy);
-            if !inside(x0, y0)
-                || !inside(x1, y1)
-                || !valid(x0 as usize, y0 as usize)
-                || !valid(x1 as usize, y1 as usize)
-            {
-                continue;
-            }
             let (vx, vy) = (-uy, ux);
-            let (a0, b0) = (cx as f32 - half * vx, cy as f32 - half * vy);
-            let (a1, b1) = (a0 + (n - 1) as f32 * vx, b0 + (n - 1) as f32 * vy);
-            if !inside(a0, b0)
-                || !inside(a1, b1)
-                || !valid(a0 as usize, b0 as usize)
-                || !valid(a1 as usize, b1 as usize)
-            {
+            let (Some((x0, y0)), Some((a0, b0))) = (start(ux, uy), start(vx, vy)) else {
                 continue;
-            }
+            };
             let mut spectrum = |sx: f32, sy: f32, dx: f32, dy: f32| -> Option<Vec<f32>> {
                 let mut mean = 0.0f32;
                 for (j, b) in buf.iter_mut().enumerate() {
