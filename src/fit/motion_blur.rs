@@ -305,18 +305,20 @@ pub fn fit_fast(y: &Plane, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
         mb.diagnostics.stages_s = st.done();
         return (mb, None);
     }
-    let y1 = crate::image::reduce(y);
-    let (fine, coarse) = (isotropy_root(y, flow, 1), isotropy_root(&y1, flow, 2));
+    let fine = isotropy_root(y, flow, 1);
     st.lap("search.isotropy");
-    let Some(IsotropyRoot { lambda, spread, n, along_excess, along_excess_se }) = fine else {
-        let n = coarse.map_or(0, |c| c.n);
-        let reason = format!(
-            "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}), and no streak zeros along the \
+    let IsotropyRoot { lambda, spread, n, along_excess, along_excess_se } = match fine {
+        Ok(root) => root,
+        Err(n) => {
+            let reason = format!(
+                "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}), and no streak zeros along the \
              flow: exposure not identifiable blindly"
-        );
-        let mut d = super::not_identifiable("fast", reason, started);
-        d.samples_used = n as u64;
-        return (MotionBlur::absent(d), None);
+            );
+            let mut d = super::not_identifiable("fast", reason, started);
+            d.samples_used = n as u64;
+            d.stages_s = st.done();
+            return (MotionBlur::absent(d), None);
+        }
     };
     let streak_note = match &streak {
         Some(s) => format!("not identified (correlation {:.2}, λ {:.3} ± {:.3})", s.score, s.lambda, s.stderr),
@@ -338,7 +340,10 @@ pub fn fit_fast(y: &Plane, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
         d.stages_s = st.done();
         return (MotionBlur::absent(d), None);
     }
-    let bias = coarse.map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
+    // The second scale only where its answer is used (the bias risk of a root).
+    let coarse = isotropy_root(&crate::image::reduce(y), flow, 2);
+    st.lap("search.isotropy");
+    let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     let stderr = (spread * spread + bias * bias).sqrt();
     let mut mb = decide("fast", lambda, stderr, None, n, started);
     mb.diagnostics.reason = format!(
@@ -351,11 +356,10 @@ pub fn fit_fast(y: &Plane, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
 }
 
 /// The isotropy root on plane `p` at `scale` (1: the frame; 2: its reduction, whose
-/// pixel (x, y) sits at frame pixel (2x, 2y)): (λ, subset spread, samples), `None`
-/// below `MIN_SAMPLES`. Samples are frame pixels with flow ≥ 3 px/frame and a
+/// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`. Samples are frame pixels with flow ≥ 3 px/frame and a
 /// gradient, picked by gradient *magnitude* only, so the selection prefers no
 /// direction.
-fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Option<IsotropyRoot> {
+fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, usize> {
     let (w, h) = (flow.width, flow.height);
     let s = scale as f32;
     let mut cand = vec![];
@@ -397,7 +401,7 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Option<IsotropyRoot> {
     }
     let n = prof.len();
     if n < MIN_SAMPLES {
-        return None;
+        return Err(n);
     }
     // C − D over the samples in `subset` (k-th of `of` interleaved subsets).
     let imbalance = |lambda: f32, subset: usize, of: usize| -> f64 {
@@ -450,7 +454,7 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Option<IsotropyRoot> {
         })
         .collect();
     let (along_excess, along_excess_se) = mean_se(&excess);
-    Some(IsotropyRoot { lambda, spread: mean_se(&parts).1, n, along_excess, along_excess_se })
+    Ok(IsotropyRoot { lambda, spread: mean_se(&parts).1, n, along_excess, along_excess_se })
 }
 
 /// What `isotropy_root` measured.

@@ -210,11 +210,8 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     } else {
         f32::INFINITY
     };
-    let identified = score >= MIN_SCORE
-        && runner_up < score
-        && stderr <= MAX_RELATIVE_STDERR * lambda
-        && lambda >= lambda_min
-        && lambda <= 1.0;
+    let identified =
+        score >= MIN_SCORE && stderr <= MAX_RELATIVE_STDERR * lambda && lambda >= lambda_min && lambda <= 1.0;
     Some(StreakSignature {
         lambda,
         stderr,
