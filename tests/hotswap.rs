@@ -37,6 +37,7 @@ fn model_for(g: u64) -> CameraModel {
     m.noise = Noise {
         present: true,
         form: NoiseForm::AffineVariance,
+        intensity: NoiseIntensity::Luma,
         levels: (0..NOISE_LEVELS)
             .map(|l| NoiseLevel { slope: [1e-4 * (1.0 + x + l as f32); 3], intercept: [1e-5 * (1.0 + x); 3] })
             .collect(),

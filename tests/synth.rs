@@ -175,6 +175,7 @@ fn noise_synthesis_matches_the_model_per_level() {
     let noise = Noise {
         present: true,
         form: NoiseForm::LinearStd,
+        intensity: NoiseIntensity::Luma,
         levels: (0..NOISE_LEVELS).map(level).collect(),
         lowpass: None,
         luminance_range: [0.0, 1.0],
@@ -199,6 +200,7 @@ fn synthesis_is_deterministic_per_seed() {
     model.noise = Noise {
         present: true,
         form: NoiseForm::AffineVariance,
+        intensity: NoiseIntensity::Luma,
         levels: vec![NoiseLevel { slope: [1e-4; 3], intercept: [1e-5; 3] }; NOISE_LEVELS],
         lowpass: None,
         luminance_range: [0.0, 1.0],
@@ -211,4 +213,31 @@ fn synthesis_is_deterministic_per_seed() {
     let c = synth::apply_camera_model(&img, &model, None, None, 2);
     assert_eq!(a, b);
     assert_ne!(a, c);
+}
+
+/// A model whose maps read each channel's own value: on a coloured flat patch,
+/// channel c's synthesised std is the map at c's value, not at the patch's luma
+/// (`noise_field_rgb`); `noise_field` (the GPU grain's twin) reads luma. Tolerance
+/// 2%: 256² samples give a 0.3% standard error, the rest is the band table's
+/// interpolation between its 33 nodes.
+#[test]
+fn channel_intensity_noise_reads_each_channels_value() {
+    let mut noise = synth::white_sensor_noise([1e-5; 3], [4e-4, 2e-4, 3e-4], [0.0, 1.0]);
+    noise.intensity = NoiseIntensity::Channel;
+    let colour = [0.8f32, 0.3, 0.1];
+    let patch = Rgb::new(256, 256, colour);
+    let own = synth::noise_field_rgb(&patch, &noise, 9);
+    let at_luma = noise_field(&patch.luma(), &noise, 9);
+    let y = patch.luma().data[0];
+    let std = |v: &[f32]| (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+    let a = [1e-5f64; 3];
+    let b = [4e-4f64, 2e-4, 3e-4];
+    for c in 0..3 {
+        let want_own = (a[c] + b[c] * colour[c] as f64).sqrt();
+        let want_luma = (a[c] + b[c] * y as f64).sqrt();
+        let (got_own, got_luma) = (std(&own.channels[c]), std(&at_luma.channels[c]));
+        println!("channel {c}: own {got_own:.5} (want {want_own:.5}), luma {got_luma:.5} (want {want_luma:.5})");
+        assert!((got_own / want_own - 1.0).abs() < 0.02, "channel {c} at its own value");
+        assert!((got_luma / want_luma - 1.0).abs() < 0.02, "channel {c} at luma");
+    }
 }

@@ -30,8 +30,11 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
 
     let noise: Vec<&CameraModel> = models.iter().filter(|m| m.noise.present).collect();
     if let Some(base) = noise.first() {
-        let form = base.noise.form;
-        let same: Vec<&&CameraModel> = noise.iter().filter(|m| m.noise.form == form).collect();
+        // Medians of coefficients only mean something between maps of one form and
+        // one intensity variable.
+        let (form, intensity) = (base.noise.form, base.noise.intensity);
+        let same: Vec<&&CameraModel> =
+            noise.iter().filter(|m| m.noise.form == form && m.noise.intensity == intensity).collect();
         out.noise = base.noise.clone();
         for l in 0..out.noise.levels.len() {
             for c in 0..3 {

@@ -30,7 +30,7 @@
 //! 1e-4 (0.026/255: far below visibility).
 
 use crate::image::{gaussian_pyramid, laplacian_pyramid, IntegralImage, Plane, Rgb};
-use crate::model::{Diagnostics, Noise, NoiseForm, NoiseLevel, Status, NOISE_LEVELS};
+use crate::model::{Diagnostics, Noise, NoiseForm, NoiseIntensity, NoiseLevel, Status, NOISE_LEVELS};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -66,11 +66,34 @@ const BLIND_MIN_FLAT: usize = 12;
 struct LevelPoints {
     y: Vec<f32>,
     y2: Vec<f32>,
+    /// Per channel, window moments of that channel's own value (B(v_c), B(v_c²)),
+    /// for `NoiseIntensity::Channel`; `None` where only luma was collected.
+    own: Option<[(Vec<f32>, Vec<f32>); 3]>,
     var: [Vec<f32>; 3],
     weights: Option<Vec<f32>>,
 }
-/// Chosen form, per-level maps, per-level per-channel OLS covariance, mean relative residual.
-type LevelFit = (NoiseForm, Vec<NoiseLevel>, Vec<[[[f64; 2]; 2]; 3]>, f64);
+
+impl LevelPoints {
+    /// The regressor moments of channel c under `intensity`.
+    fn regressor(&self, intensity: NoiseIntensity, c: usize) -> Option<(&[f32], &[f32])> {
+        match (intensity, &self.own) {
+            (NoiseIntensity::Luma, _) => Some((&self.y, &self.y2)),
+            (NoiseIntensity::Channel, Some(own)) => Some((&own[c].0, &own[c].1)),
+            (NoiseIntensity::Channel, None) => None,
+        }
+    }
+}
+
+/// The fit of one intensity variable: chosen form, per-level maps, per-level
+/// per-channel OLS covariance, mean relative residual, −2·log-likelihood.
+struct LevelFit {
+    form: NoiseForm,
+    intensity: NoiseIntensity,
+    levels: Vec<NoiseLevel>,
+    covs: Vec<[[[f64; 2]; 2]; 3]>,
+    rel_res: f64,
+    nll: f64,
+}
 
 /// Samples behind the noise plot: per level (4 = low-pass), luma and per-channel std.
 #[derive(Clone, Debug, Default)]
@@ -151,16 +174,19 @@ fn grid(len: usize, stride: usize) -> impl Iterator<Item = usize> {
     ((stride / 2).min(len.saturating_sub(1) / 2)..len).step_by(stride)
 }
 
-/// Per-level samples: luma and local variance per channel, clipped footprints out.
+/// Per-level samples: luma, local variance per channel, and (accurate tier) each
+/// channel's own window moments; clipped footprints out.
 struct LevelSamples {
     y: Vec<f32>,
     y2: Vec<f32>,
+    own: Option<[(Vec<f32>, Vec<f32>); 3]>,
     var: [Vec<f32>; 3],
 }
 
 fn collect_samples(
-    bands: &[Vec<Plane>; 3], // [channel][level 0..=4]
-    luma: &[Plane],          // Gaussian pyramid 0..=4
+    bands: &[Vec<Plane>; 3],       // [channel][level 0..=4]
+    luma: &[Plane],                // Gaussian pyramid 0..=4
+    own: Option<&[Vec<Plane>; 3]>, // per channel, Gaussian pyramid 0..=4 of the clean frame
     clip: &ClipMask,
     stride0: usize,
 ) -> Vec<LevelSamples> {
@@ -175,7 +201,12 @@ fn collect_samples(
             // reduce chain and one expand, ~5 px per level-l pixel) plus the window's
             // 2σ radius, which is 8 level-0 px at every level (σ halves as pixels double).
             let radius = 5 * scale + 8;
-            let mut out = LevelSamples { y: vec![], y2: vec![], var: [vec![], vec![], vec![]] };
+            let mut out = LevelSamples {
+                y: vec![],
+                y2: vec![],
+                own: own.map(|_| std::array::from_fn(|_| (vec![], vec![]))),
+                var: [vec![], vec![], vec![]],
+            };
             for y in grid(band0.height, stride) {
                 for x in grid(band0.width, stride) {
                     if clip.touches(x * scale, y * scale, radius, l >= 3) {
@@ -186,6 +217,13 @@ fn collect_samples(
                     // point luma instead biases dark samples near bright ones.
                     out.y.push(local_mean(&luma[l], x, y, &win));
                     out.y2.push(local_mean_sq(&luma[l], x, y, &win));
+                    if let (Some(pyr), Some(dst)) = (own, out.own.as_mut()) {
+                        for c in 0..3 {
+                            let (m1, m2) = local_moments(&pyr[c][l], x, y, &win);
+                            dst[c].0.push(m1);
+                            dst[c].1.push(m2);
+                        }
+                    }
                     for c in 0..3 {
                         out.var[c].push(local_mean_sq(&bands[c][l], x, y, &win));
                     }
@@ -293,14 +331,15 @@ fn neg2_log_likelihood(v: &[f32], pred: &[f64]) -> f64 {
 /// Per-level fits in both forms by iteratively reweighted least squares (3 rounds
 /// of 1/pred² weights); the form with the higher heteroscedastic Gaussian
 /// likelihood (summed over levels and channels) is kept.
-fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
+fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity) -> Option<LevelFit> {
     let mut affine = vec![NoiseLevel::ZERO; points.len()];
     let mut linear = vec![NoiseLevel::ZERO; points.len()];
     let mut covs = vec![[[[0.0; 2]; 2]; 3]; points.len()];
     let (mut nll_aff, mut nll_lin, mut rel_aff, mut rel_lin) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
     for (l, pts) in points.iter().enumerate() {
-        let (y, y2, wts) = (&pts.y, &pts.y2, &pts.weights);
+        let wts = &pts.weights;
         for c in 0..3 {
+            let (y, y2) = pts.regressor(intensity, c)?;
             let v = &pts.var[c];
             // Affine variance: v ≈ a + b·y.
             let (mut a, mut b, _, mut cov) = ols(y, v, wts.as_deref())?;
@@ -313,7 +352,16 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
             affine[l].intercept[c] = a as f32;
             affine[l].slope[c] = b as f32;
             covs[l][c] = cov;
-            nll_aff += neg2_log_likelihood(v, &pred_aff);
+            // The low-pass residual carries ~0.1% of white noise's variance and its
+            // few, wide samples are the least reliable: measured on a Poisson sensor
+            // (tests/independent_forward.rs) its likelihood alone flipped the form
+            // from the affine variance every band preferred to a linear std (3.0%
+            // instead of 0.7% median error). Forms (and intensities) are chosen by
+            // the band-pass levels.
+            let band = l < NOISE_LEVELS;
+            if band {
+                nll_aff += neg2_log_likelihood(v, &pred_aff);
+            }
             // Linear std: v ≈ (a + b·y)².
             let lin_pred = |a: f64, b: f64| -> Vec<f64> {
                 (0..y.len()).map(|i| a * a + 2.0 * a * b * y[i] as f64 + b * b * y2[i] as f64).collect()
@@ -324,7 +372,9 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
                 (la, lb, _) = fit_linear_std(y, y2, v, Some(&w))?;
             }
             let pred_lin = lin_pred(la, lb);
-            nll_lin += neg2_log_likelihood(v, &pred_lin);
+            if band {
+                nll_lin += neg2_log_likelihood(v, &pred_lin);
+            }
             // Keep std non-negative at the reference point: (a + b·y)² is symmetric
             // in sign, so flip to the branch with a positive std.
             let ym = y.iter().sum::<f32>() / y.len().max(1) as f32;
@@ -340,10 +390,22 @@ fn fit_levels(points: &[LevelPoints]) -> Option<LevelFit> {
         }
     }
     let m = (3 * points.len()) as f64;
-    if nll_lin < nll_aff {
-        Some((NoiseForm::LinearStd, linear, covs, rel_lin / m))
+    let (form, levels, rel_res, nll) = if nll_lin < nll_aff {
+        (NoiseForm::LinearStd, linear, rel_lin / m, nll_lin)
     } else {
-        Some((NoiseForm::AffineVariance, affine, covs, rel_aff / m))
+        (NoiseForm::AffineVariance, affine, rel_aff / m, nll_aff)
+    };
+    Some(LevelFit { form, intensity, levels, covs, rel_res, nll })
+}
+
+/// Both intensity variables where the points carry each channel's own moments,
+/// the likelier kept (same variance samples, same likelihood: comparable).
+fn fit_levels_any_intensity(points: &[LevelPoints]) -> Option<LevelFit> {
+    let luma = fit_levels(points, NoiseIntensity::Luma);
+    let own = if points.iter().all(|p| p.own.is_some()) { fit_levels(points, NoiseIntensity::Channel) } else { None };
+    match (luma, own) {
+        (Some(l), Some(o)) => Some(if o.nll < l.nll { o } else { l }),
+        (l, o) => l.or(o),
     }
 }
 
@@ -510,7 +572,7 @@ fn finish(
     with_lowpass: bool,
 ) -> Noise {
     let n_used: usize = samples.iter().map(|s| s.y.len()).sum();
-    let Some((form, mut levels, covs, rel_res)) = fitted else {
+    let Some(LevelFit { form, intensity, mut levels, covs, rel_res, .. }) = fitted else {
         let reason = "too few unclipped samples to fit the noise model";
         let mut d = super::not_identifiable(method, reason, started);
         d.samples_used = n_used as u64;
@@ -521,6 +583,7 @@ fn finish(
     let noise = Noise {
         present: false,
         form,
+        intensity,
         levels,
         lowpass,
         luminance_range: luma_range,
@@ -546,9 +609,11 @@ fn finish(
     let status = if present { Status::Present } else { Status::Absent };
     let reason = if present {
         format!(
-            "level-0 std {std_mid:.5} at luma {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood); \
-             residuals are mean squared local-variance errors at level 0",
-            100.0 * rel
+            "level-0 std {std_mid:.5} at {} {ym:.2} (±{:.2}%); form {form:?} (mean relative residual {rel_res:.4}, chosen by likelihood); \
+             intensity {intensity:?}{}; residuals are mean squared local-variance errors at level 0",
+            if intensity.is_luma() { "luma" } else { "intensity" },
+            100.0 * rel,
+            if method == "accurate" { " (luma or each channel's own value, chosen by likelihood)" } else { "" }
         )
     } else {
         format!("level-0 std {std_mid:.2e} at luma {ym:.2} is within 3 standard errors of zero or below 1e-4")
@@ -582,8 +647,7 @@ fn plot_data(points: &[LevelPoints]) -> NoisePlotData {
     }
 }
 
-fn luma_range(samples: &LevelSamples) -> [f32; 2] {
-    let mut y = samples.y.clone();
+fn intensity_range(mut y: Vec<f32>) -> [f32; 2] {
     if y.is_empty() {
         return [0.0, 1.0];
     }
@@ -617,9 +681,12 @@ pub fn fit_accurate(
     };
     let bands = pyramids(&residual);
     let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
+    let own: Vec<Vec<Plane>> =
+        (0..3).into_par_iter().map(|c| gaussian_pyramid(&denoised.plane(c), NOISE_LEVELS)).collect();
+    let own: [Vec<Plane>; 3] = own.try_into().unwrap_or_else(|_| std::array::from_fn(|_| vec![]));
     st.lap("blur");
     let stride = effective_stride(image.len(), opts.noise_stride_px);
-    let samples = collect_samples(&bands, &luma, &clip_mask(image, 1, valid), stride);
+    let samples = collect_samples(&bands, &luma, Some(&own), &clip_mask(image, 1, valid), stride);
     st.lap("search");
     // The low-pass residual is fitted when it has unclipped samples (its footprint
     // is ~90 px wide, so frames with large clipped areas may leave none).
@@ -627,11 +694,24 @@ pub fn fit_accurate(
     let points: Vec<LevelPoints> = samples
         .iter()
         .take(usable)
-        .map(|s| LevelPoints { y: s.y.clone(), y2: s.y2.clone(), var: s.var.clone(), weights: None })
+        .map(|s| LevelPoints {
+            y: s.y.clone(),
+            y2: s.y2.clone(),
+            own: s.own.clone(),
+            var: s.var.clone(),
+            weights: None,
+        })
         .collect();
-    let fitted = if points.iter().all(|p| !p.y.is_empty()) { fit_levels(&points) } else { None };
+    let fitted = if points.iter().all(|p| !p.y.is_empty()) { fit_levels_any_intensity(&points) } else { None };
     st.lap("least_squares");
-    let range = luma_range(&samples[0]);
+    let range = match (&fitted, &samples[0].own) {
+        (Some(f), Some(own)) if f.intensity == NoiseIntensity::Channel => {
+            // The channel values the samples constrain, pooled over channels.
+            let pooled: Vec<f32> = own.iter().flat_map(|(m1, _)| m1.iter().copied()).collect();
+            intensity_range(pooled)
+        }
+        _ => intensity_range(samples[0].y.clone()),
+    };
     let mut noise = finish("accurate", started, fitted, &samples, range, true);
     noise.diagnostics.stages_s = st.done();
     (noise, plot_data(&points))
@@ -883,13 +963,14 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
         points.push(LevelPoints {
             y: bins.iter().map(|b| b.y).collect(),
             y2: bins.iter().map(|b| b.y2).collect(),
+            own: None,
             var: std::array::from_fn(|c| bins.iter().map(|b| b.var[c]).collect()),
             weights: Some(bins.iter().map(|b| b.n as f32).collect()),
         });
         prev = Some(bins);
     }
-    let fitted = if measured_levels.first() == Some(&0) { fit_levels(&points) } else { None };
-    let fitted = fitted.map(|(form, lv, covs, rel)| {
+    let fitted = if measured_levels.first() == Some(&0) { fit_levels(&points, NoiseIntensity::Luma) } else { None };
+    let fitted = fitted.map(|LevelFit { form, intensity, levels: lv, covs, rel_res, nll }| {
         let unit = crate::synth::unit_band_std();
         let last = lv.len() - 1;
         // Beyond the finest measured levels: white noise's per-level ratios, scaled
@@ -918,13 +999,15 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
                 }
             })
             .collect();
-        (form, levels, covs, rel)
+        LevelFit { form, intensity, levels, covs, rel_res, nll }
     });
     // The luma range is what level 0's used bins cover: no value outside it.
     let y0 = points.first().map(|p| p.y.clone()).unwrap_or_default();
     let range = luma_span(&y0).unwrap_or([0.0, 1.0]);
-    let samples: Vec<LevelSamples> =
-        points.iter().map(|p| LevelSamples { y: p.y.clone(), y2: p.y2.clone(), var: p.var.clone() }).collect();
+    let samples: Vec<LevelSamples> = points
+        .iter()
+        .map(|p| LevelSamples { y: p.y.clone(), y2: p.y2.clone(), own: None, var: p.var.clone() })
+        .collect();
     st.lap("least_squares");
     let samples_used: usize = points.iter().flat_map(|p| p.weights.iter().flatten()).map(|&w| w as usize).sum();
     let mut noise = finish("fast", started, fitted, &samples, range, false);

@@ -66,7 +66,33 @@ pub enum NoiseForm {
     AffineVariance,
 }
 
-/// One pyramid level's map from luma Y to R, G, B noise.
+/// What a level's map reads as its intensity.
+///
+/// `luma` is the paper's choice (Sec. 3.2 and its supplement: one luma, Y of YCbCr,
+/// drives the R, G, B stds). A sensor's shot noise follows each photosite's own
+/// signal, so after white balance a channel's noise follows that channel's value:
+/// on frames made that way (tests/independent_forward.rs: a Poisson sensor with
+/// white-balance gains 1.9/1.0/1.6) a luma-driven fit is a median 9–12% off on
+/// neutral greys, and no line in Y can fix it. The accurate fit tries both and keeps
+/// the likelier (model only what the frame requires).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseIntensity {
+    /// Y (Rec. 601 luma) of the content drives every channel.
+    #[default]
+    Luma,
+    /// Channel c's own value drives channel c.
+    Channel,
+}
+
+impl NoiseIntensity {
+    pub fn is_luma(&self) -> bool {
+        *self == NoiseIntensity::Luma
+    }
+}
+
+/// One pyramid level's map from intensity (luma Y, or the channel's own value: see
+/// `NoiseIntensity`) to R, G, B noise.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseLevel {
@@ -79,11 +105,16 @@ pub struct NoiseLevel {
 pub struct Noise {
     pub present: bool,
     pub form: NoiseForm,
+    /// What the maps read as intensity; absent in files written before it existed
+    /// (read as luma, which is what those files meant), so the schema is unchanged.
+    #[serde(default, skip_serializing_if = "NoiseIntensity::is_luma")]
+    pub intensity: NoiseIntensity,
     /// Band-pass levels 0..4, finest first.
     pub levels: Vec<NoiseLevel>,
     /// The low-pass residual's map (fitted like a band; `null` if not modelled).
     pub lowpass: Option<NoiseLevel>,
-    /// Luma range fitted on; evaluation clamps Y into it (no extrapolation into
+    /// Intensity range fitted on (luma, or the channels' values for
+    /// `NoiseIntensity::Channel`); evaluation clamps into it (no extrapolation into
     /// clipped highlights or crushed blacks).
     pub luminance_range: [f32; 2],
     /// The blind fit's level-0 measurement per luma bin, with its confidence (empty
@@ -285,6 +316,7 @@ impl Noise {
         Self {
             present: false,
             form: NoiseForm::AffineVariance,
+            intensity: NoiseIntensity::Luma,
             levels: vec![NoiseLevel::ZERO; NOISE_LEVELS],
             lowpass: None,
             luminance_range: [0.0, 1.0],

@@ -24,7 +24,7 @@
 
 use super::rng::gaussian;
 use crate::image::{gaussian_pyramid, laplacian_pyramid, Plane, Rgb};
-use crate::model::{Noise, NOISE_LEVELS};
+use crate::model::{Noise, NoiseIntensity, NOISE_LEVELS};
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
@@ -212,17 +212,37 @@ impl SynthesisTable {
     }
 }
 
-/// The synthesised noise field (no content added) for content with luma `luma`.
+/// The synthesised noise field (no content added) for content with luma `luma`,
+/// every channel's maps read at luma (the GPU grain pass's twin). For a model with
+/// `NoiseIntensity::Channel` this is exact on neutral content (R = G = B = Y);
+/// `noise_field_rgb` reads each channel at its own value.
 pub fn noise_field(luma: &Plane, noise: &Noise, seed: u64) -> Rgb {
-    let (w, h) = (luma.width, luma.height);
+    let ypyr = gaussian_pyramid(luma, NOISE_LEVELS);
+    field_at(luma.width, luma.height, [&ypyr, &ypyr, &ypyr], noise, seed)
+}
+
+/// The synthesised noise field for `content`, each channel's maps read at the
+/// model's intensity: luma, or that channel's own value.
+pub fn noise_field_rgb(content: &Rgb, noise: &Noise, seed: u64) -> Rgb {
+    match noise.intensity {
+        NoiseIntensity::Luma => noise_field(&content.luma(), noise, seed),
+        NoiseIntensity::Channel => {
+            let pyr: Vec<Vec<Plane>> = (0..3).map(|c| gaussian_pyramid(&content.plane(c), NOISE_LEVELS)).collect();
+            field_at(content.width, content.height, [&pyr[0], &pyr[1], &pyr[2]], noise, seed)
+        }
+    }
+}
+
+/// Band l of channel c's white noise weighted at `intensity[c]`'s level l.
+fn field_at(w: usize, h: usize, intensity: [&Vec<Plane>; 3], noise: &Noise, seed: u64) -> Rgb {
     if !noise.present {
         return Rgb::new(w, h, [0.0; 3]);
     }
     let table = SynthesisTable::new(noise);
-    let ypyr = gaussian_pyramid(luma, NOISE_LEVELS);
     let planes: Vec<Plane> = (0..3usize)
         .into_par_iter()
         .map(|c| {
+            let ypyr = intensity[c];
             let white = (0..w * h).map(|i| gaussian((i % w) as u32, (i / w) as u32, c as u32, seed)).collect();
             let mut pyr = laplacian_pyramid(&Plane::from_vec(w, h, white), NOISE_LEVELS);
             for (l, band) in pyr.bands.iter_mut().chain(std::iter::once(&mut pyr.lowpass)).enumerate() {
@@ -251,6 +271,7 @@ pub fn white_sensor_noise(a: [f32; 3], b: [f32; 3], luminance_range: [f32; 2]) -
     Noise {
         present: true,
         form: crate::model::NoiseForm::AffineVariance,
+        intensity: NoiseIntensity::Luma,
         levels: (0..NOISE_LEVELS).map(level).collect(),
         lowpass: Some(level(NOISE_LEVELS)),
         luminance_range,
@@ -265,7 +286,7 @@ pub fn add_noise(clean: &Rgb, noise: &Noise, seed: u64) -> Rgb {
     if !noise.present {
         return clean.clone();
     }
-    let field = noise_field(&clean.luma(), noise, seed);
+    let field = noise_field_rgb(clean, noise, seed);
     let mut out = clean.clone();
     for c in 0..3 {
         for (o, n) in out.channels[c].iter_mut().zip(&field.channels[c]) {

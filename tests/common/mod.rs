@@ -2,6 +2,8 @@
 //! and flow with known structure, the true noise generator.
 #![allow(dead_code)]
 
+pub mod independent;
+
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::io;
 use std::path::PathBuf;

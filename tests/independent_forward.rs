@@ -1,0 +1,264 @@
+//! The accurate tier on frames made by a second, independent forward model
+//! (`common::independent`: Gaussian layers, bicubic MB, Poisson noise after the MB),
+//! not by the project's own `synth` (issue 10 item 6). Errors are measured over every
+//! pixel of the frame with valid depth — where virtual content may be placed — not
+//! only over the depths the fit found texture at.
+
+#![allow(clippy::needless_range_loop)]
+
+mod common;
+
+use blind_augment::fit::{fit, Effects, FitInputs, FitOptions};
+use blind_augment::image::{Plane, Rgb};
+use blind_augment::model::*;
+use blind_augment::synth::noise_field;
+use common::independent::{cubic_motion_blur, layered_defocus, sigma_map, Sensor};
+use common::*;
+
+fn only(noise: bool, mb: bool, dof: bool) -> FitOptions {
+    FitOptions { effects: Effects { noise, motion_blur: mb, depth_of_field: dof }, ..Default::default() }
+}
+
+/// Layer spacing of the independent defocus: the paper's 100 steps over [0, 10] px.
+const LAYER_STEP_PX: f32 = 0.1;
+
+struct DofScene {
+    name: &'static str,
+    image: Rgb,
+    depth: Plane,
+    truth: DofCurve,
+}
+
+/// Replace rows [0, rows) of `img` by a smooth vertical ramp between two colours:
+/// a textureless region (a wall, the sky), whose blur no fit can measure.
+fn flatten_rows(img: &mut Rgb, rows: std::ops::Range<usize>, top: [f32; 3], bottom: [f32; 3]) {
+    let n = rows.len().max(1) as f32;
+    let y0 = rows.start;
+    for y in rows {
+        let t = (y - y0) as f32 / n;
+        for x in 0..img.width {
+            for c in 0..3 {
+                img.channels[c][y * img.width + x] = top[c] + (bottom[c] - top[c]) * t;
+            }
+        }
+    }
+}
+
+/// Depth rows: `near` rows ramp from `z_near` to `z_mid`, the rest is `depth_ramp`
+/// from `z_mid` to `z_far` (rows only: the textureless band is one depth span).
+fn scenes() -> Vec<DofScene> {
+    let astro = photo("astronaut.png");
+    let (w, h) = (astro.width, astro.height);
+    let mut out = vec![];
+    let ramp = depth_ramp(w, h, 0.5, 4.0);
+    out.push(DofScene {
+        name: "textured 0.5–4 m, thin lens",
+        image: astro.clone(),
+        depth: ramp.clone(),
+        truth: DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 },
+    });
+    out.push(DofScene {
+        name: "textured 0.5–4 m, quadratic",
+        image: astro.clone(),
+        depth: ramp.clone(),
+        truth: DofCurve::Quadratic { a: 0.3, b: -1.0, c: 1.5 },
+    });
+    // The issue's miss: 14% of the frame nearer than every textured sample.
+    let band = h * 14 / 100;
+    let mut img = astro.clone();
+    flatten_rows(&mut img, 0..band, [0.62, 0.60, 0.58], [0.60, 0.58, 0.57]);
+    let mut depth = Plane::new(w, h, 0.0);
+    for y in 0..h {
+        for x in 0..w {
+            let v = (y as f32 + 0.5) / h as f32;
+            depth.data[y * w + x] = if y < band {
+                0.2 + 0.3 * (y as f32 + 0.5) / band as f32
+            } else {
+                0.5 + 3.5 * ((v - 0.14) / 0.86 + 0.05 * (6.0 * x as f32 / w as f32).sin()).clamp(0.0, 1.0)
+            };
+        }
+    }
+    out.push(DofScene {
+        name: "14% textureless nearer (0.2–0.5 m), thin lens",
+        image: img.clone(),
+        depth: depth.clone(),
+        truth: DofCurve::ThinLens { k: 1.5, focus_depth: 2.0, c0: 0.2 },
+    });
+    out.push(DofScene {
+        name: "14% textureless nearer (0.2–0.5 m), quadratic",
+        image: img,
+        depth,
+        truth: DofCurve::Quadratic { a: 0.25, b: -1.8, c: 3.6 },
+    });
+    // A textureless far band (sky) beyond the textured depths.
+    let mut img = astro.clone();
+    let sky = h - h * 20 / 100;
+    flatten_rows(&mut img, sky..h, [0.55, 0.66, 0.80], [0.58, 0.68, 0.82]);
+    let mut depth = Plane::new(w, h, 0.0);
+    for y in 0..h {
+        for x in 0..w {
+            let v = (y as f32 + 0.5) / h as f32;
+            depth.data[y * w + x] = if y >= sky {
+                4.0 + 8.0 * (y - sky) as f32 / (h - sky) as f32
+            } else {
+                0.5 + 3.5 * (v / 0.8 + 0.05 * (6.0 * x as f32 / w as f32).sin()).clamp(0.0, 1.0)
+            };
+        }
+    }
+    out.push(DofScene {
+        name: "20% textureless farther (4–12 m), thin lens",
+        image: img,
+        depth,
+        truth: DofCurve::ThinLens { k: 2.0, focus_depth: 1.0, c0: 0.0 },
+    });
+    out
+}
+
+/// RMSE of the fitted δ against the truth over every valid-depth pixel of the frame.
+fn frame_rmse(fitted: &DepthOfField, truth: &DofCurve, depth: &Plane) -> f64 {
+    let mut sse = 0.0;
+    let mut n = 0usize;
+    for &z in &depth.data {
+        if z.is_finite() && z > 0.0 {
+            let e = (fitted.sigma_px(z) - truth.sigma_px(DepthUnits::MetricM, z)) as f64;
+            sse += e * e;
+            n += 1;
+        }
+    }
+    (sse / n.max(1) as f64).sqrt()
+}
+
+#[test]
+fn dof_on_independent_gaussian_layers() {
+    let mut rmses = vec![];
+    for scene in scenes() {
+        let sig = sigma_map(&scene.depth, |z| scene.truth.sigma_px(DepthUnits::MetricM, z));
+        let blurred = quantize8(&layered_defocus(&scene.image, &sig, LAYER_STEP_PX));
+        let inp = FitInputs {
+            defocus_deblurred: Some(&scene.image),
+            depth: Some(&scene.depth),
+            depth_units: DepthUnits::MetricM,
+            ..FitInputs::new(&blurred)
+        };
+        let got = fit(&inp, &only(false, false, true)).expect("valid inputs").model.depth_of_field;
+        let rmse = frame_rmse(&got, &scene.truth, &scene.depth);
+        // Signed bias over the textured range.
+        println!(
+            "{}: got {:?} over {:?} (max truth σ {:.2} px) → frame RMSE {rmse:.4} px",
+            scene.name,
+            got.curve,
+            got.depth_range,
+            sig.iter().cloned().fold(0.0f32, f32::max)
+        );
+        rmses.push(rmse);
+    }
+    println!(
+        "median frame RMSE {:.4} px, worst {:.4}",
+        median(rmses.clone()),
+        rmses.iter().cloned().fold(0.0, f64::max)
+    );
+}
+
+#[test]
+fn exposure_on_independent_bicubic_blur() {
+    let img = photo("astronaut.png");
+    let flow = flow_field(img.width, img.height, 8.0);
+    for lambda in [0.1f32, 0.3, 0.5, 0.7, 0.9] {
+        let blurred = quantize8(&cubic_motion_blur(&img, &flow, lambda));
+        let inp = FitInputs { motion_deblurred: Some(&img), flow: Some(&flow), ..FitInputs::new(&blurred) };
+        let mb = fit(&inp, &only(false, true, false)).expect("valid").model.motion_blur;
+        println!("λ {lambda} → {:?}", mb.exposure);
+    }
+}
+
+/// Std of the noise `synth` adds to a flat grey of luma y, per channel.
+fn synth_flat_std(noise: &Noise, y: f32) -> [f64; 3] {
+    let field = noise_field(&Plane::new(256, 256, y), noise, 77);
+    std::array::from_fn(|c| {
+        let v = &field.channels[c];
+        (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+    })
+}
+
+const SENSOR: Sensor = Sensor { full_well_e: 1500.0, wb_gain: [1.9, 1.0, 1.6], read_std: [0.004, 0.003, 0.005] };
+
+/// 8-bit quantisation of a noisy signal adds Δ²/12 to its variance: the camera's
+/// output carries it, so the truth does too.
+fn truth_std(c: usize, v: f32) -> f64 {
+    (SENSOR.std_at(c, v as f64).powi(2) + (1.0f64 / 255.0).powi(2) / 12.0).sqrt()
+}
+
+/// Relative errors of synth's flat-grey std against the sensor at 9 greys spread
+/// over the fitted range (on a grey every channel's value is its luma).
+fn grey_errors(noise: &Noise) -> Vec<f64> {
+    let [lo, hi] = noise.luminance_range;
+    let mut errs = vec![];
+    for k in 0..9 {
+        let y = lo + (hi - lo) * (k as f32 + 0.5) / 9.0;
+        let s = synth_flat_std(noise, y);
+        for c in 0..3 {
+            errs.push(s[c] / truth_std(c, y) - 1.0);
+        }
+    }
+    errs
+}
+
+/// The same sensor's noise driven by the frame's luma instead of each photosite's
+/// signal (what the paper's model assumes), drawn with the independent generator.
+fn luma_driven_noise(clean: &Rgb, seed: u64) -> Rgb {
+    let y = clean.luma();
+    let mut rng = common::independent::SplitMix(seed);
+    let mut out = clean.clone();
+    for c in 0..3 {
+        for i in 0..out.len() {
+            let v = clean.channels[c][i] as f64 + rng.normal() * SENSOR.std_at(c, y.data[i] as f64);
+            out.channels[c][i] = ((v.clamp(0.0, 1.0) * 255.0).round() / 255.0) as f32;
+        }
+    }
+    out
+}
+
+/// The test double itself: on flat greys its std is the stated one (256² pixels per
+/// cell: the std's standard error is 0.3%, so 1.5% is 5 standard errors).
+#[test]
+fn independent_sensor_has_its_stated_std() {
+    for v in [0.05f32, 0.2, 0.5, 0.8] {
+        let out = SENSOR.expose(&Rgb::new(256, 256, [v; 3]), 3);
+        for c in 0..3 {
+            let x = &out.channels[c];
+            let m = x.iter().map(|&a| a as f64).sum::<f64>() / x.len() as f64;
+            let s = (x.iter().map(|&a| (a as f64 - m).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+            assert!((m - v as f64).abs() < 1e-3, "mean {m} at {v}");
+            assert!((s / truth_std(c, v) - 1.0).abs() < 0.015, "std {s} at {v}, channel {c}");
+        }
+    }
+}
+
+/// Photosite noise after the bicubic MB (the clean reference is the blurred frame):
+/// each channel's noise follows its own value, which the fit must recognise; synth's
+/// std on flat greys within the core issue's median 1.5% (measured: 0.73% astronaut,
+/// 0.26% chelsea; a luma-driven fit was 11.9% / 9.2% off). Luma-driven noise from the
+/// same generator must keep the paper's luma intensity (measured 0.33% / 0.57%).
+#[test]
+fn noise_after_independent_motion_blur() {
+    for name in ["astronaut.png", "chelsea.png"] {
+        let sharp = photo(name);
+        let flow = flow_field(sharp.width, sharp.height, 8.0);
+        let clean = cubic_motion_blur(&sharp, &flow, 0.5);
+        for (driver, noisy, want) in [
+            ("photosite", SENSOR.expose(&clean, 17), NoiseIntensity::Channel),
+            ("luma", luma_driven_noise(&clean, 5), NoiseIntensity::Luma),
+        ] {
+            let inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
+            let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
+            let errs = grey_errors(&noise);
+            let med = median(errs.iter().map(|e| e.abs()).collect());
+            println!(
+                "{name}, {driver}-driven: {:?}, {:?} over {:?}: median |rel err| {med:.4}",
+                noise.intensity, noise.form, noise.luminance_range
+            );
+            assert_eq!(noise.intensity, want, "{name}, {driver}-driven noise");
+            assert!(med <= 0.015, "{name}, {driver}-driven: median relative error {med} > 1.5%");
+        }
+    }
+}
