@@ -16,6 +16,12 @@
 //! patch looks the same at every σ. Pixels with invalid depth (non-finite, or ≤ 0
 //! for metric depth) are skipped.
 //!
+//! Range: the curve is fitted on the textured samples' depths and evaluated over
+//! the depths the frame holds (0.5–99.5th percentile of its valid depth), with at
+//! most `EXTRAPOLATION_FRACTION` of the textured inverse-depth span of
+//! extrapolation on each side — δ(Z) clamps Z into that range, so content nearer
+//! than every textured sample no longer takes the nearest sample's blur.
+//!
 //! Present when the fitted curve reaches ≥ 0.1 px somewhere in the range (a 0.1 px
 //! Gaussian removes 5% of the contrast at Nyquist: invisible) and its maximum
 //! exceeds 3 standard errors.
@@ -81,6 +87,62 @@ fn depth_range(z: &[f32]) -> [f32; 2] {
     [lo, hi]
 }
 
+/// The depths the frame holds: 0.5th–99.5th percentile of its valid depths (every
+/// other pixel in x and y), or `None` without valid depth.
+fn frame_depth_span(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
+    let mut z: Vec<f32> = (0..depth.height)
+        .step_by(2)
+        .flat_map(|y| (0..depth.width).step_by(2).map(move |x| (x, y)))
+        .map(|(x, y)| depth.get(x, y))
+        .filter(|&v| valid_depth(v, units))
+        .collect();
+    if z.is_empty() {
+        return None;
+    }
+    let k = |q: f64| ((z.len() - 1) as f64 * q).round() as usize;
+    let (klo, khi) = (k(0.005), k(0.995));
+    let lo = *z.select_nth_unstable_by(klo, |a, b| a.total_cmp(b)).1;
+    let hi = *z.select_nth_unstable_by(khi, |a, b| a.total_cmp(b)).1;
+    Some([lo, hi])
+}
+
+/// Extrapolation beyond the textured depths, as a fraction of their span in inverse
+/// depth (where the thin lens is linear), toward the depths the frame holds. Chosen
+/// by measurement (tests/independent_forward.rs, BENCHMARKS.md): on five scenes —
+/// two fully textured, one with 14% of the frame textureless and nearer than every
+/// textured sample (thin lens and quadratic truth), one with a textureless far band
+/// — 0 (the textured depths only: nearer content took the nearest sample's blur,
+/// 0.68 px frame RMSE) / 0.5 / 1 / 2 / unbounded gave worst-case frame RMSE 0.68 /
+/// 0.35 / 0.20 / 0.23 / 0.23 px and medians 0.090 / 0.076 / 0.067 / 0.066 / 0.066 px:
+/// 1 has the best worst case, and bounds how far a curve fitted on a narrow textured
+/// span is trusted.
+pub const EXTRAPOLATION_FRACTION: f32 = 1.0;
+
+/// The range the model is evaluated over (δ(Z) clamps Z into it): the textured
+/// samples' depths, extended toward the frame's depths by at most
+/// `EXTRAPOLATION_FRACTION` of their inverse-depth span on each side.
+fn evaluation_range(textured: [f32; 2], frame: Option<[f32; 2]>, units: DepthUnits) -> [f32; 2] {
+    let Some(frame) = frame else { return textured };
+    let m = EXTRAPOLATION_FRACTION;
+    // Inverse depth u: near is large u for metric depth, and z itself for
+    // relative inverse depth.
+    let u = |z: f32| units.inverse_depth(z);
+    let from_u = |u: f32| match units {
+        DepthUnits::MetricM => 1.0 / u,
+        DepthUnits::RelativeInverse => u,
+    };
+    let (ua, ub) = (u(textured[0]), u(textured[1]));
+    let (ulo, uhi) = (ua.min(ub), ua.max(ub));
+    let span = (uhi - ulo).max(0.0);
+    let (fa, fb) = (u(frame[0]), u(frame[1]));
+    let (flo, fhi) = (fa.min(fb), fa.max(fb));
+    let new_lo = flo.max(ulo - m * span).min(ulo);
+    let new_hi = fhi.min(uhi + m * span).max(uhi);
+    // Metric depth: u ≤ 0 is infinitely far; keep the far end finite.
+    let (za, zb) = (from_u(new_lo.max(1e-6)), from_u(new_hi));
+    [za.min(zb), za.max(zb)]
+}
+
 /// Turn per-pixel (Z, σ) into the model; `residuals` = (before, after) if known.
 #[allow(clippy::too_many_arguments)]
 fn finish(
@@ -88,6 +150,7 @@ fn finish(
     z: Vec<f32>,
     s: Vec<f32>,
     units: DepthUnits,
+    frame_span: Option<[f32; 2]>,
     started: Instant,
     mut st: super::Stages,
     residual_at: impl Fn(&DepthOfField) -> Option<(f64, f64)>,
@@ -99,9 +162,10 @@ fn finish(
         d.samples_used = n as u64;
         return (DepthOfField::absent(units, d), None);
     }
-    let range = depth_range(&z);
+    let textured = depth_range(&z);
+    let range = evaluation_range(textured, frame_span, units);
     st.lap("search");
-    let Some(fit) = fit_dof_curve(&z, &s, units, range) else {
+    let Some(fit) = fit_dof_curve(&z, &s, units, textured) else {
         let mut d = super::not_identifiable(method, "robust depth-model fit failed (degenerate design)", started);
         d.samples_used = n as u64;
         return (DepthOfField::absent(units, d), None);
@@ -129,8 +193,13 @@ fn finish(
         status: if present { Status::Present } else { Status::Absent },
         reason: format!(
             "{form} kept (lower mean Huber loss, thin lens on ties; flat curves become constants); max δ {max_sigma:.3} px, \
-             robust residual scale {:.3} px; {}",
+             robust residual scale {:.3} px; fitted on textured depths [{:.3}, {:.3}], evaluated over [{:.3}, {:.3}] \
+             (the frame's depths, extrapolated at most {EXTRAPOLATION_FRACTION} textured inverse-depth span); {}",
             fit.scale,
+            textured[0],
+            textured[1],
+            range[0],
+            range[1],
             if present { "visible (≥ 0.1 px) and above 3 standard errors" } else { "below 0.1 px or within 3 standard errors" }
         ),
         method: method.into(),
@@ -339,7 +408,7 @@ pub fn fit_accurate(
         let m = (9 * n).max(1) as f64;
         Some((before / m, after / m))
     };
-    finish("accurate", zs.clone(), sig, units, started, st, residual_at)
+    finish("accurate", zs.clone(), sig, units, frame_depth_span(depth, units), started, st, residual_at)
 }
 
 /// Edge-spread function of a unit step at distance `d` (px) blurred by `kernel` of
@@ -575,7 +644,7 @@ pub fn fit_fast(
     let zs: Vec<f32> = zs.into_iter().step_by(keep).collect();
     let sig: Vec<f32> =
         sig.into_iter().step_by(keep).map(|raw| calibrate(raw, kernel).min(opts.dof_max_sigma_px)).collect();
-    let (mut dof, plot) = finish("fast", zs, sig, units, started, st, |_| None);
+    let (mut dof, plot) = finish("fast", zs, sig, units, frame_depth_span(depth, units), started, st, |_| None);
     if dof.curve.is_some() {
         dof.kernel = kernel;
         dof.diagnostics.reason = format!("{}; {shape_note}", dof.diagnostics.reason);
