@@ -29,7 +29,7 @@
 //! Present when the level-0 std at mid-range luma exceeds 3 standard errors and
 //! 1e-4 (0.026/255: far below visibility).
 
-use crate::image::{gaussian_pyramid, laplacian_pyramid, IntegralImage, Plane, Rgb};
+use crate::image::{gaussian_pyramid, laplacian_pyramid, IntegralImage, Plane, Rgb, LUMA_WEIGHTS};
 use crate::model::{Diagnostics, Noise, NoiseForm, NoiseIntensity, NoiseLevel, Status, NOISE_LEVELS};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -331,7 +331,7 @@ fn neg2_log_likelihood(v: &[f32], pred: &[f64]) -> f64 {
 /// Per-level fits in both forms by iteratively reweighted least squares (3 rounds
 /// of 1/pred² weights); the form with the higher heteroscedastic Gaussian
 /// likelihood (summed over levels and channels) is kept.
-fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity) -> Option<LevelFit> {
+fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity, with_linear: bool) -> Option<LevelFit> {
     let mut affine = vec![NoiseLevel::ZERO; points.len()];
     let mut linear = vec![NoiseLevel::ZERO; points.len()];
     let mut covs = vec![[[[0.0; 2]; 2]; 3]; points.len()];
@@ -362,6 +362,11 @@ fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity) -> Option<Level
             if band {
                 nll_aff += neg2_log_likelihood(v, &pred_aff);
             }
+            if !with_linear {
+                nll_lin = f64::INFINITY;
+                rel_aff += rel_of(v, &pred_aff);
+                continue;
+            }
             // Linear std: v ≈ (a + b·y)².
             let lin_pred = |a: f64, b: f64| -> Vec<f64> {
                 (0..y.len()).map(|i| a * a + 2.0 * a * b * y[i] as f64 + b * b * y2[i] as f64).collect()
@@ -381,12 +386,8 @@ fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity) -> Option<Level
             let (la, lb) = if la + lb * ym as f64 >= 0.0 { (la, lb) } else { (-la, -lb) };
             linear[l].intercept[c] = la as f32;
             linear[l].slope[c] = lb as f32;
-            let rel = |pred: &[f64]| {
-                v.iter().zip(pred).map(|(&vi, &p)| (vi as f64 - p).powi(2)).sum::<f64>()
-                    / v.iter().map(|&vi| (vi as f64).powi(2)).sum::<f64>().max(1e-300)
-            };
-            rel_aff += rel(&pred_aff);
-            rel_lin += rel(&pred_lin);
+            rel_aff += rel_of(v, &pred_aff);
+            rel_lin += rel_of(v, &pred_lin);
         }
     }
     let m = (3 * points.len()) as f64;
@@ -398,15 +399,29 @@ fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity) -> Option<Level
     Some(LevelFit { form, intensity, levels, covs, rel_res, nll })
 }
 
-/// Both intensity variables where the points carry each channel's own moments,
-/// the likelier kept (same variance samples, same likelihood: comparable).
+/// Relative squared residual Σ(v − pred)² / Σv².
+fn rel_of(v: &[f32], pred: &[f64]) -> f64 {
+    v.iter().zip(pred).map(|(&vi, &p)| (vi as f64 - p).powi(2)).sum::<f64>()
+        / v.iter().map(|&vi| (vi as f64).powi(2)).sum::<f64>().max(1e-300)
+}
+
+/// Both intensity variables where the points carry each channel's own moments:
+/// the intensity by the affine-variance likelihood (same variance samples, same
+/// likelihood: comparable; the affine fit is a few weighted OLS passes, the
+/// linear-std Gauss–Newton is what costs), then both forms at that intensity.
 fn fit_levels_any_intensity(points: &[LevelPoints]) -> Option<LevelFit> {
-    let luma = fit_levels(points, NoiseIntensity::Luma);
-    let own = if points.iter().all(|p| p.own.is_some()) { fit_levels(points, NoiseIntensity::Channel) } else { None };
-    match (luma, own) {
-        (Some(l), Some(o)) => Some(if o.nll < l.nll { o } else { l }),
-        (l, o) => l.or(o),
-    }
+    let intensity = if points.iter().all(|p| p.own.is_some()) {
+        let luma = fit_levels(points, NoiseIntensity::Luma, false).map_or(f64::INFINITY, |f| f.nll);
+        let own = fit_levels(points, NoiseIntensity::Channel, false).map_or(f64::INFINITY, |f| f.nll);
+        if own < luma {
+            NoiseIntensity::Channel
+        } else {
+            NoiseIntensity::Luma
+        }
+    } else {
+        NoiseIntensity::Luma
+    };
+    fit_levels(points, intensity, true)
 }
 
 /// Clipped pixels: a channel is clipped at its maximum (minimum) when that exact
@@ -680,10 +695,19 @@ pub fn fit_accurate(
         }),
     };
     let bands = pyramids(&residual);
-    let luma = gaussian_pyramid(&denoised.luma(), NOISE_LEVELS);
     let own: Vec<Vec<Plane>> =
         (0..3).into_par_iter().map(|c| gaussian_pyramid(&denoised.plane(c), NOISE_LEVELS)).collect();
     let own: [Vec<Plane>; 3] = own.try_into().unwrap_or_else(|_| std::array::from_fn(|_| vec![]));
+    // The pyramid is linear: luma's levels are the weighted sums of the channels'.
+    let luma: Vec<Plane> = (0..own[0].len())
+        .map(|l| {
+            let [r, g, b] = [&own[0][l], &own[1][l], &own[2][l]];
+            let data = (r.data.iter().zip(&g.data).zip(&b.data))
+                .map(|((r, g), b)| LUMA_WEIGHTS[0] * r + LUMA_WEIGHTS[1] * g + LUMA_WEIGHTS[2] * b)
+                .collect();
+            Plane::from_vec(r.width, r.height, data)
+        })
+        .collect();
     st.lap("blur");
     let stride = effective_stride(image.len(), opts.noise_stride_px);
     let samples = collect_samples(&bands, &luma, Some(&own), &clip_mask(image, 1, valid), stride);
@@ -969,7 +993,8 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
         });
         prev = Some(bins);
     }
-    let fitted = if measured_levels.first() == Some(&0) { fit_levels(&points, NoiseIntensity::Luma) } else { None };
+    let fitted =
+        if measured_levels.first() == Some(&0) { fit_levels(&points, NoiseIntensity::Luma, true) } else { None };
     let fitted = fitted.map(|LevelFit { form, intensity, levels: lv, covs, rel_res, nll }| {
         let unit = crate::synth::unit_band_std();
         let last = lv.len() - 1;
