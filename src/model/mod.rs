@@ -224,7 +224,8 @@ pub struct DepthOfField {
     pub units: DepthUnits,
     /// `null` when not identifiable.
     pub curve: Option<DofCurve>,
-    /// Depth range fitted on; evaluation clamps Z into it.
+    /// Depth range the model holds for (fits: the frame's depths, the textured ones
+    /// extrapolated a bounded distance); evaluation clamps Z into it.
     pub depth_range: [f32; 2],
     /// Kernel shape; absent in files written before it existed (read as Gaussian,
     /// which is what those files meant), so the schema version is unchanged.
