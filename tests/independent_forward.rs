@@ -11,7 +11,6 @@ mod common;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions};
 use blind_augment::image::{Plane, Rgb};
 use blind_augment::model::*;
-use blind_augment::synth::noise_field;
 use common::independent::{cubic_motion_blur, layered_defocus, sigma_map, Sensor};
 use common::*;
 
@@ -202,15 +201,6 @@ fn exposure_on_independent_bicubic_blur() {
         assert!((got - lambda).abs() <= 0.08, "λ {lambda}: got {got}");
         assert!(got < lambda, "λ {lambda}: the bilinear convention reads band-limited streaks short, got {got}");
     }
-}
-
-/// Std of the noise `synth` adds to a flat grey of luma y, per channel.
-fn synth_flat_std(noise: &Noise, y: f32) -> [f64; 3] {
-    let field = noise_field(&Plane::new(256, 256, y), noise, 77);
-    std::array::from_fn(|c| {
-        let v = &field.channels[c];
-        (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
-    })
 }
 
 const SENSOR: Sensor = Sensor { full_well_e: 1500.0, wb_gain: [1.9, 1.0, 1.6], read_std: [0.004, 0.003, 0.005] };

@@ -12,7 +12,7 @@ mod common;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions};
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::model::*;
-use blind_augment::synth::{self, add_dof, add_motion_blur, noise_field};
+use blind_augment::synth::{self, add_dof, add_motion_blur};
 use common::*;
 
 fn only(noise: bool, mb: bool, dof: bool) -> FitOptions {
@@ -152,16 +152,6 @@ fn dof_accurate_rmse_within_0_05_px_real_disparity() {
     println!("real disparity: got {:?} over {:?}, RMSE {rmse:.4} px", got.curve, got.depth_range);
     assert!(rmse <= 0.05, "δ RMSE {rmse} px > 0.05");
     assert!(matches!(got.curve, Some(DofCurve::ThinLens { .. })), "thin lens truth kept as thin lens");
-}
-
-/// Std of the noise `synth` adds to a flat grey of luma y, per channel, over 256²
-/// pixels (std error of the estimate ≈ 0.14%).
-fn synth_flat_std(noise: &Noise, y: f32) -> [f64; 3] {
-    let field = noise_field(&Plane::new(256, 256, y), noise, 77);
-    std::array::from_fn(|c| {
-        let v = &field.channels[c];
-        (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
-    })
 }
 
 /// Relative errors of synth's flat-grey std against `truth(c, y)` at 9 lumas

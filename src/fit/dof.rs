@@ -87,15 +87,20 @@ fn depth_range(z: &[f32]) -> [f32; 2] {
     [lo, hi]
 }
 
+/// The valid depths of every `step`-th pixel in x and y.
+fn valid_depths(depth: &Plane, units: DepthUnits, step: usize) -> Vec<f32> {
+    (0..depth.height)
+        .step_by(step)
+        .flat_map(|y| (0..depth.width).step_by(step).map(move |x| (x, y)))
+        .map(|(x, y)| depth.get(x, y))
+        .filter(|&v| valid_depth(v, units))
+        .collect()
+}
+
 /// The depths the frame holds: 0.5th–99.5th percentile of its valid depths (every
 /// other pixel in x and y), or `None` without valid depth.
 fn frame_depth_span(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
-    let mut z: Vec<f32> = (0..depth.height)
-        .step_by(2)
-        .flat_map(|y| (0..depth.width).step_by(2).map(move |x| (x, y)))
-        .map(|(x, y)| depth.get(x, y))
-        .filter(|&v| valid_depth(v, units))
-        .collect();
+    let mut z = valid_depths(depth, units, 2);
     if z.is_empty() {
         return None;
     }
@@ -655,12 +660,7 @@ pub fn fit_fast(
 /// The depth range when the frame holds one depth (inverse depth's 5–95% spread
 /// within 2% of its median, over every 4th pixel), else `None`.
 fn constant_depth(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
-    let mut z: Vec<f32> = (0..depth.height)
-        .step_by(4)
-        .flat_map(|y| (0..depth.width).step_by(4).map(move |x| (x, y)))
-        .map(|(x, y)| depth.get(x, y))
-        .filter(|&v| valid_depth(v, units))
-        .collect();
+    let mut z = valid_depths(depth, units, 4);
     if z.len() < MIN_SAMPLES {
         return None;
     }

@@ -134,3 +134,13 @@ pub fn gpu_context(test: &str) -> Option<blind_augment::gpu::GpuContext> {
         }
     }
 }
+
+/// Std of the noise `synth` adds to a flat grey of luma y, per channel, over 256²
+/// pixels (std error of the estimate ≈ 0.14%).
+pub fn synth_flat_std(noise: &blind_augment::model::Noise, y: f32) -> [f64; 3] {
+    let field = blind_augment::synth::noise_field(&Plane::new(256, 256, y), noise, 77);
+    std::array::from_fn(|c| {
+        let v = &field.channels[c];
+        (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+    })
+}
