@@ -143,8 +143,10 @@ fn evaluation_range(textured: [f32; 2], frame: Option<[f32; 2]>, units: DepthUni
     let (flo, fhi) = (fa.min(fb), fa.max(fb));
     let new_lo = flo.max(ulo - m * span).min(ulo);
     let new_hi = fhi.min(uhi + m * span).max(uhi);
-    // Metric depth: u ≤ 0 is infinitely far; keep the far end finite.
-    let (za, zb) = (from_u(new_lo.max(1e-6)), from_u(new_hi));
+    // Metric depth: u ≤ 0 is infinitely far, so keep the far end finite; relative
+    // inverse depth may be ≤ 0 (it is affine in 1/Z) and is taken as it is.
+    let new_lo = if units == DepthUnits::MetricM { new_lo.max(1e-6) } else { new_lo };
+    let (za, zb) = (from_u(new_lo), from_u(new_hi));
     [za.min(zb), za.max(zb)]
 }
 
@@ -693,5 +695,29 @@ mod tests {
             }
             assert_eq!(calibrate(t[0].0, kernel), 0.0);
         }
+    }
+}
+
+#[cfg(test)]
+mod range_tests {
+    use super::*;
+
+    /// The evaluation range at the extremes: no frame depths → the textured range;
+    /// a frame far wider than the textured span → at most one span on each side (in
+    /// inverse depth); relative inverse depth below zero stays below zero; a single
+    /// textured depth does not extend.
+    #[test]
+    fn evaluation_range_is_bounded_and_keeps_units() {
+        let m = DepthUnits::MetricM;
+        assert_eq!(evaluation_range([1.0, 2.0], None, m), [1.0, 2.0]);
+        // Textured u ∈ [0.5, 1]: span 0.5 → u ∈ [0, 1.5] at most → z ∈ [0.667, 1e6].
+        let r = evaluation_range([1.0, 2.0], Some([0.01, 1e9]), m);
+        assert!((r[0] - 1.0 / 1.5).abs() < 1e-5 && r[1] == 1e6, "{r:?}");
+        // Inside the bound the frame's own depths are used.
+        let r = evaluation_range([1.0, 2.0], Some([0.8, 3.0]), m);
+        assert!((r[0] - 0.8).abs() < 1e-5 && (r[1] - 3.0).abs() < 1e-4, "{r:?}");
+        let r = evaluation_range([-0.5, 0.5], Some([-10.0, 10.0]), DepthUnits::RelativeInverse);
+        assert_eq!(r, [-1.5, 1.5]);
+        assert_eq!(evaluation_range([2.0, 2.0], Some([0.1, 50.0]), m), [2.0, 2.0]);
     }
 }
