@@ -211,21 +211,6 @@ fn truth_std(c: usize, v: f32) -> f64 {
     (SENSOR.std_at(c, v as f64).powi(2) + (1.0f64 / 255.0).powi(2) / 12.0).sqrt()
 }
 
-/// Relative errors of synth's flat-grey std against the sensor at 9 greys spread
-/// over the fitted range (on a grey every channel's value is its luma).
-fn grey_errors(noise: &Noise) -> Vec<f64> {
-    let [lo, hi] = noise.luminance_range;
-    let mut errs = vec![];
-    for k in 0..9 {
-        let y = lo + (hi - lo) * (k as f32 + 0.5) / 9.0;
-        let s = synth_flat_std(noise, y);
-        for c in 0..3 {
-            errs.push(s[c] / truth_std(c, y) - 1.0);
-        }
-    }
-    errs
-}
-
 /// The same sensor's noise driven by the frame's luma instead of each photosite's
 /// signal (what the paper's model assumes), drawn with the independent generator.
 fn luma_driven_noise(clean: &Rgb, seed: u64) -> Rgb {
@@ -274,7 +259,8 @@ fn noise_after_independent_motion_blur() {
         ] {
             let inp = FitInputs { denoised: Some(&clean), ..FitInputs::new(&noisy) };
             let noise = fit(&inp, &only(true, false, false)).expect("valid").model.noise;
-            let errs = grey_errors(&noise);
+            // On a grey every channel's value is its luma.
+            let errs = noise_errors(&noise, truth_std);
             let med = median(errs.iter().map(|e| e.abs()).collect());
             println!(
                 "{name}, {driver}-driven: {:?}, {:?} over {:?}: median |rel err| {med:.4}",

@@ -154,21 +154,6 @@ fn dof_accurate_rmse_within_0_05_px_real_disparity() {
     assert!(matches!(got.curve, Some(DofCurve::ThinLens { .. })), "thin lens truth kept as thin lens");
 }
 
-/// Relative errors of synth's flat-grey std against `truth(c, y)` at 9 lumas
-/// spread over the fitted range.
-fn noise_errors(noise: &Noise, truth: impl Fn(usize, f32) -> f64) -> Vec<f64> {
-    let [lo, hi] = noise.luminance_range;
-    let mut errs = vec![];
-    for k in 0..9 {
-        let y = lo + (hi - lo) * (k as f32 + 0.5) / 9.0;
-        let s = synth_flat_std(noise, y);
-        for c in 0..3 {
-            errs.push(s[c] / truth(c, y) - 1.0);
-        }
-    }
-    errs
-}
-
 const A: [f32; 3] = [2e-5, 1.2e-5, 4e-5];
 const B: [f32; 3] = [8e-4, 5e-4, 1.2e-3];
 

@@ -144,3 +144,17 @@ pub fn synth_flat_std(noise: &blind_augment::model::Noise, y: f32) -> [f64; 3] {
         (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
     })
 }
+
+/// Relative errors of synth's flat-grey std against `truth(c, y)` at 9 lumas
+/// spread over the fitted range.
+pub fn noise_errors(noise: &blind_augment::model::Noise, truth: impl Fn(usize, f32) -> f64) -> Vec<f64> {
+    let [lo, hi] = noise.luminance_range;
+    let mut errs = vec![];
+    for k in 0..9 {
+        let y = lo + (hi - lo) * (k as f32 + 0.5) / 9.0;
+        for (c, s) in synth_flat_std(noise, y).into_iter().enumerate() {
+            errs.push(s / truth(c, y) - 1.0);
+        }
+    }
+    errs
+}
