@@ -153,6 +153,16 @@ fn demo_runs_without_files() {
     let acc = model(&d.join("camera_accurate.json"));
     let (t, a) = (truth.motion_blur.exposure.expect("λ"), acc.motion_blur.exposure.expect("λ"));
     assert!((t - a).abs() < 0.01, "demo λ {a} vs {t}");
+    // The report's headline table puts both tiers' errors side by side (issue 10,
+    // item 7): its λ row must carry the errors of the written models.
+    let report = std::fs::read_to_string(d.join("report.md")).expect("report");
+    let fast = model(&d.join("camera_fast.json"));
+    let f = fast.motion_blur.exposure_or_zero();
+    let row = format!("| motion blur | \\|λ − λ_true\\| | {:.4} | {:.4} |", (a - t).abs(), (f - t).abs());
+    assert!(report.contains("## Error against the truth, per tier") && report.contains(&row), "{row} in\n{report}");
+    for effect in ["| depth of field | δ RMSE", "| noise | median relative error"] {
+        assert!(report.contains(effect), "{effect} in\n{report}");
+    }
     // The render half needs a Vulkan device: required under REQUIRE_GPU=1 (CI).
     if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") {
         for f in ["composite_side_by_side.png", "composite_zoom.png", "render/matched_007.png", "render/naive_000.png"]
