@@ -458,7 +458,7 @@ fn zhuo_sim_table(kernel: DofKernel) -> &'static Vec<(f32, f32)> {
                 let data: Vec<f32> =
                     (0..n).map(|x| edge_spread(kernel, x as f32 - (n as f32 / 2.0 + ph), sigma)).collect();
                 let p = Plane::from_vec(n, 1, data);
-                let re = reblur_half(&p);
+                let re = reblur_half(&reduce(&p));
                 let g = (1..n - 1).map(|x| 0.5 * (p.get(x + 1, 0) - p.get(x - 1, 0))).fold(0.0f32, f32::max);
                 let g_re = (1..n - 1).map(|x| reblur_grad(&re, x, 0).0).fold(0.0f32, f32::max);
                 let r = g / g_re;
@@ -470,11 +470,12 @@ fn zhuo_sim_table(kernel: DofKernel) -> &'static Vec<(f32, f32)> {
     })
 }
 
-/// The Zhuo–Sim re-blur (Gaussian of std `ZS_SIGMA0`) of `y`, at half resolution:
-/// `reduce` (binomial, variance 1 px², keeps the even pixels) then a discrete
-/// Gaussian of the remaining (σ0² − 1)/4 half-resolution px².
-fn reblur_half(y: &Plane) -> Plane {
-    blur_separable(&reduce(y), &discrete_gaussian_kernel((ZS_SIGMA0 * ZS_SIGMA0 - 1.0) / 4.0))
+/// The Zhuo–Sim re-blur (Gaussian of std `ZS_SIGMA0`) of the frame at half
+/// resolution, from `half` = `reduce(y)` (binomial, variance 1 px², keeps the even
+/// pixels; shared with the motion-blur fit's coarse scale): a discrete Gaussian of
+/// the remaining (σ0² − 1)/4 half-resolution px².
+fn reblur_half(half: &Plane) -> Plane {
+    blur_separable(half, &discrete_gaussian_kernel((ZS_SIGMA0 * ZS_SIGMA0 - 1.0) / 4.0))
 }
 
 /// Gradient (per full-resolution px) of the re-blurred image at full-resolution
@@ -536,13 +537,14 @@ fn calibrate(raw: f32, kernel: DofKernel) -> f32 {
 /// Fast tier: the frame and Z (Zhuo & Sim 2011 edge re-blur ratio).
 pub fn fit_fast(
     y: &Plane,
+    half: &std::sync::OnceLock<Plane>,
     depth: &Plane,
     units: DepthUnits,
     opts: &super::FitOptions,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let re = reblur_half(y);
+    let re = reblur_half(half.get_or_init(|| reduce(y)));
     st.lap("blur");
     let (w, h) = (y.width, y.height);
     let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {

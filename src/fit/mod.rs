@@ -190,12 +190,15 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     }
     if let Some(f) = inp.flow {
         size("flow", f.width, f.height)?;
-        for (i, (&dx, &dy)) in f.dx.iter().zip(&f.dy).enumerate() {
-            for (channel, value) in [(0, dx), (1, dy)] {
-                if !value.is_finite() {
-                    return Err(FitError::NonFinite { input: "flow", x: i % w, y: i / w, channel, value });
-                }
-            }
+        // The first non-finite value in pixel order (dx before dy within a pixel).
+        let first = [&f.dx, &f.dy]
+            .iter()
+            .enumerate()
+            .filter_map(|(channel, v)| crate::image::first_non_finite(v).map(|i| (i, channel)))
+            .min();
+        if let Some((i, channel)) = first {
+            let value = [&f.dx, &f.dy][channel][i];
+            return Err(FitError::NonFinite { input: "flow", x: i % w, y: i / w, channel, value });
         }
     }
     if !(opts.dof_node_spacing_px > 0.0 && opts.dof_node_spacing_px <= 2.0) {
@@ -324,9 +327,15 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     (noise, Some(data))
 }
 
-/// The frame's luma, computed once for the blind fits that read it (motion blur and
-/// DoF): a 1280×960 luma plane costs ~3 ms to build, mostly memory traffic.
-type SharedLuma = std::sync::OnceLock<Plane>;
+/// The frame's luma and its half-resolution `reduce`, each computed once for the
+/// blind fits that read them (motion blur and DoF, which may run concurrently): a
+/// 1280×960 luma plane costs ~3 ms to build, its reduction ~1 ms, mostly memory
+/// traffic.
+#[derive(Default)]
+struct SharedLuma {
+    full: std::sync::OnceLock<Plane>,
+    half: std::sync::OnceLock<Plane>,
+}
 
 fn fit_motion_blur(
     inp: &FitInputs,
@@ -347,7 +356,7 @@ fn fit_motion_blur(
         (Some(flow), Tier::Accurate, Some(sharp)) => {
             motion_blur::fit_accurate(inp.image, sharp, flow, inp.reference_valid, opts.mb_max_samples)
         }
-        (Some(flow), _, _) => motion_blur::fit_fast(luma.get_or_init(|| inp.image.luma()), flow),
+        (Some(flow), _, _) => motion_blur::fit_fast(luma.full.get_or_init(|| inp.image.luma()), &luma.half, flow),
     }
 }
 
@@ -371,7 +380,9 @@ fn fit_depth_of_field(
             None,
         ),
         (Some(depth), Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
-        (Some(depth), _, _) => dof::fit_fast(luma.get_or_init(|| inp.image.luma()), depth, inp.depth_units, opts),
+        (Some(depth), _, _) => {
+            dof::fit_fast(luma.full.get_or_init(|| inp.image.luma()), &luma.half, depth, inp.depth_units, opts)
+        }
     }
 }
 
@@ -397,7 +408,7 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     let noise_tier = tier(fx.noise, inp.denoised, "noise", "denoised")?;
     let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
     let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
-    let luma = SharedLuma::new();
+    let luma = SharedLuma::default();
     let ((noise, mb), dof) = rayon::join(
         || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier, &luma)),
         || fit_depth_of_field(inp, opts, dof_tier, &luma),

@@ -113,7 +113,7 @@ impl Rgb {
     /// First non-finite value as `(x, y, channel)`, if any.
     pub fn first_non_finite(&self) -> Option<(usize, usize, usize)> {
         for (c, ch) in self.channels.iter().enumerate() {
-            if let Some(i) = ch.iter().position(|v| !v.is_finite()) {
+            if let Some(i) = first_non_finite(ch) {
                 return Some((i % self.width.max(1), i / self.width.max(1), c));
             }
         }
@@ -198,4 +198,19 @@ impl IntegralImage {
         let w = self.width + 1;
         self.sums[y1 * w + x1] - self.sums[y0 * w + x1] - self.sums[y1 * w + x0] + self.sums[y0 * w + x0]
     }
+}
+
+/// Index of the first non-finite value. Every frame the fit sees is scanned, so the
+/// common all-finite case runs branch-free over blocks (a short-circuiting scan does
+/// not vectorise: ~1 ms per 1280×960 plane on this machine, ~0.2 ms this way); the
+/// position is looked for only in a block that holds one.
+pub fn first_non_finite(v: &[f32]) -> Option<usize> {
+    const BLOCK: usize = 1024;
+    v.chunks(BLOCK).enumerate().find_map(|(b, chunk)| {
+        if chunk.iter().fold(true, |acc, &x| acc & x.is_finite()) {
+            None
+        } else {
+            chunk.iter().position(|x| !x.is_finite()).map(|i| b * BLOCK + i)
+        }
+    })
 }
