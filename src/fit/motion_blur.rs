@@ -457,7 +457,7 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
     };
     let imbalance = |lambda: f32, subset: usize, of: usize| imbalance_at(lambda, subset, of, 1.0);
     // The λ where C/D = k (C/D rises with λ: the extra box along v lowers D).
-    let root_at = |subset: usize, of: usize, k: f64| -> f32 {
+    let root_at = |subset: usize, of: usize, k: f64, halvings: usize| -> f32 {
         if imbalance_at(0.0, subset, of, k) >= 0.0 {
             return 0.0;
         }
@@ -465,8 +465,7 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
             return 1.0;
         }
         let (mut lo, mut hi) = (0.0f32, 1.0f32);
-        // 14 halvings: λ to 6e-5, far below the estimator's spread.
-        for _ in 0..14 {
+        for _ in 0..halvings {
             let mid = 0.5 * (lo + hi);
             if imbalance_at(mid, subset, of, k) < 0.0 {
                 lo = mid;
@@ -476,11 +475,18 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
         }
         0.5 * (lo + hi)
     };
-    let root = |subset: usize, of: usize| root_at(subset, of, 1.0);
+    // 14 halvings: λ to 6e-5, far below the estimator's spread.
+    let root = |subset: usize, of: usize| root_at(subset, of, 1.0, 14);
     let lambda = root(0, 1);
     // The texture prior's band: where the root would sit if the sharp scene's
-    // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1.
-    let band = [root_at(0, 1, 1.0 - TEXTURE_ANISOTROPY_90), root_at(0, 1, 1.0 + TEXTURE_ANISOTROPY_90)];
+    // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1 — on
+    // the frame's scale only (the coarse root only checks the fine one), to 1/256
+    // (8 halvings: a bound on a bias, not a measurement).
+    let band = if scale == 1 {
+        [root_at(0, 1, 1.0 - TEXTURE_ANISOTROPY_90, 8), root_at(0, 1, 1.0 + TEXTURE_ANISOTROPY_90, 8)]
+    } else {
+        [lambda; 2]
+    };
     let k = FAST_SUBSETS as f64;
     let mean_se = |parts: &[f64]| -> (f64, f64) {
         let mean = parts.iter().sum::<f64>() / k;
