@@ -354,10 +354,7 @@ pub fn fit_fast(y: &Plane, half: &std::sync::OnceLock<Plane>, flow: &Flow) -> (M
         d.stages_s = st.done();
         return (MotionBlur::absent(d), None);
     }
-    // The second scale only where its answer is used (the bias risk of a root).
-    let coarse = isotropy_root(half.get_or_init(|| crate::image::reduce(y)), flow, 2);
-    st.lap("search.isotropy");
-    let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
+    let band = band.unwrap_or([lambda; 2]);
     let half_band = 0.5 * (band[1] - band[0]) as f64;
     let prior = format!(
         "a natural texture anisotropy (±{:.0}%, 90% of scenes) would put it anywhere in [{:.3}, {:.3}]",
@@ -377,6 +374,10 @@ pub fn fit_fast(y: &Plane, half: &std::sync::OnceLock<Plane>, flow: &Flow) -> (M
         d.stages_s = st.done();
         return (MotionBlur::absent(d), None);
     }
+    // The second scale only where its answer is used (the bias risk of a root).
+    let coarse = isotropy_root(half.get_or_init(|| crate::image::reduce(y)), flow, 2);
+    st.lap("search.isotropy");
+    let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     // The two-scale disagreement and the prior band (a 90% band: half-width / 1.645
     // is its σ) both gauge the texture's bias: the larger counts, in quadrature
     // with the sampling spread.
@@ -482,11 +483,8 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
     // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1 — on
     // the frame's scale only (the coarse root only checks the fine one), to 1/256
     // (8 halvings: a bound on a bias, not a measurement).
-    let band = if scale == 1 {
-        [root_at(0, 1, 1.0 - TEXTURE_ANISOTROPY_90, 8), root_at(0, 1, 1.0 + TEXTURE_ANISOTROPY_90, 8)]
-    } else {
-        [lambda; 2]
-    };
+    let band = (scale == 1)
+        .then(|| [root_at(0, 1, 1.0 - TEXTURE_ANISOTROPY_90, 8), root_at(0, 1, 1.0 + TEXTURE_ANISOTROPY_90, 8)]);
     let k = FAST_SUBSETS as f64;
     let mean_se = |parts: &[f64]| -> (f64, f64) {
         let mean = parts.iter().sum::<f64>() / k;
@@ -524,6 +522,6 @@ struct IsotropyRoot {
     along_excess: f64,
     along_excess_se: f64,
     /// The roots at C/D = 1 ∓ `TEXTURE_ANISOTROPY_90`: the λ range a natural
-    /// texture anisotropy leaves open (~90%).
-    band: [f32; 2],
+    /// texture anisotropy leaves open (~90%); frame scale only (`None` at scale 2).
+    band: Option<[f32; 2]>,
 }
