@@ -536,15 +536,14 @@ fn calibrate(raw: f32, kernel: DofKernel) -> f32 {
 
 /// Fast tier: the frame and Z (Zhuo & Sim 2011 edge re-blur ratio).
 pub fn fit_fast(
-    y: &Plane,
-    half: &std::sync::OnceLock<Plane>,
+    luma: &super::SharedLuma,
     depth: &Plane,
     units: DepthUnits,
     opts: &super::FitOptions,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let re = reblur_half(half.get_or_init(|| reduce(y)));
+    let (y, re) = (luma.full(), reblur_half(luma.half()));
     st.lap("blur");
     let (w, h) = (y.width, y.height);
     let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {

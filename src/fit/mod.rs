@@ -327,14 +327,31 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     (noise, Some(data))
 }
 
-/// The frame's luma and its half-resolution `reduce`, each computed once for the
-/// blind fits that read them (motion blur and DoF, which may run concurrently): a
-/// 1280×960 luma plane costs ~3 ms to build, its reduction ~1 ms, mostly memory
-/// traffic.
-#[derive(Default)]
-struct SharedLuma {
+/// The frame's luma and its half-resolution `reduce`, each computed once, on first
+/// use, for the blind fits that read them (motion blur and DoF, which may run
+/// concurrently): a 1280×960 luma plane costs ~3 ms to build, its reduction ~1 ms,
+/// mostly memory traffic. The reduction is always of this luma: callers never pair
+/// planes themselves.
+pub(super) struct SharedLuma<'a> {
+    image: &'a Rgb,
     full: std::sync::OnceLock<Plane>,
     half: std::sync::OnceLock<Plane>,
+}
+
+impl<'a> SharedLuma<'a> {
+    fn new(image: &'a Rgb) -> Self {
+        Self { image, full: Default::default(), half: Default::default() }
+    }
+
+    /// The frame's luma.
+    pub(super) fn full(&self) -> &Plane {
+        self.full.get_or_init(|| self.image.luma())
+    }
+
+    /// `reduce` of the frame's luma (binomial, variance 1 px², the even pixels).
+    pub(super) fn half(&self) -> &Plane {
+        self.half.get_or_init(|| crate::image::reduce(self.full()))
+    }
 }
 
 fn fit_motion_blur(
@@ -356,7 +373,7 @@ fn fit_motion_blur(
         (Some(flow), Tier::Accurate, Some(sharp)) => {
             motion_blur::fit_accurate(inp.image, sharp, flow, inp.reference_valid, opts.mb_max_samples)
         }
-        (Some(flow), _, _) => motion_blur::fit_fast(luma.full.get_or_init(|| inp.image.luma()), &luma.half, flow),
+        (Some(flow), _, _) => motion_blur::fit_fast(luma, flow),
     }
 }
 
@@ -380,9 +397,7 @@ fn fit_depth_of_field(
             None,
         ),
         (Some(depth), Tier::Accurate, Some(sharp)) => dof::fit_accurate(inp.image, sharp, depth, inp.depth_units, opts),
-        (Some(depth), _, _) => {
-            dof::fit_fast(luma.full.get_or_init(|| inp.image.luma()), &luma.half, depth, inp.depth_units, opts)
-        }
+        (Some(depth), _, _) => dof::fit_fast(luma, depth, inp.depth_units, opts),
     }
 }
 
@@ -408,7 +423,7 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     let noise_tier = tier(fx.noise, inp.denoised, "noise", "denoised")?;
     let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
     let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
-    let luma = SharedLuma::default();
+    let luma = SharedLuma::new(inp.image);
     let ((noise, mb), dof) = rayon::join(
         || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier, &luma)),
         || fit_depth_of_field(inp, opts, dof_tier, &luma),

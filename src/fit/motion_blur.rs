@@ -299,8 +299,9 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
 ///    defocus, noise) — wider than half of [0, 1] is *not identifiable*. The bias
 ///    term is added in quadrature to the spread of the root over `FAST_SUBSETS`
 ///    interleaved subsets / √subsets.
-pub fn fit_fast(y: &Plane, half: &std::sync::OnceLock<Plane>, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
+pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
+    let y = luma.full();
     let mut st = super::Stages::start();
     let streak = super::streak_spectrum::streak_signature(y, flow, |_, _| true);
     st.lap("search.spectrum");
@@ -375,7 +376,7 @@ pub fn fit_fast(y: &Plane, half: &std::sync::OnceLock<Plane>, flow: &Flow) -> (M
         return (MotionBlur::absent(d), None);
     }
     // The second scale only where its answer is used (the bias risk of a root).
-    let coarse = isotropy_root(half.get_or_init(|| crate::image::reduce(y)), flow, 2);
+    let coarse = isotropy_root(luma.half(), flow, 2);
     st.lap("search.isotropy");
     let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     // The two-scale disagreement and the prior band (a 90% band: half-width / 1.645

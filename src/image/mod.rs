@@ -202,8 +202,8 @@ impl IntegralImage {
 
 /// Index of the first non-finite value. Every frame the fit sees is scanned, so the
 /// common all-finite case runs branch-free over blocks (a short-circuiting scan does
-/// not vectorise: ~1 ms per 1280×960 plane on this machine, ~0.2 ms this way); the
-/// position is looked for only in a block that holds one.
+/// not vectorise: 0.36 ms per 1280×960 plane on this machine, 0.17 ms this way,
+/// measured side by side); the position is looked for only in a block that holds one.
 pub fn first_non_finite(v: &[f32]) -> Option<usize> {
     const BLOCK: usize = 1024;
     v.chunks(BLOCK).enumerate().find_map(|(b, chunk)| {
