@@ -158,7 +158,8 @@ fn demo_runs_without_files() {
     let report = std::fs::read_to_string(d.join("report.md")).expect("report");
     let fast = model(&d.join("camera_fast.json"));
     let f = fast.motion_blur.exposure_or_zero();
-    let row = format!("| motion blur | \\|λ − λ_true\\| | {:.4} | {:.4} |", (a - t).abs(), (f - t).abs());
+    // (The fast cell may go on with "(not identifiable: …)".)
+    let row = format!("| motion blur | \\|λ − λ_true\\| | {:.4} | {:.4}", (a - t).abs(), (f - t).abs());
     assert!(report.contains("## Error against the truth, per tier") && report.contains(&row), "{row} in\n{report}");
     for effect in ["| depth of field | δ RMSE", "| noise | median relative error"] {
         assert!(report.contains(effect), "{effect} in\n{report}");

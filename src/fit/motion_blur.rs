@@ -336,10 +336,18 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<Mb
         }
     };
     let streak_note = match &streak {
+        Some(s) if !s.inside => format!(
+            "not identified (the best template, λ {:.3}, lies outside [{:.3}, 1]: a fall-off, not a zero in the band)",
+            s.lambda, s.lambda_min
+        ),
         Some(s) => format!("not identified (correlation {:.2}, λ {:.3} ± {:.3})", s.score, s.lambda, s.stderr),
         None => "not measurable (no line along the flow fits the frame)".into(),
     };
-    if lambda == 0.0 && along_excess > 0.02 && along_excess > 3.0 * along_excess_se {
+    // Even the prior's most along-heavy texture (C/D = 1 + `TEXTURE_ANISOTROPY_90`)
+    // puts the root at 0: the frame's along excess lies beyond the prior, so the
+    // prior's band ([0, 0]) says nothing about λ.
+    let beyond_prior = band.is_some_and(|b| b[1] == 0.0);
+    if lambda == 0.0 && ((along_excess > 0.02 && along_excess > 3.0 * along_excess_se) || beyond_prior) {
         // The root sits at 0 because the texture itself carries more gradient
         // energy along the flow (a streak can only lower it): an isotropic scene
         // without blur and an anisotropic one with blur look alike here.

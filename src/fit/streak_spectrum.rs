@@ -26,17 +26,35 @@
 //!    ≤ 0.38 with it);
 //! 4. regress out the remaining trend (1, ln φ, ln² φ: texture anisotropy that varies
 //!    smoothly with frequency) and correlate the residual with the same-detrended
-//!    template ln(sinc²(πφλ) + ε); λ is the best template over a grid from
-//!    `lambda_min` (first zero at 80% of the band) to 1, refined by a parabola.
+//!    template. The template is the ratio a streak leaves **over a noise floor**:
+//!    along / across = (S·sinc² + N) / (S + N) = (1 − r)·sinc²(πφλ) + r, with
+//!    r(φ) = N / across(φ) and N the least smoothed along-flow power in the upper
+//!    3/4 of the band (white noise is flat on the exposure axis and is all a zero
+//!    leaves). Without it the template's deep zeros met a noise-filled ratio that
+//!    only falls to the floor and stays: noise read streaks 27–36% long (astronaut
+//!    1280×960, λ 0.5 + noise: 0.682 ± 0.043; the demo frame 0.525 for 0.40);
+//! 5. λ is the best template over a grid reaching from `BELOW_BAND` × `lambda_min`
+//!    (`lambda_min`: first zero at 80% of the band) to `ABOVE_FULL`, refined by a
+//!    parabola; a best outside [lambda_min, 1] is a fall-off at an end of the band
+//!    (a streak too short for a zero in it, defocus, interpolation), not a zero.
 //!
 //! Standard error: the spread of λ over `SUBSETS` interleaved subsets of lines /
-//! √subsets, floored at the grid step. The match is trusted (`identified`) when the
-//! correlation is ≥ `MIN_SCORE` and the subsets agree (relative standard error ≤
-//! `MAX_RELATIVE_STDERR`). Measured (640×480 astronaut, 8-bit): streaks of 4–24 px
-//! read within −6…+10% at 8 px/frame flow (4 px streaks: +10%, the single zero
-//! near Nyquist) and within −4…+1% at 24 px/frame, also under depth-varying
-//! defocus up to σ 3.8 px; the real license-plate photograph −2%. A page of text
-//! is not identified: its line pitch puts its own periodic structure along the flow.
+//! √subsets, in quadrature with the λ shift when the noise floor is doubled and
+//! halved, floored at the grid step. The match is trusted (`identified`) when the
+//! best lies inside [lambda_min, 1], the correlation is ≥ `MIN_SCORE` and the
+//! relative standard error is ≤ `MAX_RELATIVE_STDERR`. Measured (`examples/
+//! streak_probe.rs`: 42 frames — astronaut 1280×960 at ~7 px/frame and 640×480 at 8
+//! and 24 px/frame; λ 0, 0.25, 0.5; clean, noisy, defocused, both; the demo frame;
+//! two real photographs): the 7 it identifies read within 9% (1280×960 λ 0.5:
+//! 0.493 ± 0.010, under defocus 0.487 ± 0.013; 640×480 at 24 px/frame λ 0.25:
+//! 0.248, λ 0.5 + noise 0.488 ± 0.024; the license-plate photograph −2.5%), and it
+//! identifies no frame without a zero in the band. Before the floor and the grid's
+//! reach it identified 13, 7 of them 18–∞% off (the clean and the defocused
+//! 1280×960 frames at λ 0.35 with correlation 0.55–0.63; 1.8 px streaks at 0.35;
+//! noise +36%). Noisy streaks now read 0.298 ± 0.037 for 0.25 — not identified, the
+//! isotropy estimator of `motion_blur::fit_fast` takes over, with its stated band.
+//! A page of text is not identified: its line pitch puts its own periodic structure
+//! along the flow.
 //!
 //! A streak shorter than ~3 px puts its first zero near or past Nyquist: not
 //! identifiable here (the isotropy estimator of `motion_blur::fit_fast` takes over).
@@ -56,10 +74,11 @@ const TARGET_CENTRES: usize = 1200;
 /// Least flow (px/frame) a line needs, as in the isotropy estimator.
 const MIN_SPEED_PX: f32 = 3.0;
 /// Least correlation between the detrended log spectrum ratio and the template.
-/// Measured (640×480 astronaut, 8-bit, λ 0 and 0.2 — no zero in the band — with
-/// sharp, σ 1 px and depth-varying defocus, flows 8 and 24 px/frame): the best
-/// template of a streak-free ratio correlates ≤ 0.38; streaks 0.37–0.93 (the
-/// real license-plate photograph 0.55).
+/// Set on the pure-sinc template (640×480 astronaut, 8-bit, λ 0 and 0.2: streak-free
+/// ratios correlated ≤ 0.38, streaks 0.37–0.93). With the noise-floor template a
+/// streak-free frame can correlate up to 0.88, but its best lies outside
+/// [lambda_min, 1] (all 20 such frames of `examples/streak_probe.rs`); the streaks
+/// it identifies correlate 0.61–0.96, the text page's best 0.38.
 pub const MIN_SCORE: f32 = 0.45;
 /// Interleaved subsets must agree: relative standard error at most this.
 pub const MAX_RELATIVE_STDERR: f32 = 0.1;
@@ -72,6 +91,17 @@ const TEMPLATE_FLOOR: f32 = 0.02;
 const SUBSETS: usize = 4;
 /// λ grid step of the search.
 const LAMBDA_STEP: f32 = 0.0025;
+/// The subsets' and the noise-floor variants' searches step this many times
+/// coarser (they measure a spread).
+const AUX_STEPS: usize = 4;
+/// The search grid reaches below the least λ with a zero in the band (to this
+/// fraction of it) and beyond a full-frame exposure (to this λ), so that a best
+/// template at either end of [lambda_min, 1] is seen as an edge, not a zero.
+/// Measured: without the lower reach, a frame with no streak or with one too short
+/// for a zero in the band (clean, defocused, or λ 0.25 at 7 px/frame) matched the
+/// template whose zero sits at the band's edge, at correlation 0.55–0.90.
+const BELOW_BAND: f32 = 0.7;
+const ABOVE_FULL: f32 = 1.3;
 
 /// What the spectrum along the flow says about the streak.
 #[derive(Clone, Debug, PartialEq)]
@@ -87,6 +117,11 @@ pub struct StreakSignature {
     pub speed_px: f32,
     /// Least λ the band can show (first zero inside the band).
     pub lambda_min: f32,
+    /// The best template lies in [lambda_min, 1] (see `match_template`).
+    pub inside: bool,
+    /// Half the λ shift when the noise-floor estimate is doubled and halved (in
+    /// `stderr`, in quadrature with the subsets' spread).
+    pub floor_shift: f32,
     pub identified: bool,
 }
 
@@ -200,18 +235,29 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     // Least λ: the first zero φ = 1/λ at or below 80% of the band's top.
     let phi_top = bins as f32 * dphi;
     let lambda_min = (1.0 / (0.8 * phi_top)).max(LAMBDA_STEP);
-    let search = |s: &Spectrum| -> Option<(f32, f32, f32)> { match_template(s, lambda_min) };
-    let (lambda, score, runner_up) = search(&accumulate(0, 1))?;
-    let parts: Vec<f32> = (0..SUBSETS).filter_map(|k| search(&accumulate(k, SUBSETS)).map(|r| r.0)).collect();
+    let whole = accumulate(0, 1);
+    let best = match_template(&whole, lambda_min, 1.0, LAMBDA_STEP)?;
+    // The spread terms search a grid `AUX_STEPS`× coarser (parabola-refined): they
+    // gauge a spread, not the answer.
+    let aux = AUX_STEPS as f32 * LAMBDA_STEP;
+    // The noise floor is an estimate: the λ shift when it is doubled and halved.
+    let floor_shift = match (match_template(&whole, lambda_min, 2.0, aux), match_template(&whole, lambda_min, 0.5, aux))
+    {
+        (Some(a), Some(b)) => 0.5 * (a.lambda - b.lambda).abs(),
+        _ => f32::INFINITY,
+    };
+    let parts: Vec<f32> = (0..SUBSETS)
+        .filter_map(|k| match_template(&accumulate(k, SUBSETS), lambda_min, 1.0, aux).map(|r| r.lambda))
+        .collect();
     let stderr = if parts.len() >= 2 {
         let m = parts.iter().sum::<f32>() / parts.len() as f32;
         let var = parts.iter().map(|p| (p - m).powi(2)).sum::<f32>() / (parts.len() - 1) as f32;
-        (var.sqrt() / (parts.len() as f32).sqrt()).max(LAMBDA_STEP)
+        (var / parts.len() as f32 + floor_shift * floor_shift).sqrt().max(LAMBDA_STEP)
     } else {
         f32::INFINITY
     };
-    let identified =
-        score >= MIN_SCORE && stderr <= MAX_RELATIVE_STDERR * lambda && lambda >= lambda_min && lambda <= 1.0;
+    let TemplateMatch { lambda, score, runner_up, inside } = best;
+    let identified = inside && score >= MIN_SCORE && stderr <= MAX_RELATIVE_STDERR * lambda;
     Some(StreakSignature {
         lambda,
         stderr,
@@ -220,57 +266,113 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
         lines: lines.len(),
         speed_px: speed_med,
         lambda_min,
+        inside,
+        floor_shift,
         identified,
     })
 }
 
-/// Best λ in [lambda_min, 1] by correlation of detrended ln power with the
-/// detrended template; (λ, score, best score ≥ 25% away in λ).
-fn match_template(s: &Spectrum, lambda_min: f32) -> Option<(f32, f32, f32)> {
+/// The best template's answer for one spectrum.
+struct TemplateMatch {
+    lambda: f32,
+    /// Correlation of the best template with the detrended observation.
+    score: f32,
+    /// Best correlation among templates ≥ 25% away in λ.
+    runner_up: f32,
+    /// The best λ lies in [lambda_min, 1]: a zero inside the band, an exposure no
+    /// longer than the frame.
+    inside: bool,
+}
+
+/// Best λ by correlation of the detrended log power ratio with the detrended
+/// template ln((1 − r)·(sinc²(πφλ) + ε) + r), r(φ) the noise floor's share of the
+/// across-flow power (its floor estimate × `floor_scale`). The grid runs from
+/// `BELOW_BAND`·`lambda_min` to `ABOVE_FULL`: a best outside [lambda_min, 1] is a
+/// main-lobe fall-off or a pattern that wants ever more zeros, not a located zero.
+fn match_template(s: &Spectrum, lambda_min: f32, floor_scale: f64, step: f32) -> Option<TemplateMatch> {
     // Bins with data, above the lowest two native bins (window leakage from DC).
     let idx: Vec<usize> =
         (2..s.phi.len()).filter(|&b| s.weight[b] > 0.0 && s.power[b] > 0.0 && s.across[b] > 0.0).collect();
     if idx.len() < 16 {
         return None;
     }
+    let smooth = |v: &[f64], i: usize| -> f64 {
+        let lo = i.saturating_sub(ACROSS_SMOOTH_BINS);
+        let hi = (i + ACROSS_SMOOTH_BINS + 1).min(v.len());
+        v[lo..hi].iter().sum::<f64>() / (hi - lo) as f64
+    };
     let lphi: Vec<f64> = idx.iter().map(|&b| (s.phi[b] as f64).ln()).collect();
     let lacross: Vec<f64> = idx.iter().map(|&b| (s.across[b] / s.weight[b]).ln()).collect();
-    let obs: Vec<f64> = idx
-        .iter()
-        .enumerate()
-        .map(|(i, &b)| {
-            let lo = i.saturating_sub(ACROSS_SMOOTH_BINS);
-            let hi = (i + ACROSS_SMOOTH_BINS + 1).min(idx.len());
-            let a = lacross[lo..hi].iter().sum::<f64>() / (hi - lo) as f64;
-            (s.power[b] / s.weight[b]).ln() - a
-        })
-        .collect();
-    let basis = |i: usize| [1.0, lphi[i], lphi[i] * lphi[i]];
-    let detrend = |v: &[f64]| -> Vec<f64> { residual(v, &basis, idx.len()) };
-    let r_obs = detrend(&obs);
+    let along: Vec<f64> = idx.iter().map(|&b| s.power[b] / s.weight[b]).collect();
+    // The across-flow reference, smoothed (see `ACROSS_SMOOTH_BINS`), in ln power.
+    let lref: Vec<f64> = (0..idx.len()).map(|i| smooth(&lacross, i)).collect();
+    let obs: Vec<f64> = along.iter().zip(&lref).map(|(a, r)| a.ln() - r).collect();
+    // Noise floor (normalised power per bin): white noise is flat on the exposure
+    // axis and is all that is left of the along-flow power at a streak's zeros, so
+    // the least smoothed along-flow power over the upper 3/4 of the band. Without a
+    // streak or noise it is the scene's power at the band's top, which flattens the
+    // template there — conservative. Its uncertainty is carried by the caller (the
+    // λ shift when it is doubled and halved).
+    let floor = (idx.len() / 4..idx.len()).map(|i| smooth(&along, i)).fold(f64::INFINITY, f64::min) * floor_scale;
+    // Detrending basis (1, ln φ, ln² φ) and its normal matrix, inverted once: a
+    // singular system (too few distinct frequencies) leaves the data undetrended.
+    let rows: Vec<[f64; 3]> = lphi.iter().map(|&l| [1.0, l, l * l]).collect();
+    let mut ata = [[0.0f64; 3]; 3];
+    for b in &rows {
+        for r in 0..3 {
+            for c in 0..3 {
+                ata[r][c] += b[r] * b[c];
+            }
+        }
+    }
+    let m = glam::DMat3::from_cols_array_2d(&ata);
+    let inv = (m.determinant().abs() > 1e-12).then(|| m.inverse());
+    let project = |v: &[f64]| -> glam::DVec3 {
+        let mut atb = glam::DVec3::ZERO;
+        for (b, &x) in rows.iter().zip(v) {
+            atb += glam::DVec3::from(*b) * x;
+        }
+        atb
+    };
+    let r_obs: Vec<f64> = match inv {
+        Some(inv) => {
+            let coef = inv * project(&obs);
+            obs.iter().zip(&rows).map(|(&v, b)| v - coef.dot(glam::DVec3::from(*b))).collect()
+        }
+        None => obs.clone(),
+    };
     let n_obs = r_obs.iter().map(|v| v * v).sum::<f64>().sqrt();
     if n_obs.is_nan() || n_obs <= 0.0 {
         return None;
     }
-    let score_of = |lambda: f32| -> f64 {
-        let t: Vec<f64> = idx
-            .iter()
-            .map(|&b| {
-                let x = std::f64::consts::PI * s.phi[b] as f64 * lambda as f64;
-                let sinc = if x.abs() < 1e-9 { 1.0 } else { x.sin() / x };
-                (sinc * sinc + TEMPLATE_FLOOR as f64).ln()
-            })
-            .collect();
-        let r_t = detrend(&t);
-        let n_t = r_t.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if n_t.is_nan() || n_t <= 0.0 {
+    // The noise floor's share of the across-flow power per bin.
+    let share: Vec<f64> = lref.iter().map(|&lr| (floor / lr.exp()).min(1.0)).collect();
+    let mut t = vec![0.0f64; idx.len()];
+    let mut score_of = |lambda: f32| -> f64 {
+        for ((ti, &b), &r) in t.iter_mut().zip(&idx).zip(&share) {
+            let x = std::f64::consts::PI * s.phi[b] as f64 * lambda as f64;
+            let sinc = if x.abs() < 1e-9 { 1.0 } else { x.sin() / x };
+            // Along / across = (S·sinc² + N) / (S + N) with the scene's power S the
+            // same both ways: (1 − r)·sinc² + r, r = N / (S + N).
+            *ti = ((1.0 - r) * (sinc * sinc + TEMPLATE_FLOOR as f64) + r).ln();
+        }
+        // r_obs is orthogonal to the basis, so ⟨r_obs, detrended t⟩ = ⟨r_obs, t⟩, and
+        // |detrended t|² = |t|² − atbᵀ(AᵀA)⁻¹atb: no residual vector per template.
+        let dot = r_obs.iter().zip(&t).map(|(a, b)| a * b).sum::<f64>();
+        let tt = t.iter().map(|v| v * v).sum::<f64>();
+        let proj = inv.map_or(0.0, |inv| {
+            let atb = project(&t);
+            atb.dot(inv * atb)
+        });
+        let n_t2 = tt - proj;
+        if n_t2.is_nan() || n_t2 <= 1e-12 * tt.max(1e-300) {
             return -1.0;
         }
-        r_obs.iter().zip(&r_t).map(|(a, b)| a * b).sum::<f64>() / (n_obs * n_t)
+        dot / (n_obs * n_t2.sqrt())
     };
-    let steps = ((1.0 - lambda_min) / LAMBDA_STEP).floor() as usize + 1;
-    let grid: Vec<(f32, f64)> =
-        (0..steps).map(|k| lambda_min + k as f32 * LAMBDA_STEP).map(|l| (l, score_of(l))).collect();
+    let lo = BELOW_BAND * lambda_min;
+    let steps = ((ABOVE_FULL - lo) / step).floor() as usize + 1;
+    let grid: Vec<(f32, f64)> = (0..steps).map(|k| lo + k as f32 * step).map(|l| (l, score_of(l))).collect();
     let (kbest, &(lbest, sbest)) = grid.iter().enumerate().max_by(|a, b| a.1 .1.total_cmp(&b.1 .1))?;
     let runner_up = grid.iter().filter(|(l, _)| (l / lbest - 1.0).abs() >= 0.25).map(|g| g.1).fold(-1.0f64, f64::max);
     // Parabola through the best and its neighbours.
@@ -279,34 +381,13 @@ fn match_template(s: &Spectrum, lambda_min: f32) -> Option<(f32, f32, f32)> {
         let (a, b, c) = (grid[kbest - 1].1, sbest, grid[kbest + 1].1);
         let den = a - 2.0 * b + c;
         if den < 0.0 {
-            lambda += (0.5 * (a - c) / den).clamp(-0.5, 0.5) as f32 * LAMBDA_STEP;
+            lambda += (0.5 * (a - c) / den).clamp(-0.5, 0.5) as f32 * step;
         }
     }
-    Some((lambda, sbest as f32, runner_up as f32))
-}
-
-/// Least-squares residual of `v` against a 3-term basis.
-fn residual(v: &[f64], basis: &impl Fn(usize) -> [f64; 3], n: usize) -> Vec<f64> {
-    let mut ata = [[0.0f64; 3]; 3];
-    let mut atb = [0.0f64; 3];
-    for (i, &vi) in v.iter().enumerate().take(n) {
-        let b = basis(i);
-        for r in 0..3 {
-            atb[r] += b[r] * vi;
-            for c in 0..3 {
-                ata[r][c] += b[r] * b[c];
-            }
-        }
-    }
-    // Normal equations (3×3); a singular system (too few distinct frequencies)
-    // leaves the data undetrended rather than failing.
-    let m = glam::DMat3::from_cols_array_2d(&ata);
-    let coef = if m.determinant().abs() > 1e-12 { (m.inverse() * glam::DVec3::from(atb)).to_array() } else { [0.0; 3] };
-    v.iter()
-        .enumerate()
-        .map(|(i, &vi)| {
-            let b = basis(i);
-            vi - (coef[0] * b[0] + coef[1] * b[1] + coef[2] * b[2])
-        })
-        .collect()
+    Some(TemplateMatch {
+        lambda,
+        score: sbest as f32,
+        runner_up: runner_up as f32,
+        inside: lbest >= lambda_min && lbest <= 1.0,
+    })
 }

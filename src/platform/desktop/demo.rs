@@ -224,7 +224,27 @@ fn error_table(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth
         _ => "—".into(),
     };
     let (la, lf) = (exposure_error(acc, truth), exposure_error(fast, truth));
-    let _ = writeln!(r, "| motion blur | \\|λ − λ_true\\| | {la:.4} | {lf:.4} | {} |", ratio(Some(la), Some(lf)));
+    // A blind λ the fit calls not identifiable is written as absent: count it as 0,
+    // and say so rather than let it pass for a measurement.
+    let unidentified = |m: &CameraModel| {
+        if m.motion_blur.diagnostics.status == blind_augment::model::Status::NotIdentifiable {
+            " (not identifiable: counted as λ 0)"
+        } else {
+            ""
+        }
+    };
+    let _ = writeln!(
+        r,
+        "| motion blur | \\|λ − λ_true\\| | {la:.4}{} | {lf:.4}{} | {} |",
+        unidentified(acc),
+        unidentified(fast),
+        // No ratio for a value the fit did not claim.
+        if unidentified(acc).is_empty() && unidentified(fast).is_empty() {
+            ratio(Some(la), Some(lf))
+        } else {
+            "—".into()
+        }
+    );
     let (da, df) = (
         dof_rmse_px(&acc.depth_of_field, &truth.depth_of_field, &depths),
         dof_rmse_px(&fast.depth_of_field, &truth.depth_of_field, &depths),
