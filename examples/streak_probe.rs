@@ -7,16 +7,7 @@ mod common;
 use blind_augment::fit::streak_spectrum::streak_signature;
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::io;
-use blind_augment::model::*;
 use blind_augment::synth;
-fn luma(i: &Rgb) -> Plane {
-    let n = i.width * i.height;
-    Plane::from_vec(
-        i.width,
-        i.height,
-        (0..n).map(|k| 0.2126 * i.channels[0][k] + 0.7152 * i.channels[1][k] + 0.0722 * i.channels[2][k]).collect(),
-    )
-}
 fn report(name: &str, truth: f32, y: &Plane, flow: &Flow) {
     if let Ok(f) = std::env::var("ONLY") {
         if name != f {
@@ -36,58 +27,38 @@ fn main() {
     let q = |i: &Rgb| i.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);
     for (w, h, speed) in [(1280usize, 960usize, 8.0f32), (640, 480, 24.0), (640, 480, 8.0)] {
         let clean = common::mirror_tile(&common::photo("astronaut.png"), w, h);
-        let depth = Plane::from_vec(
-            w,
-            h,
-            (0..w * h)
-                .map(|i| 0.5 + 3.5 * (0.7 * (i / w) as f32 / h as f32 + 0.3 * (i % w) as f32 / w as f32))
-                .collect(),
-        );
-        let mut flow = Flow::uniform(w, h, 0.0, 0.0);
-        for y in 0..h {
-            for x in 0..w {
-                flow.dx[y * w + x] = speed * (0.8 - 0.9 * (y as f32 / h as f32 - 0.5));
-                flow.dy[y * w + x] = speed * (0.3 + 0.9 * (x as f32 / w as f32 - 0.5));
-            }
-        }
-        let dof = DepthOfField {
-            present: true,
-            units: DepthUnits::MetricM,
-            curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
-            depth_range: [0.5, 4.0],
-            kernel: DofKernel::Gaussian,
-            diagnostics: Diagnostics::not_fitted("truth"),
-        };
+        let (depth, dof) = common::thin_lens_ramp(w, h);
+        let flow = common::flow_field(w, h, speed);
         let noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
         let noise_hi = synth::white_sensor_noise([1e-4; 3], [4e-3; 3], [0.0, 1.0]);
         for lam in [0.25f32, 0.5] {
             let mb = synth::add_motion_blur(&clean, &flow, lam);
             let tag = format!("{w}x{h}@{speed} λ{lam}");
-            report(&format!("{tag} mb"), lam, &luma(&q(&mb)), &flow);
-            report(&format!("{tag} mbnoise"), lam, &luma(&q(&synth::add_noise(&mb, &noise, 1))), &flow);
-            report(&format!("{tag} mbnoiseHI"), lam, &luma(&q(&synth::add_noise(&mb, &noise_hi, 1))), &flow);
-            report(&format!("{tag} mbdof"), lam, &luma(&q(&synth::add_dof(&mb, &depth, &dof))), &flow);
+            report(&format!("{tag} mb"), lam, &q(&mb).luma(), &flow);
+            report(&format!("{tag} mbnoise"), lam, &q(&synth::add_noise(&mb, &noise, 1)).luma(), &flow);
+            report(&format!("{tag} mbnoiseHI"), lam, &q(&synth::add_noise(&mb, &noise_hi, 1)).luma(), &flow);
+            report(&format!("{tag} mbdof"), lam, &q(&synth::add_dof(&mb, &depth, &dof)).luma(), &flow);
             report(
                 &format!("{tag} all"),
                 lam,
-                &luma(&q(&synth::add_noise(&synth::add_dof(&mb, &depth, &dof), &noise, 1))),
+                &q(&synth::add_noise(&synth::add_dof(&mb, &depth, &dof), &noise, 1)).luma(),
                 &flow,
             );
         }
-        report(&format!("{w}x{h}@{speed} clean"), 0.0, &luma(&q(&clean)), &flow);
-        report(&format!("{w}x{h}@{speed} cleannoise"), 0.0, &luma(&q(&synth::add_noise(&clean, &noise, 1))), &flow);
-        report(&format!("{w}x{h}@{speed} dof"), 0.0, &luma(&q(&synth::add_dof(&clean, &depth, &dof))), &flow);
+        report(&format!("{w}x{h}@{speed} clean"), 0.0, &q(&clean).luma(), &flow);
+        report(&format!("{w}x{h}@{speed} cleannoise"), 0.0, &q(&synth::add_noise(&clean, &noise, 1)).luma(), &flow);
+        report(&format!("{w}x{h}@{speed} dof"), 0.0, &q(&synth::add_dof(&clean, &depth, &dof)).luma(), &flow);
     }
     if let (Ok((img, _)), Ok(flow)) = (
         io::load_rgb(std::path::Path::new("/tmp/demo/distorted.png")),
         io::load_flow(std::path::Path::new("/tmp/demo/flow.flo")),
     ) {
-        report("demo", 0.40, &luma(&img), &flow);
+        report("demo", 0.40, &img.luma(), &flow);
     }
     for (f, deg, d) in [("motion_licenseplate_opencv.jpg", 135.0f32, 22.0f32), ("motion_text_opencv.jpg", 86.0, 31.0)] {
         let img = common::photo(f);
         let a = deg.to_radians();
         let flow = Flow::uniform(img.width, img.height, 50.0 * a.cos(), 50.0 * a.sin());
-        report(f, d / 50.0, &luma(&img), &flow);
+        report(f, d / 50.0, &img.luma(), &flow);
     }
 }

@@ -7,7 +7,7 @@ mod common;
 use blind_augment::fit::defocus_spectrum::disc_signature;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
 use blind_augment::image::{Flow, Plane, Rgb};
-use blind_augment::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, DofKernel, Status};
+use blind_augment::model::{DepthOfField, DofCurve, DofKernel, Status};
 use blind_augment::synth::{add_defocus, add_defocus_disc, add_dof, add_motion_blur};
 use common::*;
 
@@ -162,19 +162,7 @@ fn real_motion_photos_with_stated_streaks() {
 fn motion_blur_under_varying_defocus() {
     let (w, h) = (640usize, 480usize);
     let clean = mirror_tile(&photo("astronaut.png"), w, h);
-    let depth = Plane::from_vec(
-        w,
-        h,
-        (0..w * h).map(|i| 0.5 + 3.5 * (0.7 * (i / w) as f32 / h as f32 + 0.3 * (i % w) as f32 / w as f32)).collect(),
-    );
-    let dof = DepthOfField {
-        present: true,
-        units: DepthUnits::MetricM,
-        curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
-        depth_range: [0.5, 4.0],
-        kernel: DofKernel::Gaussian,
-        diagnostics: Diagnostics::not_fitted("truth"),
-    };
+    let (depth, dof) = thin_lens_ramp(w, h);
     for (speed, expect_identified) in [(24.0f32, true), (8.0, false)] {
         let mut flow = Flow::uniform(w, h, 0.0, 0.0);
         for y in 0..h {

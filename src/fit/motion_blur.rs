@@ -455,7 +455,6 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
     if n < MIN_SAMPLES {
         return Err(n);
     }
-
     // C − k·D over the samples in `subset` (k-th of `of` interleaved subsets).
     let imbalance_at = |lambda: f32, subset: usize, of: usize, k: f64| -> f64 {
         let (mut c, mut d) = (0.0f64, 0.0f64);

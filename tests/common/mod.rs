@@ -70,6 +70,27 @@ pub fn depth_ramp(w: usize, h: usize, near_m: f32, far_m: f32) -> Plane {
     d
 }
 
+/// The motion-blur-under-defocus scene's depth and lens: a plain ramp 0.5–4 m
+/// (70% down the frame, 30% across) through a thin lens (k 3, focus 1.2 m, c0 0.3:
+/// σ up to 3.8 px at the near end).
+pub fn thin_lens_ramp(w: usize, h: usize) -> (Plane, blind_augment::model::DepthOfField) {
+    use blind_augment::model::*;
+    let depth = Plane::from_vec(
+        w,
+        h,
+        (0..w * h).map(|i| 0.5 + 3.5 * (0.7 * (i / w) as f32 / h as f32 + 0.3 * (i % w) as f32 / w as f32)).collect(),
+    );
+    let dof = DepthOfField {
+        present: true,
+        units: DepthUnits::MetricM,
+        curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
+        depth_range: [0.5, 4.0],
+        kernel: DofKernel::Gaussian,
+        diagnostics: Diagnostics::not_fitted("truth"),
+    };
+    (depth, dof)
+}
+
 /// A smooth flow field in px/frame with magnitude around `scale` and varying
 /// direction (a rotation plus a translation, like head motion).
 pub fn flow_field(w: usize, h: usize, scale: f32) -> Flow {
