@@ -77,7 +77,7 @@ const MIN_SPEED_PX: f32 = 3.0;
 /// Least correlation between the detrended log spectrum ratio and the template.
 /// Set on the pure-sinc template (640×480 astronaut, 8-bit, λ 0 and 0.2: streak-free
 /// ratios correlated ≤ 0.38, streaks 0.37–0.93). With the noise-floor template a
-/// streak-free frame can correlate up to 0.88, but its best lies outside
+/// streak-free frame can correlate up to 0.95, but its best lies outside
 /// [lambda_min, 1] (every such frame of `examples/streak_probe.rs`); the streaks
 /// it identifies correlate 0.64–0.96, the text page's best 0.38.
 pub const MIN_SCORE: f32 = 0.45;
