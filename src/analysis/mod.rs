@@ -16,6 +16,7 @@
 //! the same signature. Nothing here panics on bad input: errors name the frame and
 //! what is missing.
 
+pub mod camera;
 pub mod flow;
 pub mod onnx;
 pub mod reproject;
