@@ -244,7 +244,7 @@ fn lifecycle_120_frames_alpha_blend_validated() {
     let env = [
         ("BA_XR_DISPLAY_HZ", "72"),
         ("BA_XR_BLEND_MODES", "opaque,alpha_blend"),
-        ("BA_XR_EXTENSIONS", "passthrough,refresh_rate"),
+        ("BA_XR_EXTENSIONS", "passthrough,refresh_rate,convert_timespec"),
     ];
     let Some(run) = run_xr("lifecycle", &env, 120, true, &models) else { return };
     assert_clean(&run, true);
@@ -280,6 +280,29 @@ fn lifecycle_120_frames_alpha_blend_validated() {
         let views = p["views"].as_array().unwrap();
         assert_eq!((views[0]["array_index"].as_u64(), views[1]["array_index"].as_u64()), (Some(0), Some(1)));
         assert!(views.iter().all(|v| v["swapchain_array_size"] == 2 && v["format"] == 43), "sRGB RGBA8 array");
+    }
+    // Clock samples (XR_KHR_convert_timespec_time): on the first frame and about
+    // once a second (120 frames at 90 Hz: 2, or 3 on a slow machine). Each maps
+    // CLOCK_MONOTONIC onto the runtime's clock: a frame's predicted display time,
+    // read through the mapping taken on that frame, lies ahead of the sample by at
+    // most the runtime's pacing (one display period plus the app's budget: < 50 ms
+    // here, generous for a loaded CI machine).
+    let samples: Vec<_> = run.records.iter().filter_map(|r| r.clock.map(|c| (r, c))).collect();
+    assert!(run.records[0].clock.is_some() && (2..=4).contains(&samples.len()), "{} samples", samples.len());
+    for (r, c) in &samples {
+        assert!(c.monotonic_before_ns <= c.monotonic_after_ns && c.boottime_ns >= c.monotonic_before_ns);
+        let ahead_ns = r.predicted_display_time_ns - c.xr_time_ns;
+        assert!((0..50_000_000).contains(&ahead_ns), "display {} ns ahead of the clock sample", ahead_ns);
+    }
+    let map = blind_augment::analysis::timing::ClockMap::from_samples(
+        &samples.iter().map(|(_, c)| *c).collect::<Vec<_>>(),
+    )
+    .expect("clock map");
+    // The test runtime's XrTime is CLOCK_MONOTONIC shifted by a constant: every
+    // sample agrees on it to the width of its own window.
+    for (_, c) in &samples {
+        let offset = c.xr_time_ns - c.monotonic_before_ns;
+        assert!((offset - map.xr_minus_monotonic_ns).abs() <= map.uncertainty_ns.max(1), "{offset} vs {map:?}");
     }
 }
 
@@ -424,6 +447,7 @@ fn runtime_without_optional_extensions_falls_back() {
     assert!(!s.passthrough);
     assert_eq!(s.display_hz, None);
     assert_eq!(s.frames_rendered, 30);
+    assert!(run.records.iter().all(|r| r.clock.is_none()), "no XR_KHR_convert_timespec_time: no clock samples");
     for f in frames_of(&run.report).iter().filter(|f| !f["layers"].as_array().unwrap().is_empty()) {
         let l = f["layers"].as_array().unwrap();
         assert_eq!((l.len(), &l[0]["source_alpha"]), (1, &false.into()), "opaque projection only: {f}");

@@ -25,6 +25,7 @@ mod vulkan;
 pub use lifecycle::{Action, EndReason, Lifecycle};
 pub use views::{eye_from_view, View, ViewError};
 
+use crate::analysis::timing::ClockSample;
 use crate::gpu::{GpuContext, GpuError, GpuOptions};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
 use crate::render::{ExternalTarget, FrameInput, GBufferFrame, LayerSettings, StereoRenderer};
@@ -105,6 +106,11 @@ pub struct FrameRecord {
     /// Time blocked in xrWaitFrame (s).
     pub wait_s: f64,
     pub views: [View; 2],
+    /// A reading of CLOCK_MONOTONIC, CLOCK_BOOTTIME and the XrTime of the former
+    /// (XR_KHR_convert_timespec_time), taken on the first frame and about once a
+    /// second after: what maps camera timestamps onto the XR clock
+    /// (`analysis::timing::ClockMap`). None on other frames and without the extension.
+    pub clock: Option<ClockSample>,
 }
 
 /// The frame-timing summary `blind-augment xr` prints.
@@ -171,6 +177,12 @@ fn create_instance(
             "the display runs at the runtime's default rate",
         ),
         (available.fb_space_warp, &mut want.fb_space_warp, "XR_FB_space_warp", "every display frame is rendered"),
+        (
+            available.khr_convert_timespec_time,
+            &mut want.khr_convert_timespec_time,
+            "XR_KHR_convert_timespec_time",
+            "camera frames cannot be put on the XR clock (calibration runs without head poses)",
+        ),
     ] {
         if offered {
             *flag = true;
@@ -285,6 +297,42 @@ pub fn default_camera() -> CameraModel {
         diagnostics: placeholder(),
     };
     m
+}
+
+/// Read a clock (CLOCK_MONOTONIC, CLOCK_BOOTTIME) in ns.
+fn clock_ns(clock: libc::clockid_t) -> i64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable timespec; both clocks exist on Linux and
+    // Android (clock_gettime(2)), so the call cannot fail on them.
+    unsafe { libc::clock_gettime(clock, &mut ts) };
+    ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64
+}
+
+/// One clock reading through XR_KHR_convert_timespec_time: CLOCK_MONOTONIC just
+/// before and after converting the first reading to XrTime, CLOCK_BOOTTIME between
+/// (the Camera2 timestamps' clock).
+fn sample_clocks(instance: &xr::Instance) -> Result<ClockSample, XrError> {
+    let convert = instance
+        .exts()
+        .khr_convert_timespec_time
+        .as_ref()
+        .ok_or(XrError::MissingExtension("XR_KHR_convert_timespec_time"))?
+        .convert_timespec_time_to_time;
+    let before = clock_ns(libc::CLOCK_MONOTONIC);
+    let boottime = clock_ns(libc::CLOCK_BOOTTIME);
+    let ts = libc::timespec {
+        tv_sec: (before / 1_000_000_000) as libc::time_t,
+        tv_nsec: (before % 1_000_000_000) as libc::c_long,
+    };
+    let mut xr_time = xr::sys::Time::from_nanos(0);
+    // SAFETY: the function pointer was loaded for this instance with its extension
+    // enabled; `ts` and `xr_time` are valid for the call.
+    let r = unsafe { convert(instance.as_raw(), &ts, &mut xr_time) };
+    if r.into_raw() < 0 {
+        return Err(call("xrConvertTimespecTimeToTimeKHR")(r));
+    }
+    let after = clock_ns(libc::CLOCK_MONOTONIC);
+    Ok(ClockSample { monotonic_before_ns: before, monotonic_after_ns: after, boottime_ns: boottime, xr_time_ns: xr_time.as_nanos() })
 }
 
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
@@ -456,6 +504,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     let mut exit_requested = false;
     let mut prev: Option<(i64, [crate::render::Eye; 2])> = None;
     let mut last_display_ns: Option<i64> = None;
+    let mut last_clock_sample: Option<Instant> = None;
     let transparent = vec![0u8; (w * h * 4 * 2) as usize];
 
     'frames: loop {
@@ -533,6 +582,17 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             prev = None;
             continue;
         }
+        // The clock mapping drifts slowly (the runtime's clock against CLOCK_MONOTONIC):
+        // once a second is plenty; a failure is logged, never fatal. Taken on rendered
+        // frames as they are woken, before their predicted display time.
+        let clock = if enabled.khr_convert_timespec_time
+            && last_clock_sample.map_or(true, |t: Instant| t.elapsed() >= Duration::from_secs(1))
+        {
+            last_clock_sample = Some(Instant::now());
+            sample_clocks(&instance).map_err(|e| log::warn!("OpenXR: clock sample failed: {e}")).ok()
+        } else {
+            None
+        };
         // One camera-model snapshot for the whole frame (hot-swap contract).
         let snapshot = opts.models.latest();
         let (_flags, located) = session
@@ -673,6 +733,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             cpu_s,
             wait_s,
             views: [lv, rv],
+            clock,
         };
         if let Some(f) = opts.on_frame.as_mut() {
             f(&record);

@@ -6,7 +6,7 @@
 //! | `BA_XR_DISPLAY_HZ` | display refresh rate at start | 90 |
 //! | `BA_XR_REFRESH_RATES` | rates XR_FB_display_refresh_rate offers | 72,90,120 |
 //! | `BA_XR_EYE_SIZE` | recommended image rect per eye, `WxH` | 1680x1760 |
-//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, or `none` | passthrough,refresh_rate,space_warp |
+//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, or `none` | passthrough,refresh_rate,space_warp,convert_timespec |
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
 //! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N` | none |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
@@ -44,6 +44,8 @@ pub struct Config {
     pub passthrough: bool,
     pub refresh_rate: bool,
     pub space_warp: bool,
+    /// XR_KHR_convert_timespec_time (XrTime ↔ CLOCK_MONOTONIC).
+    pub convert_timespec: bool,
     pub blend_modes: Vec<openxr_sys::EnvironmentBlendMode>,
     pub script: Vec<(u64, Command)>,
     pub png_dir: Option<PathBuf>,
@@ -86,13 +88,14 @@ impl Config {
             }
             None => (1680, 1760),
         };
-        let extensions = var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp".into());
-        let mut ext = (false, false, false);
+        let extensions = var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp,convert_timespec".into());
+        let mut ext = (false, false, false, false);
         for e in extensions.split(',').map(str::trim) {
             match e {
                 "passthrough" => ext.0 = true,
                 "refresh_rate" => ext.1 = true,
                 "space_warp" => ext.2 = true,
+                "convert_timespec" => ext.3 = true,
                 "none" => {}
                 other => return Err(format!("BA_XR_EXTENSIONS: unknown extension {other:?}")),
             }
@@ -145,6 +148,7 @@ impl Config {
             passthrough: ext.0,
             refresh_rate: ext.1,
             space_warp: ext.2,
+            convert_timespec: ext.3,
             blend_modes,
             script,
             png_dir: var("BA_XR_PNG_DIR").map(PathBuf::from),

@@ -36,6 +36,7 @@ pub(crate) const EXT_VULKAN2: &str = "XR_KHR_vulkan_enable2";
 pub(crate) const EXT_PASSTHROUGH: &str = "XR_FB_passthrough";
 pub(crate) const EXT_REFRESH: &str = "XR_FB_display_refresh_rate";
 pub(crate) const EXT_SPACE_WARP: &str = "XR_FB_space_warp";
+pub(crate) const EXT_TIMESPEC: &str = "XR_KHR_convert_timespec_time";
 
 /// The one system this runtime has.
 pub(crate) const SYSTEM_ID: u64 = 1;
@@ -56,6 +57,8 @@ pub(crate) enum SpaceKind {
 pub(crate) struct Runtime {
     pub config: Config,
     pub epoch: Instant,
+    /// CLOCK_MONOTONIC at `epoch` (ns).
+    pub epoch_monotonic_ns: i64,
     pub instance: u64,
     pub enabled: Vec<String>,
     pub instance_lost: bool,
@@ -77,6 +80,12 @@ impl Runtime {
     pub fn now_ns(&self) -> i64 {
         // XrTime is opaque, monotonic and positive; 1 s of headroom keeps it away from 0.
         1_000_000_000 + self.epoch.elapsed().as_nanos() as i64
+    }
+
+    /// XrTime of a CLOCK_MONOTONIC reading: the runtime's clock is CLOCK_MONOTONIC
+    /// (what `Instant` reads on Linux) shifted so that `epoch` is at 1 s.
+    pub fn xr_time_of_monotonic(&self, monotonic_ns: i64) -> i64 {
+        1_000_000_000 + monotonic_ns - self.epoch_monotonic_ns
     }
 
     pub fn handle(&mut self) -> u64 {
@@ -167,6 +176,9 @@ fn offered(config: &Config) -> Vec<(&'static str, u32)> {
     }
     if config.space_warp {
         v.push((EXT_SPACE_WARP, 2));
+    }
+    if config.convert_timespec {
+        v.push((EXT_TIMESPEC, 1));
     }
     v
 }
@@ -292,6 +304,8 @@ unsafe extern "system" fn get_instance_proc_addr(
         "xrEnumerateDisplayRefreshRatesFB" => pfn!(session::enumerate_display_refresh_rates),
         "xrGetDisplayRefreshRateFB" => pfn!(session::get_display_refresh_rate),
         "xrRequestDisplayRefreshRateFB" => pfn!(session::request_display_refresh_rate),
+        "xrConvertTimespecTimeToTimeKHR" => pfn!(convert_timespec_time_to_time),
+        "xrConvertTimeToTimespecTimeKHR" => pfn!(convert_time_to_timespec_time),
         _ => None,
     };
     // Extension functions only exist when their extension is enabled (spec 3.2).
@@ -300,6 +314,8 @@ unsafe extern "system" fn get_instance_proc_addr(
             EXT_REFRESH
         } else if name.ends_with("FB") {
             EXT_PASSTHROUGH
+        } else if name.contains("Timespec") {
+            EXT_TIMESPEC
         } else if name.ends_with("KHR") {
             EXT_VULKAN2
         } else {
@@ -407,6 +423,7 @@ unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, o
     let mut rt = Runtime {
         config,
         epoch: Instant::now(),
+        epoch_monotonic_ns: monotonic_ns(),
         instance: 0,
         enabled,
         instance_lost: false,
@@ -690,4 +707,62 @@ unsafe extern "system" fn path_to_string(
         // SAFETY: the caller's two-call arguments.
         unsafe { two_call(&bytes, capacity, count, buffer) }
     })
+}
+
+// ---- XR_KHR_convert_timespec_time -------------------------------------------
+
+fn monotonic_ns() -> i64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: a valid timespec to write; CLOCK_MONOTONIC always exists on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64
+}
+
+/// xrConvertTimespecTimeToTimeKHR: a CLOCK_MONOTONIC timespec to XrTime.
+unsafe extern "system" fn convert_timespec_time_to_time(
+    instance: xr::Instance,
+    timespec_time: *const libc::timespec,
+    time: *mut xr::Time,
+) -> xr::Result {
+    let guard = lock();
+    let Some(rt) = guard.as_ref().filter(|rt| rt.instance == instance.into_raw()) else {
+        return xr::Result::ERROR_HANDLE_INVALID;
+    };
+    if timespec_time.is_null() || time.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    // SAFETY: non-null pointers from the application (spec: valid for the call).
+    let ts = unsafe { &*timespec_time };
+    let mono = ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64;
+    let t = rt.xr_time_of_monotonic(mono);
+    if t <= 0 {
+        return xr::Result::ERROR_TIME_INVALID;
+    }
+    // SAFETY: see above.
+    unsafe { *time = xr::Time::from_nanos(t) };
+    xr::Result::SUCCESS
+}
+
+/// xrConvertTimeToTimespecTimeKHR: the inverse.
+unsafe extern "system" fn convert_time_to_timespec_time(
+    instance: xr::Instance,
+    time: xr::Time,
+    timespec_time: *mut libc::timespec,
+) -> xr::Result {
+    let guard = lock();
+    let Some(rt) = guard.as_ref().filter(|rt| rt.instance == instance.into_raw()) else {
+        return xr::Result::ERROR_HANDLE_INVALID;
+    };
+    if timespec_time.is_null() || time.as_nanos() <= 0 {
+        return xr::Result::ERROR_TIME_INVALID;
+    }
+    let mono = time.as_nanos() - 1_000_000_000 + rt.epoch_monotonic_ns;
+    // SAFETY: non-null pointer from the application.
+    unsafe {
+        *timespec_time = libc::timespec {
+            tv_sec: (mono / 1_000_000_000) as libc::time_t,
+            tv_nsec: (mono % 1_000_000_000) as libc::c_long,
+        }
+    };
+    xr::Result::SUCCESS
 }
