@@ -128,8 +128,12 @@ fn worker_thread_drops_frames_and_publishes_through_the_channel() {
     let cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier))
         .expect("config");
     let worker = Worker::spawn(cal, channel.clone()).expect("thread");
-    worker.submit(frame(&frames[0]), &[pose(spec, 0), pose(spec, 1), pose(spec, 2)]);
+    assert!(worker.wants_frame(), "an idle worker wants a frame");
+    // Poses alone (the frame loop's) queue until the next frame takes them.
+    worker.submit_poses(&[pose(spec, 0), pose(spec, 1)]);
+    worker.submit(frame(&frames[0]), &[pose(spec, 2)]);
     assert!(worker.wait_idle(std::time::Duration::from_secs(60)));
+    assert!(worker.wants_frame());
     // A burst with no waiting: most of these replace each other in the slot.
     for f in &frames[1..40] {
         worker.submit(frame(f), &[pose(spec, f.index + 2)]);

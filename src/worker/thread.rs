@@ -184,6 +184,23 @@ impl Worker {
         self.shared.wake.notify_one();
     }
 
+    /// Poses alone (the frame loop's head poses between camera frames); bounded
+    /// like those `submit` carries.
+    pub fn submit_poses(&self, poses: &[TimedPose]) {
+        let mut slot = lock(&self.shared.slot);
+        slot.poses.extend_from_slice(poses);
+        let excess = slot.poses.len().saturating_sub(MAX_QUEUED_POSES);
+        slot.poses.drain(..excess);
+    }
+
+    /// Whether the worker would take a frame now (none waiting, no fit running):
+    /// a producer whose frames cost something to make (YUV → RGB) makes them only
+    /// then, instead of making frames the slot would drop.
+    pub fn wants_frame(&self) -> bool {
+        let slot = lock(&self.shared.slot);
+        slot.frame.is_none() && !slot.busy && !slot.stop
+    }
+
     /// Wait until the worker has taken and finished every submitted frame (tests,
     /// recordings); false on timeout.
     pub fn wait_idle(&self, timeout: Duration) -> bool {
