@@ -24,6 +24,10 @@ pub mod xr;
 #[cfg(target_os = "android")]
 #[path = "platform/android.rs"]
 mod android;
+/// The passthrough camera (Camera2 NDK + AImageReader) the app's worker is fed from.
+#[cfg(target_os = "android")]
+#[path = "platform/android_camera.rs"]
+mod android_camera;
 // Links the pure-Rust unwinder's _Unwind_* (no NDK libunwind; see Cargo.toml).
 #[cfg(target_os = "android")]
 extern crate unwinding;

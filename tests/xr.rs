@@ -294,10 +294,9 @@ fn lifecycle_120_frames_alpha_blend_validated() {
         let ahead_ns = r.predicted_display_time_ns - c.xr_time_ns;
         assert!((0..50_000_000).contains(&ahead_ns), "display {} ns ahead of the clock sample", ahead_ns);
     }
-    let map = blind_augment::analysis::timing::ClockMap::from_samples(
-        &samples.iter().map(|(_, c)| *c).collect::<Vec<_>>(),
-    )
-    .expect("clock map");
+    let map =
+        blind_augment::analysis::timing::ClockMap::from_samples(&samples.iter().map(|(_, c)| *c).collect::<Vec<_>>())
+            .expect("clock map");
     // The test runtime's XrTime is CLOCK_MONOTONIC shifted by a constant: every
     // sample agrees on it to the width of its own window.
     for (_, c) in &samples {

@@ -305,7 +305,7 @@ fn clock_ns(clock: libc::clockid_t) -> i64 {
     // SAFETY: `ts` is a valid, writable timespec; both clocks exist on Linux and
     // Android (clock_gettime(2)), so the call cannot fail on them.
     unsafe { libc::clock_gettime(clock, &mut ts) };
-    ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64
+    ts.tv_sec * 1_000_000_000 + ts.tv_nsec
 }
 
 /// One clock reading through XR_KHR_convert_timespec_time: CLOCK_MONOTONIC just
@@ -332,7 +332,12 @@ fn sample_clocks(instance: &xr::Instance) -> Result<ClockSample, XrError> {
         return Err(call("xrConvertTimespecTimeToTimeKHR")(r));
     }
     let after = clock_ns(libc::CLOCK_MONOTONIC);
-    Ok(ClockSample { monotonic_before_ns: before, monotonic_after_ns: after, boottime_ns: boottime, xr_time_ns: xr_time.as_nanos() })
+    Ok(ClockSample {
+        monotonic_before_ns: before,
+        monotonic_after_ns: after,
+        boottime_ns: boottime,
+        xr_time_ns: xr_time.as_nanos(),
+    })
 }
 
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.

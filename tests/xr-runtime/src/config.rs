@@ -88,7 +88,8 @@ impl Config {
             }
             None => (1680, 1760),
         };
-        let extensions = var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp,convert_timespec".into());
+        let extensions =
+            var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp,convert_timespec".into());
         let mut ext = (false, false, false, false);
         for e in extensions.split(',').map(str::trim) {
             match e {

@@ -715,7 +715,7 @@ fn monotonic_ns() -> i64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: a valid timespec to write; CLOCK_MONOTONIC always exists on Linux.
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64
+    ts.tv_sec * 1_000_000_000 + ts.tv_nsec
 }
 
 /// xrConvertTimespecTimeToTimeKHR: a CLOCK_MONOTONIC timespec to XrTime.
@@ -733,7 +733,7 @@ unsafe extern "system" fn convert_timespec_time_to_time(
     }
     // SAFETY: non-null pointers from the application (spec: valid for the call).
     let ts = unsafe { &*timespec_time };
-    let mono = ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64;
+    let mono = ts.tv_sec * 1_000_000_000 + ts.tv_nsec;
     let t = rt.xr_time_of_monotonic(mono);
     if t <= 0 {
         return xr::Result::ERROR_TIME_INVALID;
