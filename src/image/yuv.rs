@@ -4,8 +4,8 @@
 //! views of one buffer), converted to R'G'B' (the camera's encoded values, what the
 //! fits and the composite work in) or to linear light.
 //!
-//! Matrices from ITU-R BT.601 and BT.709 (the capture metadata says which: Quest
-//! passthrough frames are BT.709 by Android's default for HD); range "limited"
+//! Matrices from ITU-R BT.601 and BT.709 (the dataspace says which; Camera2's
+//! YUV_420_888 output defaults to JFIF, BT.601 full range, what the app assumes); range "limited"
 //! (Y 16–235, C 16–240, 8-bit) or "full" (0–255). Chroma is upsampled by
 //! replication (each 2×2 block shares its sample, as the 4:2:0 siting of the
 //! camera pipeline puts it: the co-sited/centred difference is under half a pixel
