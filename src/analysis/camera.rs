@@ -166,15 +166,21 @@ pub fn choose_camera(
         notes.push(format!("{}×{} is not offered: using {}×{}", size.0, size.1, nearest.0, nearest.1));
         nearest
     };
+    // Unusable calibration or pose metadata costs pose + depth flow (the worker
+    // falls back to image flow), not the calibration: noted, not fatal.
     let intrinsics = match (cam.active_array, cam.intrinsic_calibration) {
-        (Some(array), Some(calib)) => Some(stream_intrinsics(&cam.id, array, calib, chosen)?),
+        (Some(array), Some(calib)) => stream_intrinsics(&cam.id, array, calib, chosen)
+            .map_err(|e| notes.push(format!("{e}: pose + depth flow is unavailable")))
+            .ok(),
         _ => {
             notes.push("no intrinsic calibration or active array size: pose + depth flow is unavailable".into());
             None
         }
     };
     let head_from_camera = match (cam.lens_pose_rotation, cam.lens_pose_translation_m) {
-        (Some(q), Some(t)) => Some(head_from_camera(&cam.id, q, t)?),
+        (Some(q), Some(t)) => head_from_camera(&cam.id, q, t)
+            .map_err(|e| notes.push(format!("{e}: the camera is taken at the head's origin, looking forward")))
+            .ok(),
         _ => {
             notes.push("no lens pose: the camera is taken at the head's origin, looking forward".into());
             None
@@ -500,6 +506,14 @@ mod tests {
         assert!(c.intrinsics.is_none() && c.head_from_camera.is_none());
         assert_eq!(c.timestamp_source, TimestampSource::Unknown);
         assert_eq!(c.notes.len(), 4, "{:?}", c.notes);
+        // Unusable calibration and pose: chosen all the same, both said.
+        let mut bad = quest_like("50", 0);
+        bad.intrinsic_calibration = Some([f32::NAN, 866.0, 640.0, 640.0, 0.0]);
+        bad.lens_pose_rotation = Some([0.0, 0.0, 0.0, 3.0]);
+        let c = choose_camera(&[bad], CameraSide::Left, PASSTHROUGH_SIZE).unwrap();
+        assert!(c.intrinsics.is_none() && c.head_from_camera.is_none());
+        assert!(c.notes.iter().any(|n| n.contains("camera 50: intrinsic calibration")), "{:?}", c.notes);
+        assert!(c.notes.iter().any(|n| n.contains("camera 50: lens pose")), "{:?}", c.notes);
         cam.yuv_sizes.clear();
         assert_eq!(
             choose_camera(&[cam], CameraSide::Left, PASSTHROUGH_SIZE),

@@ -60,24 +60,14 @@ fn request_camera_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, boo
     use jni::objects::{JObject, JValue};
     use jni::{jni_sig, jni_str};
     with_activity(app, |env, activity| {
-        let string_class = env.find_class(jni_str!("java/lang/String"))?;
-        let names = env.new_object_array(CAMERA_PERMISSIONS.len() as i32, &string_class, JObject::null())?;
-        let mut granted = vec![];
-        for (i, p) in CAMERA_PERMISSIONS.iter().enumerate() {
-            let name = env.new_string(p)?;
-            let state = env
-                .call_method(
-                    activity,
-                    jni_str!("checkSelfPermission"),
-                    jni_sig!("(Ljava/lang/String;)I"),
-                    &[JValue::Object(&name)],
-                )?
-                .i()?;
-            // PackageManager.PERMISSION_GRANTED = 0.
-            granted.push((*p, state == 0));
-            names.set_element(env, i, &name)?;
-        }
+        let granted = permission_states(env, activity)?;
         if granted.iter().any(|(_, g)| !g) {
+            let string_class = env.find_class(jni_str!("java/lang/String"))?;
+            let names = env.new_object_array(CAMERA_PERMISSIONS.len() as i32, &string_class, JObject::null())?;
+            for (i, p) in CAMERA_PERMISSIONS.iter().enumerate() {
+                let name = env.new_string(p)?;
+                names.set_element(env, i, &name)?;
+            }
             env.call_method(
                 activity,
                 jni_str!("requestPermissions"),
@@ -87,6 +77,30 @@ fn request_camera_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, boo
         }
         Ok(granted)
     })
+}
+
+/// Each camera permission and whether it is granted now
+/// (Activity.checkSelfPermission; PackageManager.PERMISSION_GRANTED = 0).
+fn permission_states(
+    env: &mut jni::Env,
+    activity: &jni::objects::JObject,
+) -> Result<Vec<(&'static str, bool)>, jni::errors::Error> {
+    use jni::objects::JValue;
+    use jni::{jni_sig, jni_str};
+    let mut states = vec![];
+    for p in CAMERA_PERMISSIONS {
+        let name = env.new_string(p)?;
+        let state = env
+            .call_method(
+                activity,
+                jni_str!("checkSelfPermission"),
+                jni_sig!("(Ljava/lang/String;)I"),
+                &[JValue::Object(&name)],
+            )?
+            .i()?;
+        states.push((p, state == 0));
+    }
+    Ok(states)
 }
 
 /// The camera's nominal frame interval (Quest 3 passthrough: 30 Hz); the
@@ -162,27 +176,9 @@ fn with_activity<T>(
     })
 }
 
-/// Whether every camera permission is granted now (Activity.checkSelfPermission).
+/// Whether every camera permission is granted now.
 fn camera_permitted(app: &AndroidApp) -> Result<bool, jni::errors::Error> {
-    use jni::objects::JValue;
-    use jni::{jni_sig, jni_str};
-    with_activity(app, |env, activity| {
-        for p in CAMERA_PERMISSIONS {
-            let name = env.new_string(p)?;
-            let state = env
-                .call_method(
-                    activity,
-                    jni_str!("checkSelfPermission"),
-                    jni_sig!("(Ljava/lang/String;)I"),
-                    &[JValue::Object(&name)],
-                )?
-                .i()?;
-            if state != 0 {
-                return Ok(false);
-            }
-        }
-        Ok(true)
-    })
+    with_activity(app, |env, activity| Ok(permission_states(env, activity)?.iter().all(|(_, g)| *g)))
 }
 
 /// Meta's vendor keys of camera `id` (position, source): `CameraCharacteristics`
@@ -296,18 +292,21 @@ fn calibrate_live(
     let realtime = choice.timestamp_source == TimestampSource::Realtime;
     let (w, l) = (worker.clone(), live.clone());
     let handler = Box::new(move |yuv: &Yuv420<'_>, timestamp_ns: i64, result: Option<CaptureResult>| {
-        let poses: Vec<TimedPose> =
-            l.take_heads().into_iter().map(|(t, q, p)| camera_pose(t, (q, p), &head_from_camera)).collect();
         if let Some(map) = l.new_clock_map() {
             assembler.set_clock(map);
         }
         // Frames and poses share a clock only once the clocks are mapped; before
-        // that (the first rendered frame brings a sample) frames wait, and a camera
-        // on an unknown clock calibrates without poses.
+        // that (the first rendered frame brings a sample) frames wait and the head
+        // poses stay queued; a camera on an unknown clock calibrates without poses.
         if realtime && assembler.clock().is_none() {
             return;
         }
-        let poses = if realtime { poses } else { vec![] };
+        let heads = l.take_heads();
+        let poses: Vec<TimedPose> = if realtime {
+            heads.into_iter().map(|(t, q, p)| camera_pose(t, (q, p), &head_from_camera)).collect()
+        } else {
+            vec![]
+        };
         if !w.wants_frame() {
             w.submit_poses(&poses);
             return;
