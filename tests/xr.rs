@@ -183,6 +183,9 @@ fn run_xr_until(
         models,
         settings: LayerSettings::default(),
         display_hz: 90.0,
+        // Used where the runtime offers XR_META_environment_depth (`env_depth` in
+        // BA_XR_EXTENSIONS); ignored elsewhere.
+        env_depth_hz: 30.0,
         on_frame: Some(&mut on_frame),
         stop: Some(&stop),
         platform: &(),

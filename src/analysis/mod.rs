@@ -4,7 +4,7 @@
 //!
 //! * **headset-native**: the headset's own metric depth, delivered with the frame
 //!   (`Frame::depth`; on Quest, XR_META_environment_depth reprojected into the
-//!   camera by `reproject`; on desktop, depth files), and flow from head pose +
+//!   camera by `reproject`, per frame by `headset_depth`; on desktop, depth files), and flow from head pose +
 //!   depth (`PoseDepthFlow`), exact for a static scene. On a headset these replace the paper's two slowest networks.
 //! * **classical** (`LucasKanadeFlow`, `GivenFlow`; the blind estimators of `fit`).
 //! * **video as its own reference** (`temporal`): other frames aligned by pose and
@@ -18,6 +18,7 @@
 
 pub mod camera;
 pub mod flow;
+pub mod headset_depth;
 pub mod onnx;
 pub mod reproject;
 pub mod temporal;

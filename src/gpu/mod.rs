@@ -9,12 +9,14 @@
 //! 05137, VUID-vkDestroyInstance-instance-00629).
 #![allow(unsafe_code)]
 
+mod depth_readback;
 mod frames;
 mod graphics;
 mod image;
 mod pipeline;
 mod query;
 
+pub use depth_readback::DepthReadback;
 pub use frames::{FrameRing, FrameSlot};
 pub use graphics::{GraphicsDesc, GraphicsPipeline, MultiviewTarget, VertexAttribute, EYES};
 pub use image::{record_copy_to_external_depth, texel_bytes, Image, Texture};

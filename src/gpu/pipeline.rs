@@ -6,12 +6,15 @@
 use super::{vkr, Buffer, GpuContext, GpuError, Image};
 use ash::vk;
 
-/// One descriptor: a whole buffer (storage or uniform) or a storage image (all
-/// layers, in its kept layout).
+/// One descriptor: a whole buffer (storage or uniform), a storage image (all
+/// layers, in its kept layout), or a view of an image someone else owns, read with
+/// texel fetches (SAMPLED_IMAGE, no sampler: the OpenXR runtime's environment-depth
+/// images, which are made to be sampled).
 #[derive(Clone, Copy)]
 pub enum Resource<'r, 'c> {
     Buffer(&'r Buffer<'c>),
     Image(&'r Image<'c>),
+    SampledView { view: vk::ImageView, layout: vk::ImageLayout },
 }
 
 /// A compute pipeline and its descriptor set; destroyed on drop, before its context.
@@ -142,11 +145,17 @@ impl<'a> ComputePipeline<'a> {
             });
         }
         for (i, r) in res.iter().enumerate() {
-            let is_image = matches!(r, Resource::Image(_));
-            if is_image != (self.types[i] == vk::DescriptorType::STORAGE_IMAGE) {
+            let fits = match r {
+                Resource::Buffer(_) => {
+                    matches!(self.types[i], vk::DescriptorType::STORAGE_BUFFER | vk::DescriptorType::UNIFORM_BUFFER)
+                }
+                Resource::Image(_) => self.types[i] == vk::DescriptorType::STORAGE_IMAGE,
+                Resource::SampledView { .. } => self.types[i] == vk::DescriptorType::SAMPLED_IMAGE,
+            };
+            if !fits {
                 return Err(GpuError::Input {
                     input: "bindings",
-                    problem: format!("binding {i} is {:?}, got the other kind of resource", self.types[i]),
+                    problem: format!("binding {i} is {:?}, got another kind of resource", self.types[i]),
                 });
             }
         }
@@ -154,7 +163,7 @@ impl<'a> ComputePipeline<'a> {
             .iter()
             .map(|r| match r {
                 Resource::Buffer(b) => [vk::DescriptorBufferInfo::default().buffer(b.buffer).range(vk::WHOLE_SIZE)],
-                Resource::Image(_) => [vk::DescriptorBufferInfo::default()],
+                Resource::Image(_) | Resource::SampledView { .. } => [vk::DescriptorBufferInfo::default()],
             })
             .collect();
         let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = res
@@ -162,6 +171,9 @@ impl<'a> ComputePipeline<'a> {
             .map(|r| match r {
                 Resource::Image(img) => {
                     [vk::DescriptorImageInfo::default().image_view(img.view).image_layout(img.layout)]
+                }
+                Resource::SampledView { view, layout } => {
+                    [vk::DescriptorImageInfo::default().image_view(*view).image_layout(*layout)]
                 }
                 Resource::Buffer(_) => [vk::DescriptorImageInfo::default()],
             })
@@ -176,7 +188,7 @@ impl<'a> ComputePipeline<'a> {
                     .descriptor_type(self.types[i]);
                 match r {
                     Resource::Buffer(_) => w.buffer_info(&buffer_infos[i]),
-                    Resource::Image(_) => w.image_info(&image_infos[i]),
+                    Resource::Image(_) | Resource::SampledView { .. } => w.image_info(&image_infos[i]),
                 }
             })
             .collect();

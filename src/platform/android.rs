@@ -440,6 +440,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
                 models: &models,
                 settings: LayerSettings::default(),
                 display_hz: 90.0,
+                env_depth_hz: ENV_DEPTH_HZ,
                 on_frame: Some(&mut on_frame),
                 stop: Some(&stop),
                 platform: &platform,

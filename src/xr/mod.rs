@@ -3,25 +3,29 @@
 //! swapchain (one image array, a layer per eye) the stereo renderer's composite is
 //! copied into, passthrough (XR_FB_passthrough under an alpha-blended projection
 //! layer, or the ALPHA_BLEND environment blend mode where offered), the display
-//! rate (XR_FB_display_refresh_rate), the session state machine and the frame
+//! rate (XR_FB_display_refresh_rate), the headset's depth for calibration
+//! (XR_META_environment_depth, `env_depth`), the session state machine and the frame
 //! loop. The same code runs on the headset and, on desktop, on the project's
 //! headless test runtime (`tests/xr-runtime`) through the Khronos loader.
 //!
 //! Teardown order (openxrs' `examples/vulkan.rs`, and the spec's parent/child
 //! rule: a handle is destroyed before its parent, Vulkan objects before the
 //! device the session was created with): the GPU is drained; the renderer (its
-//! Vulkan objects) goes; the passthrough layer and feature, the swapchain and the
+//! Vulkan objects) goes; the environment-depth read-back, swapchain and provider;
+//! the passthrough layer and feature, the swapchain and the
 //! reference space (children of the session); the session; then the Vulkan device
 //! and instance (`GpuContext`, created through the XR instance but owned by the
 //! app); the XR instance last. `run` holds them as locals declared in the reverse
 //! of that order, so Rust's drop order (reverse declaration) is the teardown order.
 #![allow(unsafe_code)]
 
+mod env_depth;
 mod lifecycle;
 mod spacewarp;
 mod views;
 mod vulkan;
 
+pub use env_depth::{depth_views, EnvironmentDepth, ROWS_BOTTOM_UP};
 pub use lifecycle::{Action, EndReason, Lifecycle};
 pub use views::{eye_from_view, View, ViewError};
 
@@ -36,6 +40,7 @@ use ash::vk::Handle as _;
 use glam::{Mat4, Quat, Vec3};
 use openxr as xr;
 use spacewarp::space_warp_swapchains;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use vulkan::XrVulkan;
 
@@ -61,6 +66,8 @@ pub enum XrError {
     View(#[from] ViewError),
     #[error(transparent)]
     Gpu(#[from] GpuError),
+    #[error("environment depth: {0}")]
+    EnvironmentDepth(String),
 }
 
 fn call(name: &'static str) -> impl Fn(xr::sys::Result) -> XrError {
@@ -83,6 +90,9 @@ pub struct XrOptions<'a> {
     pub settings: LayerSettings,
     /// Preferred display refresh rate (Hz) when XR_FB_display_refresh_rate is offered.
     pub display_hz: f32,
+    /// Read the headset's depth (XR_META_environment_depth) at most this often (Hz)
+    /// into `FrameRecord::env_depth`, for calibration; 0: not used.
+    pub env_depth_hz: f32,
     /// Called after each rendered frame with its record (tests, the CLI's progress).
     pub on_frame: Option<&'a mut dyn FnMut(&FrameRecord)>,
     /// Set from any thread to shut down (Ctrl-C, Android's onDestroy): the loop
@@ -111,6 +121,9 @@ pub struct FrameRecord {
     /// second after: what maps camera timestamps onto the XR clock
     /// (`analysis::timing::ClockMap`). None on other frames and without the extension.
     pub clock: Option<ClockSample>,
+    /// The headset's depth read back since the previous rendered frame (acquired a
+    /// frame or more earlier; XR_META_environment_depth at `env_depth_hz`).
+    pub env_depth: Option<Arc<EnvironmentDepth>>,
 }
 
 /// The frame-timing summary `blind-augment xr` prints.
@@ -125,6 +138,10 @@ pub struct XrSummary {
     pub passthrough: bool,
     /// XR_FB_space_warp in use (the compositor synthesises every other frame).
     pub space_warp: bool,
+    /// XR_META_environment_depth in use.
+    pub env_depth: bool,
+    /// Environment-depth images read back.
+    pub env_depth_reads: u64,
     pub display_hz: Option<f32>,
     pub frames_rendered: u64,
     /// Frames submitted with no layers (session SYNCHRONIZED, not yet visible).
@@ -146,6 +163,7 @@ const CORE_VALIDATION: &str = "XR_APILAYER_LUNARG_core_validation";
 fn create_instance(
     validation: bool,
     platform: &dyn xr::PlatformInfo,
+    env_depth: bool,
 ) -> Result<(xr::Entry, xr::Instance, xr::ExtensionSet), XrError> {
     // SAFETY: the Khronos loader (Debian's libopenxr_loader.so.1; the APK's
     // libopenxr_loader.so) conforms to the spec.
@@ -190,11 +208,12 @@ fn create_instance(
             log::info!("OpenXR: {name} not offered: {consequence}");
         }
     }
-    if available.meta_environment_depth {
-        // The headset's depth feeds calibration (the worker), not the renderer.
-        log::info!("OpenXR: XR_META_environment_depth offered; not used until live calibration exists");
-    } else {
-        log::info!("OpenXR: XR_META_environment_depth not offered: calibration will need depth from elsewhere");
+    // The headset's depth feeds calibration (the worker), not the renderer: enabled
+    // only when asked for.
+    if env_depth && available.meta_environment_depth {
+        want.meta_environment_depth = true;
+    } else if env_depth {
+        log::info!("OpenXR: XR_META_environment_depth not offered: calibration runs without headset depth");
     }
     let mut layers = vec![];
     if validation {
@@ -352,7 +371,7 @@ pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
 /// Run the XR app until the runtime ends the session (or `frames` are rendered).
 pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // Declared in the reverse of the teardown order (see the module doc).
-    let (_entry, instance, enabled) = create_instance(opts.validation, opts.platform)?;
+    let (_entry, instance, enabled) = create_instance(opts.validation, opts.platform, opts.env_depth_hz > 0.0)?;
     let props = instance.properties().map_err(call("xrGetInstanceProperties"))?;
     let system = instance.system(xr::FormFactor::HEAD_MOUNTED_DISPLAY).map_err(call("xrGetSystem"))?;
     let sys_props = instance.system_properties(system).map_err(call("xrGetSystemProperties"))?;
@@ -473,6 +492,17 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     };
     let see_through = passthrough.is_some() || blend_mode == xr::EnvironmentBlendMode::ALPHA_BLEND;
 
+    // The headset's depth for calibration; a failure to set it up costs the depth,
+    // never the session.
+    let mut env_depth = if enabled.meta_environment_depth {
+        env_depth::EnvDepth::new(&instance, system, &session, &ctx, opts.env_depth_hz).unwrap_or_else(|e| {
+            log::warn!("OpenXR: environment depth unavailable ({e}): calibration runs without headset depth");
+            None
+        })
+    } else {
+        None
+    };
+
     let mut display_hz = None;
     if enabled.fb_display_refresh_rate {
         let rates = session.enumerate_display_refresh_rates().map_err(call("xrEnumerateDisplayRefreshRatesFB"))?;
@@ -494,6 +524,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         blend_mode,
         passthrough: see_through,
         space_warp: space_warp.is_some(),
+        env_depth: env_depth.is_some(),
+        env_depth_reads: 0,
         display_hz,
         frames_rendered: 0,
         frames_empty: 0,
@@ -597,6 +629,19 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             sample_clocks(&instance).map_err(|e| log::warn!("OpenXR: clock sample failed: {e}")).ok()
         } else {
             None
+        };
+        // The headset's depth: acquired (spec: between xrBeginFrame and xrEndFrame, at
+        // most once) and read back without waiting; a failure turns it off, logged.
+        let depth = match env_depth.as_mut().map(|d| d.on_frame(&space, state.predicted_display_time)) {
+            Some(Ok(d)) => d.map(Arc::new),
+            Some(Err(e)) => {
+                log::warn!("OpenXR: environment depth stops ({e}): calibration goes on without it");
+                if let Some(d) = env_depth.take() {
+                    summary.env_depth_reads += d.reads;
+                }
+                None
+            }
+            None => None,
         };
         // One camera-model snapshot for the whole frame (hot-swap contract).
         let snapshot = opts.models.latest();
@@ -739,6 +784,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             wait_s,
             views: [lv, rv],
             clock,
+            env_depth: depth,
         };
         if let Some(f) = opts.on_frame.as_mut() {
             f(&record);
@@ -757,6 +803,13 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     summary.vulkan_messages = ctx.take_messages();
     // Explicit teardown in the documented order (the drops would do the same).
     drop(renderer);
+    if let Some(d) = env_depth.take() {
+        summary.env_depth_reads += d.reads;
+        if d.not_available > 0 {
+            log::info!("OpenXR: environment depth not yet available on {} acquires", d.not_available);
+        }
+    }
+    drop(env_depth);
     drop(passthrough);
     drop(space_warp);
     drop(swapchain);

@@ -85,6 +85,8 @@ pub fn run(args: XrArgs) -> Result<()> {
         models: &models,
         settings: LayerSettings::default(),
         display_hz: args.display_hz,
+        // The desktop app runs no live calibration: the headset's depth would go unused.
+        env_depth_hz: 0.0,
         on_frame: None,
         stop: None,
         platform: &(),
