@@ -261,7 +261,7 @@ impl<'a> EnvDepth<'a> {
             self.reads += 1;
             if let Some(a) = self.pending.take() {
                 let views = depth_views(&values, readback.size(), a.near_z, a.far_z, &a.views)
-                    .map_err(|problem| XrError::EnvironmentDepth(problem))?;
+                    .map_err(XrError::EnvironmentDepth)?;
                 out = Some(EnvironmentDepth { acquired_at_ns: a.at_ns, views });
             }
         }
