@@ -89,6 +89,7 @@ const VARS: &[&str] = &[
     "BA_XR_PNG_FRAMES",
     "BA_XR_REPORT",
     "BA_XR_HEAD",
+    "BA_XR_ENV_DEPTH_DENIALS",
 ];
 
 fn tmp(name: &str) -> PathBuf {
@@ -126,18 +127,24 @@ struct Run {
 }
 
 /// Run the XR loop in-process on the test runtime configured by `env`.
+/// `validation`: both layers (Vulkan's and the OpenXR core validation layer).
 fn run_xr(name: &str, env: &[(&str, &str)], frames: u64, validation: bool, models: &ModelChannel) -> Option<Run> {
-    run_xr_until(name, env, Some(frames), None, validation, models)
+    run_xr_until(name, env, Some(frames), None, (validation, validation), models)
+}
+
+/// As `run_xr`, with Vulkan validation on and the OpenXR core validation layer off.
+fn run_xr_vulkan_validated(name: &str, env: &[(&str, &str)], frames: u64, models: &ModelChannel) -> Option<Run> {
+    run_xr_until(name, env, Some(frames), None, (true, false), models)
 }
 
 /// As `run_xr`, ending after `frames` or when another thread sets the stop flag
-/// `stop_after` into the run.
+/// `stop_after` into the run; `validation`: (Vulkan, OpenXR core) layers.
 fn run_xr_until(
     name: &str,
     env: &[(&str, &str)],
     frames: Option<u64>,
     stop_after: Option<std::time::Duration>,
-    validation: bool,
+    (validation, core_validation): (bool, bool),
     models: &ModelChannel,
 ) -> Option<Run> {
     let manifest = manifest()?;
@@ -155,7 +162,7 @@ fn run_xr_until(
     std::env::set_var("XR_CORE_VALIDATION_FILE_NAME", &xr_log);
     std::env::set_var("BA_XR_EYE_SIZE", format!("{}x{}", EYE.0, EYE.1));
     std::env::set_var("BA_XR_REPORT", &report);
-    if validation {
+    if core_validation {
         // Under the core validation layer, passthrough by ALPHA_BLEND (the FB
         // passthrough layer is refused by Debian's 1.0.20 layer: see the file doc).
         std::env::set_var("BA_XR_BLEND_MODES", "opaque,alpha_blend");
@@ -177,6 +184,7 @@ fn run_xr_until(
     let result = xr::run(XrOptions {
         frames,
         validation,
+        core_validation,
         scene: &scene,
         // Close enough to fill a good part of the small eye buffers.
         local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -0.6)),
@@ -393,7 +401,7 @@ fn fb_passthrough_frames_match_the_desktop_render() {
         // Quest-like: passthrough only through the FB layer.
         ("BA_XR_BLEND_MODES", "opaque"),
     ];
-    let Some(run) = run_xr("passthrough", &env, 20, false, &models) else { return };
+    let Some(run) = run_xr_vulkan_validated("passthrough", &env, 20, &models) else { return };
     assert_clean(&run, false);
     assert_eq!(run.summary.blend_mode, openxr::EnvironmentBlendMode::OPAQUE);
     assert!(run.summary.passthrough);
@@ -453,6 +461,80 @@ fn runtime_without_optional_extensions_falls_back() {
     for f in frames_of(&run.report).iter().filter(|f| !f["layers"].as_array().unwrap().is_empty()) {
         let l = f["layers"].as_array().unwrap();
         assert_eq!((l.len(), &l[0]["source_alpha"]), (1, &false.into()), "opaque projection only: {f}");
+    }
+}
+
+/// XR_META_environment_depth end to end: the provider refused once (the spatial-data
+/// permission not yet granted) and set up again a second later; hand removal on;
+/// depth acquired inside frames and read back from the runtime's D16 images by the
+/// GPU (sampled: the runtime grants no TRANSFER_SRC) without the frame loop waiting.
+/// Every delivered pair is held to what the runtime reported for that acquire — the
+/// view poses and fields of view — and to its scene: each texel's depth, unprojected
+/// along its ray, lies on the runtime's plane. Tolerance: two D16 steps of view
+/// depth, 2·z²/(near·65535) along a ray up to 1.6× the view axis (the texels are
+/// quantised to 1/65535 of NDC depth), + 0.1 mm of f32. A row order, a field of view
+/// or an NDC convention read wrongly puts points tens of centimetres off the tilted
+/// plane.
+///
+/// Vulkan validation on; the OpenXR core validation layer off: Debian's (1.0.20)
+/// predates XR_META_environment_depth and fails xrGetSystemProperties when
+/// XrSystemEnvironmentDepthPropertiesMETA is chained ("Invalid structure(s) in
+/// next chain", VUID-XrSystemProperties-next-next), so under it the app rightly
+/// finds no environment depth.
+#[test]
+fn environment_depth_read_back_matches_the_runtime_scene() {
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let env =
+        [("BA_XR_EXTENSIONS", "passthrough,refresh_rate,convert_timespec,env_depth"), ("BA_XR_ENV_DEPTH_DENIALS", "1")];
+    let Some(run) = run_xr_vulkan_validated("env_depth", &env, 200, &models) else { return };
+    assert_clean(&run, false);
+    assert!(run.summary.env_depth, "environment depth set up after the refusal");
+    let events = |name: &str| run.report.iter().filter(|v| v["event"] == name).collect::<Vec<_>>();
+    assert_eq!(events("env_depth_refused").len(), 1);
+    assert_eq!(events("env_depth_hand_removal").first().map(|v| v["enabled"].clone()), Some(true.into()));
+    let started = events("env_depth_provider");
+    assert_eq!(started.first().map(|v| v["started"].clone()), Some(true.into()), "{started:?}");
+    assert_eq!(started.last().map(|v| v["started"].clone()), Some(false.into()), "stopped at teardown");
+    let acquires = events("env_depth");
+    let delivered: Vec<_> = run.records.iter().filter_map(|r| r.env_depth.clone()).collect();
+    assert!(delivered.len() >= 5, "{} depth pairs delivered of {} acquires", delivered.len(), acquires.len());
+    assert_eq!(run.summary.env_depth_reads as usize, delivered.len());
+    let f32s = |v: &serde_json::Value| -> Vec<f32> {
+        v.as_array().expect("array").iter().map(|x| x.as_f64().expect("number") as f32).collect()
+    };
+    for d in &delivered {
+        let a = acquires
+            .iter()
+            .find(|a| a["display_time"].as_i64() == Some(d.acquired_at_ns))
+            .unwrap_or_else(|| panic!("no acquire reported at {}", d.acquired_at_ns));
+        let (p0, n) = (Vec3::from_slice(&f32s(&a["plane"]["point"])), Vec3::from_slice(&f32s(&a["plane"]["normal"])));
+        for (e, view) in d.views.iter().enumerate() {
+            let rv = &a["views"][e];
+            let (t, q) = (f32s(&rv["t"]), f32s(&rv["q"]));
+            let want = Mat4::from_rotation_translation(glam::Quat::from_slice(&q), Vec3::from_slice(&t));
+            assert!(view.world_from_view.abs_diff_eq(want, 1e-5), "eye {e} pose");
+            let fov: Vec<f32> = f32s(&rv["fov"]).iter().map(|x| x.tan()).collect();
+            assert!(view.fov_tan.iter().zip(&fov).all(|(a, b)| (a - b).abs() < 1e-5), "eye {e} fov");
+            assert_eq!((view.width, view.height), (320, 320));
+            assert!(view.far_m.is_infinite() && (view.near_m - 0.1).abs() < 1e-6);
+            let [l, r, u, dn] = view.fov_tan;
+            let (mut on_plane, mut worst) = (0, 0.0f32);
+            for y in (0..view.height).step_by(7) {
+                for x in (0..view.width).step_by(7) {
+                    let Some(z) = view.view_depth_m(view.ndc_depth[y * view.width + x]) else { continue };
+                    let tx = l + (x as f32 + 0.5) * (r - l) / view.width as f32;
+                    let ty = u - (y as f32 + 0.5) * (u - dn) / view.height as f32;
+                    let p = view.world_from_view.transform_point3(Vec3::new(tx * z, ty * z, -z));
+                    let off = (p - p0).dot(n).abs();
+                    let tol = 2.0 * 1.6 * z * z / (0.1 * 65535.0) + 1e-4;
+                    assert!(off <= tol, "eye {e} texel ({x}, {y}): {off} m off the plane (z {z} m, tolerance {tol})");
+                    worst = worst.max(off / tol);
+                    on_plane += 1;
+                }
+            }
+            assert!(on_plane > 2000, "eye {e}: {on_plane} texels with depth");
+            eprintln!("eye {e}: {on_plane} texels on the plane, worst {:.2} of the tolerance", worst);
+        }
     }
 }
 
@@ -560,7 +642,7 @@ fn cli() -> std::process::Command {
 #[test]
 fn stop_flag_requests_exit_and_ends_cleanly() {
     let models = ModelChannel::new(model(0.4)).expect("model");
-    let run = run_xr_until("stop", &[], None, Some(std::time::Duration::from_secs(3)), true, &models);
+    let run = run_xr_until("stop", &[], None, Some(std::time::Duration::from_secs(3)), (true, true), &models);
     let Some(run) = run else { return };
     assert_clean(&run, true);
     assert_eq!(run.summary.end, EndReason::Exited);

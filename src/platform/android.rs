@@ -435,6 +435,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
             let result = xr::run(XrOptions {
                 frames: None,
                 validation: false,
+                core_validation: false,
                 scene: &scene,
                 local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -1.5)),
                 models: &models,

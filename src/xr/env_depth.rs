@@ -93,6 +93,16 @@ struct Acquired {
     views: [xr::sys::EnvironmentDepthImageViewMETA; 2],
 }
 
+/// What setting the extension up came to.
+pub(super) enum Setup<'a> {
+    Ready(EnvDepth<'a>),
+    /// The system has no environment depth.
+    Unsupported,
+    /// Not permitted (Quest: the spatial-data permission `com.oculus.permission.
+    /// USE_SCENE` not granted yet): worth trying again once the user may have.
+    NotPermitted,
+}
+
 /// The provider, its swapchain and the read-back of its images.
 pub(super) struct EnvDepth<'a> {
     fp: xr::raw::EnvironmentDepthMETA,
@@ -109,16 +119,14 @@ pub(super) struct EnvDepth<'a> {
 }
 
 impl<'a> EnvDepth<'a> {
-    /// Create and start the provider, or None (logged) when the system has no
-    /// environment depth or the app may not use it (Quest: the spatial-data
-    /// permission `com.oculus.permission.USE_SCENE` not granted).
+    /// Create and start the provider (see `Setup` for why it may not be).
     pub fn new(
         instance: &xr::Instance,
         system: xr::SystemId,
         session: &xr::Session<xr::Vulkan>,
         ctx: &'a GpuContext,
         hz: f32,
-    ) -> Result<Option<Self>, XrError> {
+    ) -> Result<Setup<'a>, XrError> {
         let Some(fp) = instance.exts().meta_environment_depth else {
             return Err(XrError::MissingExtension("XR_META_environment_depth"));
         };
@@ -141,8 +149,7 @@ impl<'a> EnvDepth<'a> {
             return Err(call("xrGetSystemProperties (environment depth)")(r));
         }
         if props.supports_environment_depth != xr::sys::TRUE {
-            log::warn!("OpenXR: the system has no environment depth: calibration runs without headset depth");
-            return Ok(None);
+            return Ok(Setup::Unsupported);
         }
         let mut provider = xr::sys::EnvironmentDepthProviderMETA::NULL;
         let info = xr::sys::EnvironmentDepthProviderCreateInfoMETA {
@@ -153,10 +160,7 @@ impl<'a> EnvDepth<'a> {
         // SAFETY: a live session of this instance; `info` and `provider` outlive the call.
         let r = unsafe { (fp.create_environment_depth_provider)(session.as_raw(), &info, &mut provider) };
         if r == xr::sys::Result::ERROR_NOT_PERMITTED_PASSTHROUGH_FB {
-            log::warn!(
-                "OpenXR: environment depth not permitted (spatial data permission com.oculus.permission.USE_SCENE): calibration runs without headset depth"
-            );
-            return Ok(None);
+            return Ok(Setup::NotPermitted);
         }
         if r.into_raw() < 0 {
             return Err(call("xrCreateEnvironmentDepthProviderMETA")(r));
@@ -249,7 +253,7 @@ impl<'a> EnvDepth<'a> {
             state.height,
             vk_images.len()
         );
-        Ok(Some(me))
+        Ok(Setup::Ready(me))
     }
 
     /// Call once per frame between xrBeginFrame and xrEndFrame: the depth read back

@@ -79,9 +79,12 @@ pub struct XrOptions<'a> {
     /// Stop (request exit) after this many rendered frames; None = until the
     /// runtime ends the session.
     pub frames: Option<u64>,
-    /// Enable the Khronos core validation layer (XR_APILAYER_LUNARG_core_validation)
-    /// and Vulkan's validation layer when installed (tests do).
+    /// Enable Vulkan's validation layer when installed (tests do).
     pub validation: bool,
+    /// Enable the Khronos core validation layer (XR_APILAYER_LUNARG_core_validation)
+    /// when installed (tests do, except where a layer older than an extension the
+    /// app uses rejects it).
+    pub core_validation: bool,
     pub scene: &'a Scene,
     /// Where the virtual content stands, in the LOCAL reference space.
     pub local_from_scene: Mat4,
@@ -158,6 +161,8 @@ pub struct XrSummary {
 }
 
 const CORE_VALIDATION: &str = "XR_APILAYER_LUNARG_core_validation";
+/// How often environment depth is set up again while it is not permitted.
+const ENV_DEPTH_RETRY: Duration = Duration::from_secs(1);
 
 /// Load the loader and create the instance with what the runtime offers.
 fn create_instance(
@@ -371,7 +376,7 @@ pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
 /// Run the XR app until the runtime ends the session (or `frames` are rendered).
 pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // Declared in the reverse of the teardown order (see the module doc).
-    let (_entry, instance, enabled) = create_instance(opts.validation, opts.platform, opts.env_depth_hz > 0.0)?;
+    let (_entry, instance, enabled) = create_instance(opts.core_validation, opts.platform, opts.env_depth_hz > 0.0)?;
     let props = instance.properties().map_err(call("xrGetInstanceProperties"))?;
     let system = instance.system(xr::FormFactor::HEAD_MOUNTED_DISPLAY).map_err(call("xrGetSystem"))?;
     let sys_props = instance.system_properties(system).map_err(call("xrGetSystemProperties"))?;
@@ -493,15 +498,31 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     let see_through = passthrough.is_some() || blend_mode == xr::EnvironmentBlendMode::ALPHA_BLEND;
 
     // The headset's depth for calibration; a failure to set it up costs the depth,
-    // never the session.
-    let mut env_depth = if enabled.meta_environment_depth {
-        env_depth::EnvDepth::new(&instance, system, &session, &ctx, opts.env_depth_hz).unwrap_or_else(|e| {
-            log::warn!("OpenXR: environment depth unavailable ({e}): calibration runs without headset depth");
-            None
-        })
-    } else {
-        None
+    // never the session. Not permitted yet (the user may still be answering the
+    // permission dialog): tried again every ENV_DEPTH_RETRY.
+    let setup_env_depth = |told: bool| -> (Option<env_depth::EnvDepth<'_>>, Option<Instant>) {
+        match env_depth::EnvDepth::new(&instance, system, &session, &ctx, opts.env_depth_hz) {
+            Ok(env_depth::Setup::Ready(d)) => (Some(d), None),
+            Ok(env_depth::Setup::Unsupported) => {
+                log::warn!("OpenXR: the system has no environment depth: calibration runs without headset depth");
+                (None, None)
+            }
+            Ok(env_depth::Setup::NotPermitted) => {
+                if !told {
+                    log::warn!(
+                        "OpenXR: environment depth not permitted (the spatial-data permission com.oculus.permission.USE_SCENE): calibration runs without headset depth until it is granted"
+                    );
+                }
+                (None, Some(Instant::now()))
+            }
+            Err(e) => {
+                log::warn!("OpenXR: environment depth unavailable ({e}): calibration runs without headset depth");
+                (None, None)
+            }
+        }
     };
+    let (mut env_depth, mut env_depth_retry) =
+        if enabled.meta_environment_depth { setup_env_depth(false) } else { (None, None) };
 
     let mut display_hz = None;
     if enabled.fb_display_refresh_rate {
@@ -630,6 +651,10 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         } else {
             None
         };
+        if env_depth.is_none() && env_depth_retry.is_some_and(|t| t.elapsed() >= ENV_DEPTH_RETRY) {
+            (env_depth, env_depth_retry) = setup_env_depth(true);
+            summary.env_depth |= env_depth.is_some();
+        }
         // The headset's depth: acquired (spec: between xrBeginFrame and xrEndFrame, at
         // most once) and read back without waiting; a failure turns it off, logged.
         let depth = match env_depth.as_mut().map(|d| d.on_frame(&space, state.predicted_display_time)) {

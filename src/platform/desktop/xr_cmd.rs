@@ -80,6 +80,7 @@ pub fn run(args: XrArgs) -> Result<()> {
     let summary = xr::run(XrOptions {
         frames: args.frames,
         validation: args.validation,
+        core_validation: args.validation,
         scene: &scene,
         local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -args.object_depth_m)),
         models: &models,

@@ -6,7 +6,8 @@
 //! | `BA_XR_DISPLAY_HZ` | display refresh rate at start | 90 |
 //! | `BA_XR_REFRESH_RATES` | rates XR_FB_display_refresh_rate offers | 72,90,120 |
 //! | `BA_XR_EYE_SIZE` | recommended image rect per eye, `WxH` | 1680x1760 |
-//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, or `none` | passthrough,refresh_rate,space_warp,convert_timespec |
+//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, `env_depth` (XR_META_environment_depth), or `none` | passthrough,refresh_rate,space_warp,convert_timespec |
+//! | `BA_XR_ENV_DEPTH_DENIALS` | refuse this many environment-depth provider creations (XR_ERROR_NOT_PERMITTED_PASSTHROUGH_FB: the spatial-data permission not yet granted) | 0 |
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
 //! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N` | none |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
@@ -46,6 +47,9 @@ pub struct Config {
     pub space_warp: bool,
     /// XR_KHR_convert_timespec_time (XrTime ↔ CLOCK_MONOTONIC).
     pub convert_timespec: bool,
+    /// XR_META_environment_depth (the depth of a known plane, `env_depth.rs`).
+    pub env_depth: bool,
+    pub env_depth_denials: u32,
     pub blend_modes: Vec<openxr_sys::EnvironmentBlendMode>,
     pub script: Vec<(u64, Command)>,
     pub png_dir: Option<PathBuf>,
@@ -91,12 +95,14 @@ impl Config {
         let extensions =
             var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp,convert_timespec".into());
         let mut ext = (false, false, false, false);
+        let mut env_depth = false;
         for e in extensions.split(',').map(str::trim) {
             match e {
                 "passthrough" => ext.0 = true,
                 "refresh_rate" => ext.1 = true,
                 "space_warp" => ext.2 = true,
                 "convert_timespec" => ext.3 = true,
+                "env_depth" => env_depth = true,
                 "none" => {}
                 other => return Err(format!("BA_XR_EXTENSIONS: unknown extension {other:?}")),
             }
@@ -137,6 +143,10 @@ impl Config {
                 .ok_or(format!("BA_XR_PNG_FRAMES={s:?}: expected comma-separated frame numbers"))?,
             None => vec![],
         };
+        let env_depth_denials = match var("BA_XR_ENV_DEPTH_DENIALS") {
+            Some(s) => s.trim().parse().map_err(|_| format!("BA_XR_ENV_DEPTH_DENIALS={s:?}: expected a count"))?,
+            None => 0,
+        };
         let head = match var("BA_XR_HEAD").as_deref() {
             None | Some("sway") => Head::Sway,
             Some("still") => Head::Still,
@@ -150,6 +160,8 @@ impl Config {
             refresh_rate: ext.1,
             space_warp: ext.2,
             convert_timespec: ext.3,
+            env_depth,
+            env_depth_denials,
             blend_modes,
             script,
             png_dir: var("BA_XR_PNG_DIR").map(PathBuf::from),

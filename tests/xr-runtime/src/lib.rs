@@ -6,7 +6,8 @@
 //! configuration with views from a scripted head path, swapchains backed by Vulkan
 //! images it owns on the application's device, `xrWaitFrame` paced at the display
 //! rate, the session lifecycle with scripted exit/loss, XR_FB_passthrough,
-//! XR_FB_display_refresh_rate and XR_FB_space_warp's throttling — and it reports
+//! XR_FB_display_refresh_rate, XR_FB_space_warp's throttling, XR_KHR_convert_
+//! timespec_time and XR_META_environment_depth (the depth of a known plane) — and it reports
 //! every frame (JSON lines) and writes chosen frames' layers to PNG.
 //!
 //! It is one process-wide state behind a mutex (the loader allows one runtime per
@@ -14,6 +15,7 @@
 #![allow(clippy::missing_safety_doc)]
 
 mod config;
+mod env_depth;
 mod frame;
 mod input;
 mod session;
@@ -37,6 +39,7 @@ pub(crate) const EXT_PASSTHROUGH: &str = "XR_FB_passthrough";
 pub(crate) const EXT_REFRESH: &str = "XR_FB_display_refresh_rate";
 pub(crate) const EXT_SPACE_WARP: &str = "XR_FB_space_warp";
 pub(crate) const EXT_TIMESPEC: &str = "XR_KHR_convert_timespec_time";
+pub(crate) const EXT_ENV_DEPTH: &str = "XR_META_environment_depth";
 
 /// The one system this runtime has.
 pub(crate) const SYSTEM_ID: u64 = 1;
@@ -74,6 +77,10 @@ pub(crate) struct Runtime {
     pub actions: HashSet<u64>,
     pub vk: Option<vulkan::VkState>,
     pub report: Option<std::fs::File>,
+    /// XR_META_environment_depth's provider (at most one).
+    pub env_depth: Option<env_depth::Provider>,
+    /// Provider creations refused so far (`BA_XR_ENV_DEPTH_DENIALS`).
+    pub env_depth_refused: u32,
 }
 
 impl Runtime {
@@ -179,6 +186,9 @@ fn offered(config: &Config) -> Vec<(&'static str, u32)> {
     }
     if config.convert_timespec {
         v.push((EXT_TIMESPEC, 1));
+    }
+    if config.env_depth {
+        v.push((EXT_ENV_DEPTH, 1));
     }
     v
 }
@@ -305,6 +315,16 @@ unsafe extern "system" fn get_instance_proc_addr(
         "xrGetDisplayRefreshRateFB" => pfn!(session::get_display_refresh_rate),
         "xrRequestDisplayRefreshRateFB" => pfn!(session::request_display_refresh_rate),
         "xrConvertTimespecTimeToTimeKHR" => pfn!(convert_timespec_time_to_time),
+        "xrCreateEnvironmentDepthProviderMETA" => pfn!(env_depth::create_provider),
+        "xrDestroyEnvironmentDepthProviderMETA" => pfn!(env_depth::destroy_provider),
+        "xrStartEnvironmentDepthProviderMETA" => pfn!(env_depth::start_provider),
+        "xrStopEnvironmentDepthProviderMETA" => pfn!(env_depth::stop_provider),
+        "xrCreateEnvironmentDepthSwapchainMETA" => pfn!(env_depth::create_swapchain),
+        "xrDestroyEnvironmentDepthSwapchainMETA" => pfn!(env_depth::destroy_swapchain),
+        "xrEnumerateEnvironmentDepthSwapchainImagesMETA" => pfn!(env_depth::enumerate_swapchain_images),
+        "xrGetEnvironmentDepthSwapchainStateMETA" => pfn!(env_depth::get_swapchain_state),
+        "xrAcquireEnvironmentDepthImageMETA" => pfn!(env_depth::acquire_image),
+        "xrSetEnvironmentDepthHandRemovalMETA" => pfn!(env_depth::set_hand_removal),
         "xrConvertTimeToTimespecTimeKHR" => pfn!(convert_time_to_timespec_time),
         _ => None,
     };
@@ -438,6 +458,8 @@ unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, o
         actions: HashSet::new(),
         vk: None,
         report,
+        env_depth: None,
+        env_depth_refused: 0,
     };
     rt.instance = rt.handle();
     let extensions = rt.enabled.clone();
@@ -551,7 +573,8 @@ unsafe extern "system" fn get_system_properties(
         p.graphics_properties.max_swapchain_image_height = 8192;
         p.tracking_properties.orientation_tracking = xr::TRUE;
         p.tracking_properties.position_tracking = xr::TRUE;
-        let (passthrough, space_warp) = (rt.has(EXT_PASSTHROUGH), rt.has(EXT_SPACE_WARP));
+        let (passthrough, space_warp, env_depth) =
+            (rt.has(EXT_PASSTHROUGH), rt.has(EXT_SPACE_WARP), rt.has(EXT_ENV_DEPTH));
         let (w, h) = rt.config.eye_size;
         // SAFETY: the chain is the caller's, each struct starts with a header.
         unsafe {
@@ -564,6 +587,11 @@ unsafe extern "system" fn get_system_properties(
                     // Quest recommends motion vectors at a fraction of the eye size.
                     sw.recommended_motion_vector_image_rect_width = w.div_ceil(4);
                     sw.recommended_motion_vector_image_rect_height = h.div_ceil(4);
+                }
+                xr::StructureType::SYSTEM_ENVIRONMENT_DEPTH_PROPERTIES_META if env_depth => {
+                    let d = &mut *(s as *mut xr::SystemEnvironmentDepthPropertiesMETA);
+                    d.supports_environment_depth = xr::TRUE;
+                    d.supports_hand_removal = xr::TRUE;
                 }
                 _ => {}
             })

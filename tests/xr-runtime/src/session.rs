@@ -97,6 +97,8 @@ impl Runtime {
 /// Destroy the session's children and Vulkan state (xrDestroySession, or the
 /// instance going away with a session still alive).
 pub(crate) fn teardown_session(rt: &mut Runtime) {
+    crate::env_depth::teardown(rt);
+    rt.env_depth = None;
     let chains: Vec<u64> = rt.swapchains.keys().copied().collect();
     for h in chains {
         if let (Some(sc), Some(vk)) = (rt.swapchains.remove(&h), rt.vk.as_ref()) {
@@ -398,7 +400,7 @@ impl Pose {
         }
     }
 
-    fn rotate(&self, v: [f32; 3]) -> [f32; 3] {
+    pub(crate) fn rotate(&self, v: [f32; 3]) -> [f32; 3] {
         let [x, y, z, w] = self.q;
         let u = [x, y, z];
         let cross = |a: [f32; 3], b: [f32; 3]| {
@@ -434,6 +436,11 @@ impl Pose {
 const EYE_HEIGHT_M: f32 = 1.6;
 /// Quest 3's default inter-pupillary distance.
 pub(crate) const IPD_M: f32 = 0.063;
+
+/// Eye `e` (0 left, 1 right) in the head's frame: half the IPD to each side.
+pub(crate) fn head_from_eye(e: usize) -> Pose {
+    Pose { q: Pose::IDENTITY.q, t: [if e == 0 { -IPD_M / 2.0 } else { IPD_M / 2.0 }, 0.0, 0.0] }
+}
 
 /// `local_from_head` at `time_ns` on the scripted path.
 pub(crate) fn head_pose(head: Head, time_ns: i64) -> Pose {
@@ -540,8 +547,7 @@ pub(crate) unsafe extern "system" fn locate_views(
         let local_from_space = local_from_space(rt, space.1, &space.2, t);
         let space_from_head = local_from_space.inverse().mul(&local_from_head);
         for e in 0..2 {
-            let head_from_eye =
-                Pose { q: Pose::IDENTITY.q, t: [if e == 0 { -IPD_M / 2.0 } else { IPD_M / 2.0 }, 0.0, 0.0] };
+            let head_from_eye = head_from_eye(e);
             // SAFETY: two views at `views` (capacity ≥ 2); `ty`/`next` are the caller's.
             unsafe {
                 (*views.add(e)).pose = space_from_head.mul(&head_from_eye).to_xr();

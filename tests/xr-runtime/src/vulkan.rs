@@ -369,6 +369,155 @@ impl VkState {
     }
 }
 
+/// XR_META_environment_depth's images: D16_UNORM, two layers, SAMPLED and
+/// TRANSFER_DST only (the app must sample them: no TRANSFER_SRC, which a runtime
+/// need not grant), kept in SHADER_READ_ONLY_OPTIMAL between writes.
+pub(crate) const ENV_DEPTH_LAYOUT: vk::ImageLayout = vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL;
+
+impl VkState {
+    /// Find a memory type with `props` among `bits`.
+    fn memory_type(&self, bits: u32, props: vk::MemoryPropertyFlags) -> Option<u32> {
+        (0..self.memory.memory_type_count)
+            .find(|&i| bits & (1 << i) != 0 && self.memory.memory_types[i as usize].property_flags.contains(props))
+    }
+
+    /// `count` environment-depth images of `width`×`height` (see ENV_DEPTH_LAYOUT).
+    pub fn create_depth_images(
+        &self,
+        count: u32,
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<(vk::Image, vk::DeviceMemory)>, String> {
+        let mut images: Vec<(vk::Image, vk::DeviceMemory)> = vec![];
+        let result = (|| {
+            for _ in 0..count {
+                let ci = vk::ImageCreateInfo::default()
+                    .image_type(vk::ImageType::TYPE_2D)
+                    .format(vk::Format::D16_UNORM)
+                    .extent(vk::Extent3D { width, height, depth: 1 })
+                    .mip_levels(1)
+                    .array_layers(2)
+                    .samples(vk::SampleCountFlags::TYPE_1)
+                    .tiling(vk::ImageTiling::OPTIMAL)
+                    .usage(vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST)
+                    .sharing_mode(vk::SharingMode::EXCLUSIVE)
+                    .initial_layout(vk::ImageLayout::UNDEFINED);
+                // SAFETY: valid device and create info.
+                let image = unsafe { self.device.create_image(&ci, None) }.map_err(vk_err("vkCreateImage"))?;
+                // SAFETY: just created.
+                let req = unsafe { self.device.get_image_memory_requirements(image) };
+                let Some(ty) = self.memory_type(req.memory_type_bits, vk::MemoryPropertyFlags::DEVICE_LOCAL) else {
+                    // SAFETY: unbound image of ours.
+                    unsafe { self.device.destroy_image(image, None) };
+                    return Err("no device-local memory for a depth image".to_string());
+                };
+                let alloc = vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(ty);
+                // SAFETY: valid allocation for this device.
+                let mem = match unsafe { self.device.allocate_memory(&alloc, None) } {
+                    Ok(m) => m,
+                    Err(e) => {
+                        // SAFETY: unbound image of ours.
+                        unsafe { self.device.destroy_image(image, None) };
+                        return Err(vk_err("vkAllocateMemory")(e));
+                    }
+                };
+                images.push((image, mem));
+                // SAFETY: compatible memory, offset 0, both unbound.
+                unsafe { self.device.bind_image_memory(image, mem, 0) }.map_err(vk_err("vkBindImageMemory"))?;
+            }
+            self.submit(|cmd| {
+                for (image, _) in &images {
+                    self.barrier(cmd, *image, true, vk::ImageLayout::UNDEFINED, ENV_DEPTH_LAYOUT);
+                }
+            })
+        })();
+        if let Err(e) = result {
+            self.destroy_images(images);
+            return Err(e);
+        }
+        Ok(images)
+    }
+
+    pub fn destroy_images(&self, images: Vec<(vk::Image, vk::DeviceMemory)>) {
+        // SAFETY: the queue is idle before the images go (the app's reads of them
+        // have finished); they are ours.
+        unsafe {
+            let _ = self.device.queue_wait_idle(self.queue);
+            for (image, memory) in images {
+                self.device.destroy_image(image, None);
+                self.device.free_memory(memory, None);
+            }
+        }
+    }
+
+    /// Write both layers of a depth image (`texels`: layer-major, rows as stored),
+    /// waiting for the app's earlier work on the queue first.
+    pub fn write_depth(&self, image: vk::Image, width: u32, height: u32, texels: &[u16]) -> Result<(), String> {
+        let size = texels.len() as u64 * 2;
+        if texels.len() != 2 * (width * height) as usize {
+            return Err(format!("{} texels for two {width}×{height} layers", texels.len()));
+        }
+        let bi = vk::BufferCreateInfo::default().size(size).usage(vk::BufferUsageFlags::TRANSFER_SRC);
+        // SAFETY: valid device and create info.
+        let buffer = unsafe { self.device.create_buffer(&bi, None) }.map_err(vk_err("vkCreateBuffer"))?;
+        // SAFETY: just created.
+        let req = unsafe { self.device.get_buffer_memory_requirements(buffer) };
+        let want = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+        let result = (|| {
+            let ty = self.memory_type(req.memory_type_bits, want).ok_or("no host-visible memory")?;
+            let alloc = vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(ty);
+            // SAFETY: valid allocation info.
+            let mem = unsafe { self.device.allocate_memory(&alloc, None) }.map_err(vk_err("vkAllocateMemory"))?;
+            let r = (|| {
+                // SAFETY: unbound buffer, compatible memory; mapped, written in
+                // bounds and unmapped before the GPU reads it.
+                unsafe {
+                    self.device.bind_buffer_memory(buffer, mem, 0).map_err(vk_err("vkBindBufferMemory"))?;
+                    let p = self
+                        .device
+                        .map_memory(mem, 0, size, vk::MemoryMapFlags::empty())
+                        .map_err(vk_err("vkMapMemory"))?;
+                    std::ptr::copy_nonoverlapping(texels.as_ptr() as *const u8, p as *mut u8, size as usize);
+                    self.device.unmap_memory(mem);
+                }
+                self.submit(|cmd| {
+                    self.barrier(cmd, image, true, ENV_DEPTH_LAYOUT, vk::ImageLayout::TRANSFER_DST_OPTIMAL);
+                    let regions: Vec<vk::BufferImageCopy> = (0..2)
+                        .map(|layer| {
+                            vk::BufferImageCopy::default()
+                                .buffer_offset(layer as u64 * (width * height) as u64 * 2)
+                                .image_subresource(vk::ImageSubresourceLayers {
+                                    aspect_mask: vk::ImageAspectFlags::DEPTH,
+                                    mip_level: 0,
+                                    base_array_layer: layer,
+                                    layer_count: 1,
+                                })
+                                .image_extent(vk::Extent3D { width, height, depth: 1 })
+                        })
+                        .collect();
+                    // SAFETY: recording; image in TRANSFER_DST_OPTIMAL, buffer large enough.
+                    unsafe {
+                        self.device.cmd_copy_buffer_to_image(
+                            cmd,
+                            buffer,
+                            image,
+                            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                            &regions,
+                        )
+                    };
+                    self.barrier(cmd, image, true, vk::ImageLayout::TRANSFER_DST_OPTIMAL, ENV_DEPTH_LAYOUT);
+                })
+            })();
+            // SAFETY: not in use (queue idle after submit, or never submitted).
+            unsafe { self.device.free_memory(mem, None) };
+            r
+        })();
+        // SAFETY: not in use (as above).
+        unsafe { self.device.destroy_buffer(buffer, None) };
+        result
+    }
+}
+
 // ---- entry points ------------------------------------------------------------
 
 pub(crate) unsafe extern "system" fn enumerate_swapchain_formats(
