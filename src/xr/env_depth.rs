@@ -95,7 +95,7 @@ struct Acquired {
 
 /// What setting the extension up came to.
 pub(super) enum Setup<'a> {
-    Ready(EnvDepth<'a>),
+    Ready(Box<EnvDepth<'a>>),
     /// The system has no environment depth.
     Unsupported,
     /// Not permitted (Quest: the spatial-data permission `com.oculus.permission.
@@ -253,7 +253,7 @@ impl<'a> EnvDepth<'a> {
             state.height,
             vk_images.len()
         );
-        Ok(Setup::Ready(me))
+        Ok(Setup::Ready(Box::new(me)))
     }
 
     /// Call once per frame between xrBeginFrame and xrEndFrame: the depth read back

@@ -500,7 +500,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // The headset's depth for calibration; a failure to set it up costs the depth,
     // never the session. Not permitted yet (the user may still be answering the
     // permission dialog): tried again every ENV_DEPTH_RETRY.
-    let setup_env_depth = |told: bool| -> (Option<env_depth::EnvDepth<'_>>, Option<Instant>) {
+    let setup_env_depth = |told: bool| -> (Option<Box<env_depth::EnvDepth<'_>>>, Option<Instant>) {
         match env_depth::EnvDepth::new(&instance, system, &session, &ctx, opts.env_depth_hz) {
             Ok(env_depth::Setup::Ready(d)) => (Some(d), None),
             Ok(env_depth::Setup::Unsupported) => {
