@@ -120,7 +120,7 @@ pub(super) struct EnvDepth<'a> {
 
 impl<'a> EnvDepth<'a> {
     /// Create and start the provider (see `Setup` for why it may not be).
-    pub fn new(
+    pub fn set_up(
         instance: &xr::Instance,
         system: xr::SystemId,
         session: &xr::Session<xr::Vulkan>,

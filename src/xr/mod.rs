@@ -501,7 +501,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // never the session. Not permitted yet (the user may still be answering the
     // permission dialog): tried again every ENV_DEPTH_RETRY.
     let setup_env_depth = |told: bool| -> (Option<Box<env_depth::EnvDepth<'_>>>, Option<Instant>) {
-        match env_depth::EnvDepth::new(&instance, system, &session, &ctx, opts.env_depth_hz) {
+        match env_depth::EnvDepth::set_up(&instance, system, &session, &ctx, opts.env_depth_hz) {
             Ok(env_depth::Setup::Ready(d)) => (Some(d), None),
             Ok(env_depth::Setup::Unsupported) => {
                 log::warn!("OpenXR: the system has no environment depth: calibration runs without headset depth");
