@@ -6,7 +6,10 @@
 //! renders with. Calibration starts as soon as the camera permissions are granted
 //! — during boundary setup, the worker's start-up burst — and refreshes from
 //! then on; the last model is stored in the app's internal storage and is the
-//! next start's first model. Wiring only: every decision it relies on is tested
+//! next start's first model. With the spatial-data permission the frame loop also
+//! reads the headset's depth (XR_META_environment_depth), which the camera thread
+//! reprojects into each frame it submits (`analysis::headset_depth`): metric depth
+//! for δ(Z) and pose + depth flow. Wiring only: every decision it relies on is tested
 //! on desktop; this file itself has not run on a headset (no device here).
 #![allow(unsafe_code)]
 
@@ -14,6 +17,7 @@ use crate::analysis::camera::{
     camera_pose, choose_camera, forward_camera, head_from_eyes, CameraSide, CaptureResult, ExposureCheck,
     FrameAssembler, PASSTHROUGH_SIZE,
 };
+use crate::analysis::headset_depth::HeadsetDepth;
 use crate::analysis::timing::{ClockMap, ClockSample, TimedPose, TimestampSource};
 use crate::android_camera::{CameraManager, PassthroughCamera};
 use crate::image::yuv::{Yuv420, YuvMatrix, YuvRange};
@@ -21,7 +25,7 @@ use crate::model::CameraModel;
 use crate::render::LayerSettings;
 use crate::scene::Scene;
 use crate::worker::{CalibrationTier, Calibrator, CalibratorConfig, ModelChannel, Providers, Worker};
-use crate::xr::{self, FrameRecord, XrOptions};
+use crate::xr::{self, EnvironmentDepth, FrameRecord, XrOptions};
 use android_activity::{AndroidApp, MainEvent, PollEvent};
 use glam::{Mat4, Quat, Vec3};
 use std::collections::VecDeque;
@@ -32,6 +36,13 @@ use std::time::{Duration, Instant};
 /// The permissions the camera path needs (manifest: uses-permission); asked for
 /// at start. Without them the app renders with the stored or default camera model.
 const CAMERA_PERMISSIONS: [&str; 2] = ["android.permission.CAMERA", "horizonos.permission.HEADSET_CAMERA"];
+/// Spatial data (XR_META_environment_depth): asked for with the camera's; without
+/// it calibration runs on image flow and blind DoF (the frame loop retries the
+/// depth provider, so a grant during the session takes effect).
+const SCENE_PERMISSION: &str = "com.oculus.permission.USE_SCENE";
+/// How often the frame loop reads the headset's depth back (Hz): the worker takes
+/// a frame every few hundred ms, and `headset_depth::MAX_AGE_NS` allows 250 ms.
+const ENV_DEPTH_HZ: f32 = 5.0;
 
 #[no_mangle]
 fn android_main(app: AndroidApp) {
@@ -52,19 +63,21 @@ fn asset(app: &AndroidApp, name: &str) -> Result<Vec<u8>, String> {
     Ok(bytes.to_vec())
 }
 
-/// Ask for the camera permissions (Activity.requestPermissions over JNI) and
-/// report which are granted now; the answer to the request comes later, through
+/// Ask for the camera and spatial-data permissions (Activity.requestPermissions
+/// over JNI) and report which are granted now; the answer to the request comes later, through
 /// the system dialog (NativeActivity has no onRequestPermissionsResult), so the
 /// camera path checks again when it starts.
-fn request_camera_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, bool)>, jni::errors::Error> {
+fn request_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, bool)>, jni::errors::Error> {
     use jni::objects::{JObject, JValue};
     use jni::{jni_sig, jni_str};
     with_activity(app, |env, activity| {
-        let granted = permission_states(env, activity)?;
-        if granted.iter().any(|(_, g)| !g) {
+        let all = [CAMERA_PERMISSIONS[0], CAMERA_PERMISSIONS[1], SCENE_PERMISSION];
+        let granted = permission_states(env, activity, &all)?;
+        let missing: Vec<&str> = granted.iter().filter(|(_, g)| !g).map(|(p, _)| *p).collect();
+        if !missing.is_empty() {
             let string_class = env.find_class(jni_str!("java/lang/String"))?;
-            let names = env.new_object_array(CAMERA_PERMISSIONS.len() as i32, &string_class, JObject::null())?;
-            for (i, p) in CAMERA_PERMISSIONS.iter().enumerate() {
+            let names = env.new_object_array(missing.len() as i32, &string_class, JObject::null())?;
+            for (i, p) in missing.iter().enumerate() {
                 let name = env.new_string(p)?;
                 names.set_element(env, i, &name)?;
             }
@@ -79,16 +92,17 @@ fn request_camera_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, boo
     })
 }
 
-/// Each camera permission and whether it is granted now
+/// Each of `permissions` and whether it is granted now
 /// (Activity.checkSelfPermission; PackageManager.PERMISSION_GRANTED = 0).
 fn permission_states(
     env: &mut jni::Env,
     activity: &jni::objects::JObject,
+    permissions: &[&'static str],
 ) -> Result<Vec<(&'static str, bool)>, jni::errors::Error> {
     use jni::objects::JValue;
     use jni::{jni_sig, jni_str};
     let mut states = vec![];
-    for p in CAMERA_PERMISSIONS {
+    for &p in permissions {
         let name = env.new_string(p)?;
         let state = env
             .call_method(
@@ -118,6 +132,8 @@ const STORED_MODEL: &str = "camera.json";
 struct LiveInputs {
     heads: Mutex<VecDeque<(i64, Quat, Vec3)>>,
     clocks: Mutex<(VecDeque<ClockSample>, bool)>,
+    /// The newest headset depth not yet taken by the camera thread.
+    depth: Mutex<Option<Arc<EnvironmentDepth>>>,
 }
 
 impl LiveInputs {
@@ -132,6 +148,9 @@ impl LiveInputs {
         }
         heads.push_back((r.predicted_display_time_ns, q, p));
         drop(heads);
+        if let Some(d) = &r.env_depth {
+            *self.depth.lock().unwrap_or_else(|e| e.into_inner()) = Some(d.clone());
+        }
         if let Some(c) = r.clock {
             let mut clocks = self.clocks.lock().unwrap_or_else(|e| e.into_inner());
             if clocks.0.len() == MAX_CLOCKS {
@@ -140,6 +159,10 @@ impl LiveInputs {
             clocks.0.push_back(c);
             clocks.1 = true;
         }
+    }
+
+    fn take_depth(&self) -> Option<Arc<EnvironmentDepth>> {
+        self.depth.lock().unwrap_or_else(|e| e.into_inner()).take()
     }
 
     fn take_heads(&self) -> Vec<(i64, Quat, Vec3)> {
@@ -178,7 +201,9 @@ fn with_activity<T>(
 
 /// Whether every camera permission is granted now.
 fn camera_permitted(app: &AndroidApp) -> Result<bool, jni::errors::Error> {
-    with_activity(app, |env, activity| Ok(permission_states(env, activity)?.iter().all(|(_, g)| *g)))
+    with_activity(app, |env, activity| {
+        Ok(permission_states(env, activity, &CAMERA_PERMISSIONS)?.iter().all(|(_, g)| *g))
+    })
 }
 
 /// Meta's vendor keys of camera `id` (position, source): `CameraCharacteristics`
@@ -290,6 +315,9 @@ fn calibrate_live(
     // otherwise (the HAL's default for camera YUV output).
     let mut assembler = FrameAssembler::new(YuvMatrix::Bt601, YuvRange::Full, choice.timestamp_source);
     let realtime = choice.timestamp_source == TimestampSource::Realtime;
+    // The headset's depth needs the camera's intrinsics and poses on the XR clock.
+    let mut headset = choice.intrinsics.filter(|_| realtime).map(HeadsetDepth::new);
+    let mut depth_note = Instant::now() - Duration::from_secs(60);
     let (w, l) = (worker.clone(), live.clone());
     let handler = Box::new(move |yuv: &Yuv420<'_>, timestamp_ns: i64, result: Option<CaptureResult>| {
         if let Some(map) = l.new_clock_map() {
@@ -307,12 +335,31 @@ fn calibrate_live(
         } else {
             vec![]
         };
+        if let Some(h) = headset.as_mut() {
+            h.push_poses(&poses);
+            if let Some(d) = l.take_depth() {
+                h.set_views(d.acquired_at_ns, d.views.clone());
+            }
+        }
         if !w.wants_frame() {
             w.submit_poses(&poses);
             return;
         }
         match assembler.assemble(yuv, timestamp_ns, result.as_ref()) {
-            Ok(a) => w.submit(a.frame, &poses),
+            Ok(mut a) => {
+                if let (Some(h), true) = (headset.as_ref(), a.on_xr_clock) {
+                    match h.depth_at((a.frame.t_s * 1e9).round() as i64) {
+                        Ok(d) => a.frame.depth = Some(d),
+                        // Why a frame goes without depth, at most every 10 s.
+                        Err(e) if depth_note.elapsed() >= Duration::from_secs(10) => {
+                            depth_note = Instant::now();
+                            log::info!("camera frame {} without headset depth: {e}", a.frame.index);
+                        }
+                        Err(_) => {}
+                    }
+                }
+                w.submit(a.frame, &poses)
+            }
             Err(e) => log::warn!("camera: {e}"),
         }
     });
@@ -401,11 +448,17 @@ fn store_model(app: &AndroidApp, models: &ModelChannel) {
 }
 
 fn run(app: &AndroidApp) -> Result<(), String> {
-    match request_camera_permissions(app) {
+    match request_permissions(app) {
         Ok(states) => {
             for (p, granted) in states {
-                if !granted {
-                    log::warn!("{p} not granted (asked): until it is, the camera model is the stored or default one");
+                match (granted, p == SCENE_PERMISSION) {
+                    (true, _) => {}
+                    (false, false) => log::warn!(
+                        "{p} not granted (asked): until it is, the camera model is the stored or default one"
+                    ),
+                    (false, true) => {
+                        log::warn!("{p} not granted (asked): until it is, calibration runs without headset depth")
+                    }
                 }
             }
         }

@@ -265,6 +265,7 @@ fn check(apk: &Path, unstripped: &Path) -> Result<()> {
         "launchable-activity: name='android.app.NativeActivity'",
         "uses-permission: name='android.permission.CAMERA'",
         "uses-permission: name='horizonos.permission.HEADSET_CAMERA'",
+        "uses-permission: name='com.oculus.permission.USE_SCENE'",
         "uses-permission: name='org.khronos.openxr.permission.OPENXR'",
         "sdkVersion:'29'",
     ] {
