@@ -136,18 +136,16 @@ impl<'a> EnvDepth<'a> {
             supports_environment_depth: xr::sys::FALSE,
             supports_hand_removal: xr::sys::FALSE,
         };
-        let mut sys = xr::sys::SystemProperties {
-            ty: xr::sys::SystemProperties::TYPE,
-            next: &mut props as *mut _ as *mut _,
-            // SAFETY: plain data (ids, arrays, flags); zero is a valid bit pattern.
-            ..unsafe { std::mem::zeroed() }
-        };
-        // SAFETY: a live instance and system; the chained struct belongs to the
-        // enabled extension; both live for the call.
-        let r = unsafe { (instance.fp().get_system_properties)(instance.as_raw(), system, &mut sys) };
-        if r.into_raw() < 0 {
-            return Err(call("xrGetSystemProperties (environment depth)")(r));
-        }
+        // SAFETY: `props` is the enabled extension's properties struct, typed, next
+        // null, alive for the call.
+        unsafe {
+            super::chained_system_properties(
+                instance,
+                system,
+                &mut props as *mut _ as *mut _,
+                "xrGetSystemProperties (environment depth)",
+            )
+        }?;
         if props.supports_environment_depth != xr::sys::TRUE {
             return Ok(Setup::Unsupported);
         }

@@ -364,6 +364,33 @@ fn sample_clocks(instance: &xr::Instance) -> Result<ClockSample, XrError> {
     })
 }
 
+/// xrGetSystemProperties with an extension's properties struct chained (openxr 0.22's
+/// `system_properties` chains nothing).
+///
+/// # Safety
+/// `next` points at a live, writable properties struct of an enabled extension,
+/// beginning with its `ty`/`next` header, whose own `next` is null.
+unsafe fn chained_system_properties(
+    instance: &xr::Instance,
+    system: xr::SystemId,
+    next: *mut std::ffi::c_void,
+    call_name: &'static str,
+) -> Result<(), XrError> {
+    let mut props = xr::sys::SystemProperties {
+        ty: xr::sys::SystemProperties::TYPE,
+        next,
+        // SAFETY: plain data (ids, arrays, flags); zero is a valid bit pattern.
+        ..unsafe { std::mem::zeroed() }
+    };
+    // SAFETY: a live instance and system; `props` and what it chains (the caller's
+    // contract) live for the call.
+    let r = unsafe { (instance.fp().get_system_properties)(instance.as_raw(), system, &mut props) };
+    if r.into_raw() < 0 {
+        return Err(call(call_name)(r));
+    }
+    Ok(())
+}
+
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
 pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
     offered

@@ -54,18 +54,16 @@ pub(super) fn space_warp_swapchains(
         recommended_motion_vector_image_rect_width: 0,
         recommended_motion_vector_image_rect_height: 0,
     };
-    let mut props = xr::sys::SystemProperties {
-        ty: xr::sys::SystemProperties::TYPE,
-        next: &mut sw as *mut _ as *mut _,
-        // SAFETY: plain data (ids, arrays, flags); zero is a valid bit pattern.
-        ..unsafe { std::mem::zeroed() }
-    };
-    // SAFETY: a live instance and system; `props` chains a struct the enabled
-    // extension defines, both live for the call.
-    let r = unsafe { (instance.fp().get_system_properties)(instance.as_raw(), system, &mut props) };
-    if r.into_raw() < 0 {
-        return Err(call("xrGetSystemProperties (space warp)")(r));
-    }
+    // SAFETY: `sw` is the enabled extension's properties struct, typed, next null,
+    // alive for the call.
+    unsafe {
+        super::chained_system_properties(
+            instance,
+            system,
+            &mut sw as *mut _ as *mut _,
+            "xrGetSystemProperties (space warp)",
+        )
+    }?;
     let size = (sw.recommended_motion_vector_image_rect_width, sw.recommended_motion_vector_image_rect_height);
     let (vf, df) = (VECTOR_FORMAT.as_raw() as u32, DEPTH_FORMAT.as_raw() as u32);
     if size.0 == 0

@@ -13,7 +13,6 @@
 use crate::session::{eye_fov, head_pose, Pose};
 use crate::{with_runtime, Runtime, SpaceKind};
 use ash::vk;
-use ash::vk::Handle as _;
 use openxr_sys as xr;
 use xr::Handle as _;
 
@@ -241,28 +240,8 @@ pub(crate) unsafe extern "system" fn enumerate_swapchain_images(
         let Some(chain) = rt.env_depth.as_ref().and_then(|d| d.swapchain.as_ref()) else {
             return xr::Result::ERROR_HANDLE_INVALID;
         };
-        if count.is_null() {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        }
-        // SAFETY: non-null count.
-        unsafe { *count = chain.images.len() as u32 };
-        if capacity == 0 {
-            return xr::Result::SUCCESS;
-        }
-        if (capacity as usize) < chain.images.len() {
-            return xr::Result::ERROR_SIZE_INSUFFICIENT;
-        }
-        let out = out as *mut xr::SwapchainImageVulkanKHR;
-        for (i, (image, _)) in chain.images.iter().enumerate() {
-            // SAFETY: an array of `capacity` Vulkan image structs (the session's API).
-            unsafe {
-                if (*out.add(i)).ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR {
-                    return xr::Result::ERROR_VALIDATION_FAILURE;
-                }
-                (*out.add(i)).image = image.as_raw();
-            }
-        }
-        xr::Result::SUCCESS
+        // SAFETY: the caller's two-call arguments.
+        unsafe { crate::vulkan::enumerate_images(&chain.images, capacity, count, out) }
     })
 }
 

@@ -586,30 +586,43 @@ pub(crate) unsafe extern "system" fn enumerate_swapchain_images(
 ) -> xr::Result {
     with_runtime(|rt| {
         let Some(sc) = rt.swapchains.get(&swapchain.into_raw()) else { return xr::Result::ERROR_HANDLE_INVALID };
-        if count.is_null() {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        }
-        // SAFETY: non-null count.
-        unsafe { *count = sc.images.len() as u32 };
-        if capacity == 0 {
-            return xr::Result::SUCCESS;
-        }
-        if (capacity as usize) < sc.images.len() {
-            return xr::Result::ERROR_SIZE_INSUFFICIENT;
-        }
-        let out = out as *mut xr::SwapchainImageVulkanKHR;
-        for (i, (image, _)) in sc.images.iter().enumerate() {
-            // SAFETY: the app passes an array of XrSwapchainImageVulkan2KHR (its
-            // graphics API's struct, spec 10.1) with `capacity` elements.
-            unsafe {
-                if (*out.add(i)).ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR {
-                    return xr::Result::ERROR_VALIDATION_FAILURE;
-                }
-                (*out.add(i)).image = image.as_raw();
-            }
-        }
-        xr::Result::SUCCESS
+        // SAFETY: the caller's two-call arguments.
+        unsafe { enumerate_images(&sc.images, capacity, count, out) }
     })
+}
+
+/// The two-call enumeration of Vulkan swapchain images (xrEnumerateSwapchainImages
+/// and XR_META_environment_depth's twin): the app passes an array of
+/// XrSwapchainImageVulkanKHR (its graphics API's struct, spec 10.1) with
+/// `capacity` elements, each typed.
+pub(crate) unsafe fn enumerate_images(
+    images: &[(vk::Image, vk::DeviceMemory)],
+    capacity: u32,
+    count: *mut u32,
+    out: *mut xr::SwapchainImageBaseHeader,
+) -> xr::Result {
+    if count.is_null() {
+        return xr::Result::ERROR_VALIDATION_FAILURE;
+    }
+    // SAFETY: non-null count.
+    unsafe { *count = images.len() as u32 };
+    if capacity == 0 {
+        return xr::Result::SUCCESS;
+    }
+    if (capacity as usize) < images.len() || out.is_null() {
+        return xr::Result::ERROR_SIZE_INSUFFICIENT;
+    }
+    let out = out as *mut xr::SwapchainImageVulkanKHR;
+    for (i, (image, _)) in images.iter().enumerate() {
+        // SAFETY: `capacity` ≥ images.len() elements at `out` (the caller's contract).
+        unsafe {
+            if (*out.add(i)).ty != xr::StructureType::SWAPCHAIN_IMAGE_VULKAN_KHR {
+                return xr::Result::ERROR_VALIDATION_FAILURE;
+            }
+            (*out.add(i)).image = image.as_raw();
+        }
+    }
+    xr::Result::SUCCESS
 }
 
 fn with_swapchain(swapchain: xr::Swapchain, f: impl FnOnce(&mut Swapchain) -> xr::Result) -> xr::Result {
