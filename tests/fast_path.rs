@@ -195,3 +195,36 @@ fn streak_zeros_claim_only_zeros_they_see() {
     println!("24 px/frame, MB + noise: {s:?}");
     assert!(s.identified && (s.lambda / 0.5 - 1.0).abs() <= 0.05, "24 px/frame MB + noise: {s:?}");
 }
+
+/// Blind noise's coarse levels on the calibration video (the Motorcycle photograph
+/// re-rendered along a head path, 320×240, Poisson–Gaussian noise ×1.5 after the
+/// camera change — `synth::sequence`): on frames 110–125 the flattest samples of
+/// levels 1–3 scatter by luma bin (texture in some bins, noise in others) and no
+/// line explains three of them. Keeping every bin then put levels 1–3 at up to 21×
+/// the truth (1 frame in 12 over 3× across the 150-frame video); such a level now
+/// counts as not identifiable and continues the finest measured one. Measured after
+/// the change: the worst level 1–3 std over all 150 frames is 1.86× the truth (the
+/// level-0 texture inflation this scene carries through), 1.05× on these frames.
+/// Bound: within 2× either way on every frame.
+#[test]
+fn coarse_noise_levels_never_run_away_on_the_calibration_video() {
+    use blind_augment::synth::sequence::{motorcycle, SequenceSpec};
+    let scene = motorcycle().expect("bundled scene");
+    let spec = SequenceSpec::motorcycle(&scene, 320, 240, 150, Some(2.5));
+    for i in 110..125 {
+        let f = spec.frame(&scene, i);
+        let noise = fit(&FitInputs::new(&f.image), &opts(true, false, false)).expect("valid").model.noise;
+        assert!(noise.present, "frame {i}: {}", noise.diagnostics.reason);
+        let truth = &f.truth.noise;
+        let at =
+            |n: &Noise, l: usize| n.levels[l].std(n.form, 1, 0.4f32.clamp(n.luminance_range[0], n.luminance_range[1]));
+        for l in 1..4 {
+            let ratio = at(&noise, l) / at(truth, l);
+            assert!(
+                (0.5..=2.0).contains(&ratio),
+                "frame {i} level {l}: {ratio:.2}× the truth; {}",
+                noise.diagnostics.reason
+            );
+        }
+    }
+}

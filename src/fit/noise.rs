@@ -974,8 +974,21 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     let (mut points, mut measured_levels, mut derived): (Vec<LevelPoints>, Vec<usize>, Vec<usize>) =
         (vec![], vec![], vec![]);
     let mut prev: Option<Vec<&BinMeasure>> = None;
+    let mut level0_untrimmed = false;
     for (l, bins) in measured.iter().enumerate() {
-        let bins = trim_textured(bins);
+        // A level whose bins no line explains (fewer than 3 agree) is texture, not
+        // noise: measured on the calibration video (Motorcycle, 320×240), keeping
+        // every bin there let levels 1–3 read 5–20× the truth on 1 frame in 5.
+        // Level 0 keeps its bins (its samples are the most numerous, and without
+        // it there is no map at all); the reason says it was not trimmed.
+        let (bins, untrimmed) = match trim_textured(bins) {
+            Some(b) => (b, false),
+            None if l == 0 => (bins.iter().collect(), true),
+            None => (vec![], true),
+        };
+        if untrimmed && l == 0 {
+            level0_untrimmed = true;
+        }
         let grows = prev.as_ref().is_some_and(|p| median_std_ratio(&bins, p).map_or(true, |r| r > MAX_LEVEL_STD_RATIO));
         // Level 0 may stand on fewer than 3 bins (a narrow-luma frame); coarser ones not.
         let too_few = bins.is_empty() || (l > 0 && bins.len() < 3);
@@ -1050,6 +1063,11 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
             used: used0.contains(&b.y),
         })
         .collect();
+    if noise.present && level0_untrimmed {
+        noise.diagnostics.reason +=
+            "; level 0's luma bins agree with no common line (3 or more within 1.2× in variance): \
+             all were used, texture may be counted as noise";
+    }
     if noise.present && !derived.is_empty() {
         noise.diagnostics.reason += &format!(
             "; levels {derived:?} not identifiable from this frame (texture exceeds the noise there, or too few flat luma bins): \
@@ -1187,10 +1205,11 @@ fn measure_level(
 /// best line's inliers are kept (ties: the lower line). A plain refit-and-trim loop
 /// fails on real frames whose dark half is all texture (the vtest lawn: its bins
 /// pull the first line up so far that the flat road's bins look like outliers).
-/// Fewer than 4 bins are kept as they are.
-fn trim_textured(bins: &[BinMeasure]) -> Vec<&BinMeasure> {
+/// Fewer than 4 bins are kept as they are; `None` when no line explains 3 of 4 or
+/// more (the bins scatter: texture, not a noise map).
+fn trim_textured(bins: &[BinMeasure]) -> Option<Vec<&BinMeasure>> {
     if bins.len() < 4 {
-        return bins.iter().collect();
+        return Some(bins.iter().collect());
     }
     let v: Vec<f64> = bins.iter().map(|b| b.var.iter().map(|&x| x as f64).sum::<f64>() / 3.0).collect();
     let y: Vec<f64> = bins.iter().map(|b| b.y as f64).collect();
@@ -1216,8 +1235,8 @@ fn trim_textured(bins: &[BinMeasure]) -> Vec<&BinMeasure> {
         }
     }
     match best {
-        Some((count, _, inl)) if count >= 3 => bins.iter().zip(inl).filter(|(_, k)| *k).map(|(b, _)| b).collect(),
-        _ => bins.iter().collect(),
+        Some((count, _, inl)) if count >= 3 => Some(bins.iter().zip(inl).filter(|(_, k)| *k).map(|(b, _)| b).collect()),
+        _ => None,
     }
 }
 
