@@ -21,6 +21,7 @@ fn main() {
         depth_units: DepthUnits::MetricM,
         flow: Some(&flow),
         reference_valid: None,
+        neighbour: None,
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
     for _ in 0..3 {

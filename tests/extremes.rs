@@ -23,6 +23,7 @@ fn all_refs<'a>(image: &'a Rgb, clean: &'a Rgb, depth: &'a Plane, flow: &'a Flow
         depth_units: DepthUnits::MetricM,
         flow: Some(flow),
         reference_valid: None,
+        neighbour: None,
     }
 }
 

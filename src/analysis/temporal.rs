@@ -255,7 +255,7 @@ pub fn pose_matrix(p: &super::timing::TimedPose) -> Mat4 {
 }
 
 /// A cheap, view-independent noise probe for change detection: the previous frame
-/// aligned into this one and subtracted; in the flattest third of the valid pixels
+/// aligned into this one (`align`) and subtracted; in the flattest third of the valid pixels
 /// (smallest gradient of this frame) the difference is the two frames' noise, so
 /// its robust spread (green channel: the mean absolute deviation from the median
 /// of the inner 90%, scaled to a Gaussian std, over √2) tracks the noise level; a
@@ -263,8 +263,7 @@ pub fn pose_matrix(p: &super::timing::TimedPose) -> Mat4 {
 /// an estimate of it — alignment low-passes the previous frame's noise and motion
 /// differs slightly between frames — but a quantity with a steady bias, whose
 /// steps are steps of the camera's noise.
-pub fn noise_probe(previous: &Analysed, current: &Analysed, k: &Intrinsics) -> Option<f32> {
-    let a = align(previous, current, k)?;
+pub fn noise_probe(a: &Aligned, current: &Analysed) -> Option<f32> {
     let img = &current.frame.image;
     let (w, h) = (img.width, img.height);
     let g = &img.channels[1];

@@ -64,6 +64,19 @@ pub struct FitInputs<'a> {
     /// occluded; the accurate noise and motion-blur fits skip samples whose
     /// footprint touches such pixels. `None`: valid everywhere.
     pub reference_valid: Option<&'a Plane>,
+    /// Another exposure of the same scene aligned to this frame (video: the previous
+    /// frame warped by pose and depth, `analysis::temporal::align`). Not a
+    /// reference: it carries its own noise. The blind noise fit uses it to cancel
+    /// texture (the two exposures share the scene, not the noise).
+    pub neighbour: Option<Neighbour<'a>>,
+}
+
+/// An aligned second exposure (`FitInputs::neighbour`) and where the alignment holds.
+#[derive(Clone, Copy, Debug)]
+pub struct Neighbour<'a> {
+    pub image: &'a Rgb,
+    /// > 0.5 where `image` shows this frame's scene point; elsewhere it is ignored.
+    pub valid: &'a Plane,
 }
 
 impl<'a> FitInputs<'a> {
@@ -79,6 +92,7 @@ impl<'a> FitInputs<'a> {
             depth_units: DepthUnits::MetricM,
             flow: None,
             reference_valid: None,
+            neighbour: None,
         }
     }
 }
@@ -322,7 +336,7 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     }
     let (noise, data) = match (tier, inp.denoised) {
         (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, inp.reference_valid, opts),
-        _ => noise::fit_fast(inp.image),
+        _ => noise::fit_fast(inp.image, inp.neighbour.as_ref()),
     };
     (noise, Some(data))
 }

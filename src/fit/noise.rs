@@ -142,6 +142,37 @@ fn local_mean_sq(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
     window_sum(p, x, y, w, |v| v * v)
 }
 
+/// Window mean of the product of two planes of one size.
+#[inline]
+fn local_mean_prod(p: &Plane, q: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
+    let mut acc = 0.0;
+    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
+        for (j, row) in w.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for ((wt, &a), &b) in row.iter().zip(&p.data[start..start + 9]).zip(&q.data[start..start + 9]) {
+                acc += wt * a * b;
+            }
+        }
+        return acc;
+    }
+    for (j, row) in w.iter().enumerate() {
+        let yy = y as isize + j as isize - 4;
+        for (i, wt) in row.iter().enumerate() {
+            let xx = x as isize + i as isize - 4;
+            acc += wt * p.get_clamped(xx, yy) * q.get_clamped(xx, yy);
+        }
+    }
+    acc
+}
+
+/// Mean and its standard error (0 for fewer than 2 values).
+fn mean_se(v: &[f32]) -> (f32, f32) {
+    let n = v.len().max(1) as f64;
+    let mean = v.iter().map(|&x| x as f64).sum::<f64>() / n;
+    let var = v.iter().map(|&x| (x as f64 - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean as f32, if v.len() < 2 { 0.0 } else { (var / n).sqrt() as f32 })
+}
+
 /// (window mean, window mean of squares) in one pass over the window.
 #[inline]
 fn local_moments(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> (f32, f32) {
@@ -775,6 +806,55 @@ fn white_noise_median_to_mean(level: usize) -> f32 {
     })[level.min(NOISE_LEVELS - 1)]
 }
 
+/// Share of white noise's level-`l` band variance that survives a Catmull–Rom
+/// bicubic resampling at a sub-pixel offset (what `analysis::temporal::align` does
+/// to the neighbour frame), averaged over offsets on a 4×4 grid of phases: the
+/// bicubic kernel low-passes, most at level 0. Measured once on a 256² field.
+fn bicubic_noise_transmission(level: usize) -> f32 {
+    static K: std::sync::OnceLock<[f32; NOISE_LEVELS]> = std::sync::OnceLock::new();
+    K.get_or_init(|| {
+        let n = 256usize;
+        let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, 7, 0x5eed)).collect();
+        let field = Plane::from_vec(n, n, data);
+        let var_of = |p: &Plane| -> [f64; NOISE_LEVELS] {
+            let pyr = laplacian_pyramid(p, NOISE_LEVELS);
+            std::array::from_fn(|l| {
+                // The inner half: away from the clamped borders.
+                let b = &pyr.bands[l];
+                let (x0, y0) = (b.width / 4, b.height / 4);
+                let mut acc = 0.0f64;
+                let mut m = 0usize;
+                for y in y0..b.height - y0 {
+                    for x in x0..b.width - x0 {
+                        acc += (b.get(x, y) as f64).powi(2);
+                        m += 1;
+                    }
+                }
+                acc / m.max(1) as f64
+            })
+        };
+        let base = var_of(&field);
+        let mut sum = [0.0f64; NOISE_LEVELS];
+        let phases = [0.125f32, 0.375, 0.625, 0.875];
+        for &u in &phases {
+            for &v in &phases {
+                let mut shifted = Plane::new(n, n, 0.0);
+                for y in 0..n {
+                    for x in 0..n {
+                        shifted.data[y * n + x] =
+                            crate::synth::sequence::sample_bicubic(&field, x as f32 + u, y as f32 + v);
+                    }
+                }
+                let s = var_of(&shifted);
+                for l in 0..NOISE_LEVELS {
+                    sum[l] += s[l] / base[l] / (phases.len() * phases.len()) as f64;
+                }
+            }
+        }
+        sum.map(|k| k as f32)
+    })[level.min(NOISE_LEVELS - 1)]
+}
+
 /// One luma bin's blind measurement at one level.
 struct BinMeasure {
     y: f32,
@@ -887,9 +967,32 @@ const BLOCKING_RATIO: f32 = 1.15;
 /// judged flat or textured by the bright parts' standard. Bins more than 30% above
 /// their level's fitted line are texture and dropped (one-sided). The low-pass is
 /// not identifiable from one frame (it is the image itself) and is left out.
-pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
+pub fn fit_fast(image: &Rgb, neighbour: Option<&super::Neighbour>) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let mut st = super::Stages::start();
+    // With an aligned neighbour (another exposure of the same scene): the band-pass
+    // levels of D = I − I' per channel (0 where the alignment does not hold; samples
+    // whose footprint holds more than `MAX_INVALID_FRACTION` of such pixels are
+    // skipped), so that each flat sample reads B(b·b_D) = B(b²) − B(b·b'): the two
+    // exposures' noise is independent, their texture the same, so the product with
+    // the neighbour's band cancels the texture and keeps the noise (see `fit_fast`).
+    let (fw, fh) = (image.width, image.height);
+    let neighbour = neighbour.filter(|n| (n.image.width, n.image.height) == (fw, fh));
+    let cross: Option<Vec<Vec<Plane>>> = neighbour.map(|n| {
+        (0..3)
+            .into_par_iter()
+            .map(|c| {
+                let d: Vec<f32> = image.channels[c]
+                    .iter()
+                    .zip(&n.image.channels[c])
+                    .zip(&n.valid.data)
+                    .map(|((a, b), v)| if *v > 0.5 { a - b } else { 0.0 })
+                    .collect();
+                channel_pyramids(&d, fw, fh, NOISE_LEVELS).1
+            })
+            .collect()
+    });
+    st.lap("blur.neighbour");
     // One Gaussian pyramid per channel, levels 0..=L+2, and its band-pass levels
     // 0..L+2. Everything the fit reads of the luma follows by linearity (luma is a
     // fixed weighted sum of the channels, and reduce/expand are linear), so no luma
@@ -897,31 +1000,8 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     // level l (I's own luma carries the noise) is expand(G_Y[l+1]) = Σ w_c (G_c[l] −
     // band_c[l]); level l's structure measure is the luma band l+2 = Σ w_c band_c[l+2].
     // Level 0 is the frame's own channel (borrowed, not copied).
-    let (fw, fh) = (image.width, image.height);
-    let pyr: Vec<(Vec<Plane>, Vec<Plane>)> = (0..3)
-        .into_par_iter()
-        .map(|c| {
-            let g = gaussian_pyramid(&crate::image::reduce_slice(&image.channels[c], fw, fh), NOISE_LEVELS + 1);
-            let fine = |l: usize| -> (&[f32], usize, usize) {
-                if l == 0 {
-                    (&image.channels[c], fw, fh)
-                } else {
-                    (&g[l - 1].data, g[l - 1].width, g[l - 1].height)
-                }
-            };
-            let bands = (0..NOISE_LEVELS + 2)
-                .map(|l| {
-                    let (data, w, h) = fine(l);
-                    let mut b = crate::image::expand(&g[l], w, h);
-                    for (v, gv) in b.data.iter_mut().zip(data) {
-                        *v = gv - *v;
-                    }
-                    b
-                })
-                .collect();
-            (g, bands)
-        })
-        .collect();
+    let pyr: Vec<(Vec<Plane>, Vec<Plane>)> =
+        (0..3).into_par_iter().map(|c| channel_pyramids(&image.channels[c], fw, fh, NOISE_LEVELS + 2)).collect();
     st.lap("blur.pyramids");
     let luma_of = |c: [&[f32]; 3], minus: Option<[&Plane; 3]>, like: &Plane| -> Plane {
         let w = crate::image::LUMA_WEIGHTS;
@@ -954,10 +1034,15 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     let limits = clip_limits(image);
     st.lap("search.clipping");
     let clip: [ClipMask; 3] = std::array::from_fn(|c| clip_mask_of(image, &limits, 8, None, &[c]));
+    // Where the neighbour's alignment fails: one table for all channels.
+    let misaligned = neighbour.map(|n| clip_mask_of(image, &limits, 8, Some(n.valid), &[]));
     st.lap("search.clipping");
     let measured: Vec<Vec<BinMeasure>> = (0..NOISE_LEVELS)
         .into_par_iter()
-        .map(|l| measure_level(l, &bands, &smooth[l], &structure[l], &clip, stride0))
+        .map(|l| {
+            let cross = cross.as_deref().zip(misaligned.as_ref());
+            measure_level(l, &bands, cross, &smooth[l], &structure[l], &clip, stride0)
+        })
         .collect();
     st.lap("search.samples");
     // Levels with fewer than 3 usable bins (tiny or fully textured frames) cannot be
@@ -1084,6 +1169,25 @@ pub fn fit_fast(image: &Rgb) -> (Noise, NoisePlotData) {
     (noise, plot_data(&points))
 }
 
+/// One channel's Gaussian pyramid G[1..=levels] (`.0[l]` is G[l + 1]; G[0] is
+/// `data` itself, not copied) and its band-pass levels 0..levels, by the clamp-free
+/// interior `reduce`/`expand`.
+fn channel_pyramids(data: &[f32], w: usize, h: usize, levels: usize) -> (Vec<Plane>, Vec<Plane>) {
+    let g = gaussian_pyramid(&crate::image::reduce_slice(data, w, h), levels);
+    let bands = (0..levels)
+        .map(|l| {
+            let (fine, fw, fh) =
+                if l == 0 { (data, w, h) } else { (&g[l - 1].data[..], g[l - 1].width, g[l - 1].height) };
+            let mut b = crate::image::expand(&g[l], fw, fh);
+            for (v, gv) in b.data.iter_mut().zip(fine) {
+                *v = gv - *v;
+            }
+            b
+        })
+        .collect();
+    (g, bands)
+}
+
 /// The lowest and highest of the lumas `y` (`None` when empty).
 fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
     let lo = y.iter().cloned().reduce(f32::min)?;
@@ -1122,6 +1226,7 @@ fn level_stride(stride0: f32, l: usize) -> usize {
 fn measure_level(
     l: usize,
     bands: &[Vec<Plane>],
+    cross: Option<(&[Vec<Plane>], &ClipMask)>,
     luma: &Plane,
     structure: &Plane,
     clip: &[ClipMask; 3],
@@ -1146,7 +1251,7 @@ fn measure_level(
     for y in grid(h, stride) {
         for x in grid(w, stride) {
             let ok = (0..3).fold(0u8, |m, c| m | ((!clip[c].touches(x * scale, y * scale, radius, l >= 2) as u8) << c));
-            if ok == 0 {
+            if ok == 0 || cross.is_some_and(|(_, bad)| bad.touches(x * scale, y * scale, radius, l >= 2)) {
                 continue;
             }
             let s = energy.get((x / 4).min(energy.width - 1), (y / 4).min(energy.height - 1));
@@ -1180,10 +1285,29 @@ fn measure_level(
         let mut rel_se = 0.0f32;
         for c in 0..3 {
             let n = flats[c].len() as f32;
-            let mut v: Vec<f32> = flats[c].iter().map(|p| local_mean_sq(&bands[c][l], p.0, p.1, &win)).collect();
+            // With a neighbour — level 0: B(b·b_D), first order in a texture mismatch
+            // between the exposures but free of the alignment's low-pass; coarser
+            // levels: B(b_D²) / (1 + κ_l), the texture mismatch entering squared, κ_l
+            // the alignment's noise transmission (≈ 1 there). Measured on the
+            // calibration video (BENCHMARKS.md): the product at every level reads
+            // levels 1–3 2–5× high while the head turns (the exposures' motion blur
+            // differs, and texture dwarfs the noise there).
+            if let Some((cross, _)) = cross.filter(|_| l == 0) {
+                let v: Vec<f32> =
+                    flats[c].iter().map(|p| local_mean_prod(&bands[c][l], &cross[c][l], p.0, p.1, &win)).collect();
+                let (mean, se) = mean_se(&v);
+                var[c] = mean;
+                rel_se += if mean > 0.0 { se / (2.0 * mean) / 3.0 } else { 1.0 / 3.0 };
+                continue;
+            }
+            let (plane, gain) = match cross {
+                Some((d, _)) => (&d[c][l], 1.0 + bicubic_noise_transmission(l)),
+                None => (&bands[c][l], 1.0),
+            };
+            let mut v: Vec<f32> = flats[c].iter().map(|p| local_mean_sq(plane, p.0, p.1, &win)).collect();
             let med = percentile(&mut v, 0.5);
             let iqr = percentile(&mut v, 0.75) - percentile(&mut v, 0.25);
-            var[c] = med / m2m;
+            var[c] = med / m2m / gain;
             // SE of a median: 1.2533·sd/√n with sd from the IQR; half of it in std terms.
             rel_se += if med > 0.0 { 1.2533 * iqr / 1.349 / n.sqrt() / (2.0 * med) / 3.0 } else { 1.0 / 3.0 };
         }

@@ -114,6 +114,7 @@ fn fit_one(image: &Rgb, reference: &Rgb, effects: Effects, depth: &Plane, flow: 
         depth_units: DepthUnits::MetricM,
         flow: Some(flow),
         reference_valid: None,
+        neighbour: None,
     };
     Ok(fit(&inputs, &FitOptions { effects, ..Default::default() })?)
 }
@@ -163,6 +164,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         depth_units: DepthUnits::MetricM,
         flow: Some(&flow),
         reference_valid: None,
+        neighbour: None,
     };
     let fast_out = fit(&fast_inputs, &FitOptions::default())?;
 

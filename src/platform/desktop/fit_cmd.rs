@@ -164,6 +164,7 @@ fn run_one(inp: &mut Loaded, nets: &mut Networks, opts: &FitOptions) -> Result<F
         depth_units: inp.depth_units,
         flow: inp.flow.as_ref(),
         reference_valid: valid.as_ref(),
+        neighbour: None,
     };
     Ok(fit(&fi, opts)?)
 }

@@ -90,12 +90,9 @@ impl Calibrator {
     /// this frame cannot be aligned: the two kinds are not mixed), else the blind
     /// noise estimator.
     pub(super) fn noise_probe(&mut self, current: &Analysed) -> Option<f32> {
-        if let Some(k) = self.cfg.intrinsics.as_ref() {
-            let prev = self.window.back()?;
-            if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
-                return None;
-            }
-            return crate::analysis::temporal::noise_probe(prev, current, k);
+        if self.cfg.intrinsics.is_some() {
+            let aligned = self.aligned_previous(current)?;
+            return crate::analysis::temporal::noise_probe(&aligned, current);
         }
         let opts = FitOptions {
             tier: Some(fit::Tier::Fast),
@@ -105,6 +102,28 @@ impl Calibrator {
         fit::fit(&FitInputs::new(&current.frame.image), &opts)
             .ok()
             .and_then(|o| crate::model::compare::noise_headline(&o.model.noise))
+    }
+
+    /// The previous frame aligned into `current` by pose and depth (None without
+    /// intrinsics, poses or depth, or when the previous frame is more than 2.5 frame
+    /// intervals old), made once per frame: the noise probe and the blind noise fit
+    /// both read it.
+    pub(super) fn aligned_previous(&mut self, current: &Analysed) -> Option<Arc<crate::analysis::temporal::Aligned>> {
+        let index = current.frame.index;
+        if let Some((i, a)) = &self.aligned_previous {
+            if *i == index {
+                return a.clone();
+            }
+        }
+        let aligned = self.cfg.intrinsics.as_ref().and_then(|k| {
+            let prev = self.window.back()?;
+            if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
+                return None;
+            }
+            crate::analysis::temporal::align(prev, current, k).map(Arc::new)
+        });
+        self.aligned_previous = Some((index, aligned.clone()));
+        aligned
     }
 
     /// Two consecutive confident estimates of λ by the same method, both off the

@@ -312,6 +312,9 @@ pub struct Calibrator {
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
+    /// The previous frame aligned into the frame of this index (`change::
+    /// aligned_previous`): made once, read by the noise probe and the blind noise fit.
+    aligned_previous: Option<(u64, Option<Arc<crate::analysis::temporal::Aligned>>)>,
 }
 
 /// Head motion no tracker reports for a real head (m/s, rad/s): a tracking loss.
@@ -353,6 +356,7 @@ impl Calibrator {
             after_change: false,
             presence: Default::default(),
             published: None,
+            aligned_previous: None,
         })
     }
 
@@ -606,6 +610,11 @@ impl Calibrator {
             motion_blur: due(1, self.cfg.effects.motion_blur),
             depth_of_field: due(2, self.cfg.effects.depth_of_field),
         };
+        // The blind noise fit reads texture off the previous exposure aligned by pose
+        // and depth (`fit::Neighbour`): on the calibration video its error falls from
+        // ~20% to ~5% (BENCHMARKS.md).
+        let neighbour =
+            if fx.noise && self.providers.denoise.is_none() { self.aligned_previous(current) } else { None };
         let ctx = FrameContext {
             current,
             window: held,
@@ -642,10 +651,18 @@ impl Calibrator {
         };
         let depth = current.depth.as_ref();
         let image = &current.frame.image;
+        let neighbour_valid = neighbour.as_ref().map(|a| {
+            let (w, h) = (image.width, image.height);
+            crate::image::Plane::from_vec(w, h, a.valid.iter().map(|&v| if v { 1.0 } else { 0.0 }).collect())
+        });
         let base = FitInputs {
             depth: depth.map(|d| &d.depth),
             depth_units: depth.map_or(crate::model::DepthUnits::MetricM, |d| d.units),
             flow: flow.as_ref(),
+            neighbour: neighbour
+                .as_ref()
+                .zip(neighbour_valid.as_ref())
+                .map(|(a, v)| fit::Neighbour { image: &a.image, valid: v }),
             ..FitInputs::new(image)
         };
         let only = |n, m, d| FitOptions {
