@@ -41,7 +41,7 @@ fn main() {
         for e in &ev {
             match e {
                 Event::Published(u) => println!(
-                    "{i:3} t={:.2} λ={:?}({:.3}) noise_err={:?} dof_rmse={:?} {:?} {:.0} ms  [mb {}] [n {}]",
+                    "{i:3} t={:.2} λ={:?}({:.3}) noise_err={:?} dof_rmse={:?} {:?} {:.0} ms  [mb {}] [n {}] [{}]",
                     u.t_s,
                     u.model.motion_blur.exposure.map(|x| (x * 1000.0).round() / 1000.0),
                     exposure_error(&u.model, &truth),
@@ -50,7 +50,8 @@ fn main() {
                     u.reason,
                     dt * 1e3,
                     u.model.motion_blur.diagnostics.method,
-                    u.model.noise.diagnostics.method
+                    u.model.noise.diagnostics.method,
+                    u.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect::<Vec<_>>().join(", ")
                 ),
                 Event::Degraded { reason, .. } => println!("    degraded: {reason}"),
                 other => println!("    {other:?}"),

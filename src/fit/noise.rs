@@ -841,8 +841,7 @@ fn bicubic_noise_transmission(level: usize) -> f32 {
                 let mut shifted = Plane::new(n, n, 0.0);
                 for y in 0..n {
                     for x in 0..n {
-                        shifted.data[y * n + x] =
-                            crate::synth::sequence::sample_bicubic(&field, x as f32 + u, y as f32 + v);
+                        shifted.data[y * n + x] = crate::image::sample_bicubic(&field, x as f32 + u, y as f32 + v);
                     }
                 }
                 let s = var_of(&shifted);

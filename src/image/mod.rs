@@ -1,5 +1,5 @@
 //! CPU image operations shared by `synth` and `fit`: planar float images, luma,
-//! Burt–Adelson pyramids, discrete-Gaussian blurs and bilinear sampling; camera
+//! Burt–Adelson pyramids, discrete-Gaussian blurs, bilinear and bicubic sampling; camera
 //! YUV_420_888 frames to RGB (`yuv`).
 //!
 //! Conventions: values are linear floats (nominally [0,1] for colour), row-major,
@@ -8,10 +8,12 @@
 
 mod blur;
 mod pyramid;
+mod sample;
 pub mod yuv;
 
 pub use blur::{blur_separable, discrete_gaussian_kernel};
 pub use pyramid::{expand, gaussian_pyramid, laplacian_pyramid, reduce, reduce_slice, LaplacianPyramid};
+pub use sample::{bicubic_interior, cubic_weights, sample_bicubic, sample_bicubic_rgb_interior};
 
 /// One channel of floats.
 #[derive(Clone, Debug, PartialEq)]

@@ -12,7 +12,7 @@
 //! 4×4 projections, independently of `analysis::flow`.
 
 use crate::analysis::reproject::Intrinsics;
-use crate::image::{Flow, Plane, Rgb};
+use crate::image::{sample_bicubic, Flow, Plane, Rgb};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
 use glam::{Mat4, Quat, Vec3, Vec4};
 
@@ -168,29 +168,6 @@ fn projection(k: &Intrinsics) -> Mat4 {
 fn project(m: &Mat4, p: Vec3) -> Option<(f32, f32, f32)> {
     let q = *m * p.extend(1.0);
     (q.w > 1e-3).then(|| (q.x / q.w, q.y / q.w, q.w))
-}
-
-/// Catmull–Rom (Keys, a = −½) weights for a fractional offset.
-fn cubic_weights(t: f32) -> [f32; 4] {
-    let (t2, t3) = (t * t, t * t * t);
-    [-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0, -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2]
-}
-
-/// Bicubic (Catmull–Rom) sample, clamp-to-edge: sharper than bilinear, so the
-/// re-rendered frames keep the photograph's fine texture.
-pub fn sample_bicubic(p: &Plane, x: f32, y: f32) -> f32 {
-    let (fx, fy) = (x.floor(), y.floor());
-    let (wx, wy) = (cubic_weights(x - fx), cubic_weights(y - fy));
-    let (ix, iy) = (fx as isize, fy as isize);
-    let mut acc = 0.0;
-    for (j, wyj) in wy.iter().enumerate() {
-        let mut row = 0.0;
-        for (i, wxi) in wx.iter().enumerate() {
-            row += wxi * p.get_clamped(ix + i as isize - 1, iy + j as isize - 1);
-        }
-        acc += wyj * row;
-    }
-    acc
 }
 
 /// The scene seen by a camera `view` at `world_from_camera`: colour and z-depth.

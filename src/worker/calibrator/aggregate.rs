@@ -29,6 +29,7 @@ impl Presence {
 impl Calibrator {
     /// Aggregate the window's estimates, apply hysteresis, validate.
     pub(super) fn aggregate(&mut self, frame: u64, t_s: f64, reason: UpdateReason, started: Instant) -> Option<Update> {
+        let t_agg = Instant::now();
         let from = t_s - self.cfg.window_s;
         while self.estimates.front().is_some_and(|e| e.t_s < from) {
             self.estimates.pop_front();
@@ -105,6 +106,7 @@ impl Calibrator {
         }
         agg.validate().ok()?;
         self.published = Some(agg.clone());
+        self.stages.add("aggregation", t_agg);
         Some(Update {
             frame,
             t_s,
@@ -112,6 +114,7 @@ impl Calibrator {
             reason,
             compute_s: started.elapsed().as_secs_f64(),
             frames_used: self.estimates.iter().map(|e| e.frame).collect(),
+            stages_s: self.stages.0.clone(),
         })
     }
 }

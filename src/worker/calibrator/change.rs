@@ -120,7 +120,10 @@ impl Calibrator {
             if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
                 return None;
             }
-            crate::analysis::temporal::align(prev, current, k).map(Arc::new)
+            let t0 = Instant::now();
+            let aligned = crate::analysis::temporal::align(prev, current, k).map(Arc::new);
+            self.stages.add("alignment", t0);
+            aligned
         });
         self.aligned_previous = Some((index, aligned.clone()));
         aligned
