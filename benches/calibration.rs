@@ -34,12 +34,14 @@ struct Published {
     model: CameraModel,
     truth: CameraModel,
     compute_s: f64,
+    stages_s: Vec<(&'static str, f64)>,
 }
 
 struct Run {
     published: Vec<Published>,
     changes: Vec<f64>,
     frame_s: Vec<f64>,
+    fps: f64,
 }
 
 fn pose(spec: &SequenceSpec, i: usize) -> TimedPose {
@@ -52,7 +54,7 @@ fn run(tier: CalibrationTier, spec: &SequenceSpec, frames: &[SequenceFrame]) -> 
     let cfg = CalibratorConfig::new(tier, 1.0 / spec.fps as f64, Some(spec.view));
     let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
-    let mut r = Run { published: vec![], changes: vec![], frame_s: vec![] };
+    let mut r = Run { published: vec![], changes: vec![], frame_s: vec![], fps: spec.fps as f64 };
     for f in frames {
         cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
         let frame = Frame {
@@ -72,6 +74,7 @@ fn run(tier: CalibrationTier, spec: &SequenceSpec, frames: &[SequenceFrame]) -> 
                     model: u.model,
                     truth: f.truth.clone(),
                     compute_s: u.compute_s,
+                    stages_s: u.stages_s,
                 }),
                 Event::ChangeDetected { t_s, .. } => r.changes.push(t_s),
                 _ => {}
@@ -127,6 +130,31 @@ fn fmt_opt(v: Option<f64>, scale: f64, digits: usize, unit: &str) -> String {
     v.map_or("—".into(), |x| format!("{:.*}{unit}", digits, x * scale))
 }
 
+/// One row of the stage table: mean time per steady update per stage, and the
+/// worker's compute per second of video over the steady frames.
+fn stage_line(tier: CalibrationTier, r: &Run, steady_frames: usize) -> String {
+    let steady: Vec<&Published> = r.published.iter().filter(|p| p.t_s >= 1.0).collect();
+    let mut names: Vec<&'static str> = vec![];
+    for p in &steady {
+        for (k, _) in &p.stages_s {
+            if !names.contains(k) {
+                names.push(k);
+            }
+        }
+    }
+    let n = steady.len().max(1) as f64;
+    let mean =
+        |k: &str| steady.iter().flat_map(|p| &p.stages_s).filter(|(n, _)| *n == k).map(|(_, s)| s).sum::<f64>() / n;
+    let total: f64 = names.iter().map(|k| mean(k)).sum();
+    let cells: Vec<String> = names
+        .iter()
+        .map(|k| format!("{k} {:.1} ({:.0}%)", mean(k) * 1e3, 100.0 * mean(k) / total.max(1e-12)))
+        .collect();
+    let steady_s: f64 = r.frame_s.iter().rev().take(steady_frames).sum();
+    let video_s = steady_frames as f64 / r.fps;
+    format!("| {} | {} | {:.2} |", tier.name(), cells.join(", "), steady_s / video_s)
+}
+
 fn frames(scene: &Scene, spec: &SequenceSpec, n: usize) -> Vec<SequenceFrame> {
     (0..n).map(|i| spec.frame(scene, i)).collect()
 }
@@ -157,6 +185,7 @@ fn main() {
     println!("| tier | update at 1280×960, 1 thread: burst (median) / steady (median, p95) | frame without update | λ error before / after change | noise error before / after | δ RMSE (px) | converged after start (share staying) | change detected after | converged after change (share staying) |");
     println!("|---|---|---|---|---|---|---|---|---|");
     let mut points = vec![];
+    let mut stage_lines = vec![];
     for tier in TIERS {
         let r = run(tier, &small, &small_frames);
         let big_run = one.install(|| run(tier, &big, &big_frames));
@@ -205,6 +234,13 @@ fn main() {
             100.0 * stay1,
         );
         points.push((tier, upd_med * 1e3, lb.unwrap_or(f64::NAN), nb.unwrap_or(f64::NAN), conv1));
+        stage_lines.push(stage_line(tier, &big_run, steady_frames));
+    }
+    println!("\nWhere the steady updates' time goes at 1280×960, one thread (mean per update over the updates after the burst; each stage's share of the sum), and the worker's load: all its compute over those frames per second of video (1.0 = one core busy):\n");
+    println!("| tier | stages: mean ms per update (share) | load (cores) |");
+    println!("|---|---|---|");
+    for l in stage_lines {
+        println!("{l}");
     }
     let colours = [RGBColor(220, 50, 47), RGBColor(230, 150, 0), RGBColor(38, 110, 210)];
     let panel = |title: &str, y: &str, get: &dyn Fn(&Point) -> f64| Panel {
@@ -248,7 +284,15 @@ fn noise_references(spec: &SequenceSpec, frames: &[SequenceFrame], pool: &rayon:
     let mut net = OnnxDenoiser::new(OnnxModel::load(Role::Denoise, &path, None).expect("shipped model"));
     let only_noise = Effects { noise: true, motion_blur: false, depth_of_field: false };
     let (mut t_net, mut t_fit, mut t_blind, mut e_net, mut e_blind) = (vec![], vec![], vec![], vec![], vec![]);
-    for f in frames.iter().step_by(10).take(5) {
+    let (mut t_align, mut t_nb, mut e_nb) = (vec![], vec![], vec![]);
+    let with_pose = |f: &SequenceFrame| Analysed {
+        frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
+        depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
+        world_from_camera: Some(f.world_from_camera),
+        sparse_flow: None,
+    };
+    // Frames 1, 11, …: each has a previous frame for the fast tier's neighbour.
+    for f in frames.iter().skip(1).step_by(10).take(5) {
         let a = Analysed {
             frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
             depth: None,
@@ -277,6 +321,23 @@ fn noise_references(spec: &SequenceSpec, frames: &[SequenceFrame], pool: &rayon:
             .expect("fit");
             t_blind.push(t0.elapsed().as_secs_f64());
             e_blind.push(noise_relative_error(&b.model.noise, &spec.truth.noise).map_or(f64::NAN, |e| e as f64));
+            // The fast tier's path: the previous frame aligned by pose and depth.
+            let (prev, cur) = (with_pose(&frames[f.index - 1]), with_pose(f));
+            let t0 = Instant::now();
+            let al = blind_augment::analysis::temporal::align(&prev, &cur, &spec.view).expect("poses and depth");
+            t_align.push(t0.elapsed().as_secs_f64());
+            let valid = blind_augment::image::Plane::from_vec(
+                al.image.width,
+                al.image.height,
+                al.valid.iter().map(|&v| f32::from(u8::from(v))).collect(),
+            );
+            let mut inp = FitInputs::new(&f.image);
+            inp.neighbour = Some(blind_augment::fit::Neighbour { image: &al.image, valid: &valid });
+            let t0 = Instant::now();
+            let b = fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: only_noise, ..Default::default() })
+                .expect("fit");
+            t_nb.push(t0.elapsed().as_secs_f64());
+            e_nb.push(noise_relative_error(&b.model.noise, &spec.truth.noise).map_or(f64::NAN, |e| e as f64));
         });
     }
     let med = |v: &[f64]| median(v.to_vec()).unwrap_or(f64::NAN);
@@ -293,4 +354,10 @@ fn noise_references(spec: &SequenceSpec, frames: &[SequenceFrame], pool: &rayon:
         med(&e_net) * 100.0
     );
     println!("| none (blind fit of the frame) | — | {:.0} | {:.1}% |", med(&t_blind) * 1e3, med(&e_blind) * 100.0);
+    println!(
+        "| the previous frame aligned by pose + depth (blind fit with `FitInputs::neighbour`: the fast tier) | {:.0} | {:.0} | {:.1}% |",
+        med(&t_align) * 1e3,
+        med(&t_nb) * 1e3,
+        med(&e_nb) * 100.0
+    );
 }

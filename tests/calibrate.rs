@@ -48,13 +48,21 @@ fn frame(f: &blind_augment::synth::sequence::SequenceFrame) -> Frame {
     }
 }
 
+/// Every published update's time and stage times (`Update::stages_s`).
+type StageLog = Vec<(f64, Vec<(&'static str, f64)>)>;
+
 /// Run a tier over the sequence; every published (t, model, truth) and the changes.
 fn run(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>) {
+    let (published, changes, _) = run_with_stages(tier);
+    (published, changes)
+}
+
+fn run_with_stages(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>, StageLog) {
     let (spec, frames) = sequence();
     let cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
     let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("valid config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
-    let (mut out, mut changes) = (vec![], vec![]);
+    let (mut out, mut changes, mut stages) = (vec![], vec![], vec![]);
     for f in frames {
         // Poses lead the camera by two frames, as on a headset.
         cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
@@ -62,6 +70,12 @@ fn run(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>
             match e {
                 Event::Published(u) => {
                     u.model.validate().expect("every published model is valid");
+                    // Each stage lies within the update's wall time (their sum may not:
+                    // the three fits run concurrently where there are cores).
+                    for (k, s) in &u.stages_s {
+                        assert!(*s > 0.0 && *s <= u.compute_s + 1e-6, "stage {k}: {s} s of {} s", u.compute_s);
+                    }
+                    stages.push((u.t_s, u.stages_s));
                     out.push((u.t_s, u.model, f.truth.clone()));
                 }
                 Event::ChangeDetected { t_s, .. } => changes.push(t_s),
@@ -69,7 +83,7 @@ fn run(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>
             }
         }
     }
-    (out, changes)
+    (out, changes, stages)
 }
 
 /// The accurate tier (video as its own reference) before and after the change.
@@ -103,18 +117,40 @@ fn accurate_tier_converges_and_follows_a_camera_change() {
     assert!(lam < 0.03, "λ error {lam} at {}", after.0);
 }
 
-/// The fast tier (the frame alone) publishes every frame and never anything
-/// invalid; its blind estimators' accuracy is the subject of BENCHMARKS.md (it is
-/// far from the accurate tier's on this sequence), so only convergence of the
-/// noise to within the fast-tier target of 10%… is not asserted here: the test
-/// holds the structural guarantees (a model per frame, valid, presence stable).
+/// The fast tier (blind fits; the previous frame aligned for noise) publishes every
+/// frame and never anything invalid, presence does not flicker, and:
+/// * noise within the fast tier's 10% target in the half second before the change
+///   (median of the publications; measured ~5% on the 150-frame bench sequence);
+/// * after the burst, the previous frame is aligned at most once per 0.1 s of video
+///   (the noise probe's interval): the noise refit waits for a frame the probe
+///   aligned instead of aligning again out of phase (the old schedule aligned
+///   twice per 0.1 s; the alignment is the largest single cost of a fast update).
 #[test]
 fn fast_tier_publishes_every_frame_and_presence_does_not_flicker() {
-    let (published, _) = run(CalibrationTier::Fast);
+    let (published, _, stages) = run_with_stages(CalibrationTier::Fast);
     assert_eq!(published.len(), sequence().1.len(), "one model per frame");
     // Hysteresis: once on, noise stays on.
     let flips = published.windows(2).filter(|w| w[0].1.noise.present != w[1].1.noise.present).count();
     assert!(flips <= 1, "noise presence flipped {flips} times");
+    let mut errs: Vec<f32> = published
+        .iter()
+        .filter(|p| p.0 >= CHANGE_S - 0.5 && p.0 < CHANGE_S)
+        .filter_map(|p| noise_relative_error(&p.1.noise, &p.2.noise))
+        .collect();
+    errs.sort_by(f32::total_cmp);
+    let median = errs.get(errs.len() / 2).copied().expect("noise published before the change");
+    eprintln!("fast tier noise error before the change: median {:.1}% of {errs:?}", 100.0 * median);
+    assert!(median < 0.10, "noise error {median}");
+    // Steady state between the start-up burst (1 s) and the change (its burst).
+    let aligned: Vec<f64> = stages
+        .iter()
+        .filter(|(t, s)| *t >= 1.0 && *t < CHANGE_S && s.iter().any(|(k, _)| *k == "alignment"))
+        .map(|(t, _)| *t)
+        .collect();
+    let span_s = CHANGE_S - 1.0;
+    eprintln!("alignments at {aligned:?}");
+    assert!(!aligned.is_empty(), "the fast tier aligns the previous frame");
+    assert!(aligned.len() as f64 <= span_s / 0.1 + 1.0, "{} alignments in {span_s} s", aligned.len());
 }
 
 /// The worker thread: frames submitted far faster than it fits are dropped (the

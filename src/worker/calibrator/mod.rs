@@ -221,7 +221,9 @@ pub struct Update {
     /// the blind noise fit's), `change probe`, `flow`, `references` (denoise /
     /// deblur providers), `fit.noise`, `fit.motion_blur`, `fit.depth_of_field`
     /// (each fit's own timer), `aggregation`. Seconds; a stage that did not run this
-    /// frame is absent.
+    /// frame is absent. The three fits run concurrently where the worker's pool has
+    /// threads, so the stages may sum to more than `compute_s`; on one thread they
+    /// add up to it less the untimed glue.
     pub stages_s: Vec<(&'static str, f64)>,
 }
 
