@@ -641,11 +641,11 @@ impl Calibrator {
         // aligned previous frame, the largest single cost of a fast update (37 ms of
         // one core at 1280×960). Out of phase they made two alignments per 0.1 s.
         // It waits at most one more interval.
-        let probed_now = self.aligned_previous.as_ref().is_some_and(|(i, a)| *i == index && a.is_some());
+        let aligned_now = self.aligned_previous.as_ref().is_some_and(|(i, a)| *i == index && a.is_some());
         let mut due = |k: usize, wanted: bool| {
             let since = t_s - self.last_effect_fit_s[k];
             let interval = self.cfg.refit_s[k] - 1e-9;
-            let in_phase = k != 0 || probed_now || since >= 2.0 * interval;
+            let in_phase = k != 0 || aligned_now || since >= 2.0 * interval;
             let ok = wanted && (in_burst || (since >= interval && in_phase));
             if ok {
                 self.last_effect_fit_s[k] = t_s;
@@ -762,7 +762,12 @@ impl Calibrator {
             motion_blur: fx.motion_blur && sharp.is_none(),
             depth_of_field: fx.depth_of_field && in_focus.is_none(),
         };
-        if denoised.is_some() || sharp.is_some() || in_focus.is_some() {
+        // Timed whenever a provider was asked, served or not (a failed reference
+        // costs time too).
+        let asked = (fx.noise && self.providers.denoise.is_some())
+            || (fx.motion_blur && flow.is_some() && self.providers.motion_deblur.is_some())
+            || (fx.depth_of_field && depth.is_some() && self.providers.defocus_deblur.is_some());
+        if asked {
             self.stages.add("references", t_refs);
         }
         let mut model = match fit::fit(&base, &fast_opts(blind)) {
