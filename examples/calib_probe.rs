@@ -40,6 +40,14 @@ fn main() {
         let dt = t0.elapsed().as_secs_f64();
         for e in &ev {
             match e {
+                Event::Published(u) if std::env::var_os("MB").is_some() => {
+                    println!(
+                        "{i:3} t={:.2} λ err {:.3}: {}",
+                        u.t_s,
+                        exposure_error(&u.model, &truth),
+                        u.model.motion_blur.diagnostics.reason
+                    )
+                }
                 Event::Published(u) => println!(
                     "{i:3} t={:.2} λ={:?}({:.3}) noise_err={:?} dof_rmse={:?} {:?} {:.0} ms  [mb {}] [n {}] [{}]",
                     u.t_s,

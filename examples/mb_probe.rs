@@ -7,7 +7,14 @@ use blind_augment::synth::sequence::*;
 use std::sync::Arc;
 fn main() {
     let scene = motorcycle().unwrap();
-    let spec = SequenceSpec::motorcycle(&scene, 320, 240, 60, None);
+    let w: usize = std::env::var("W").ok().and_then(|s| s.parse().ok()).unwrap_or(320);
+    let frames: Vec<usize> = std::env::var("FRAMES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
+        .unwrap_or(vec![18, 20, 24]);
+    let sparse = std::env::var_os("SPARSE").is_some();
+    let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, 60, None);
+    let npx = w * w * 3 / 4;
     let poses: Vec<TimedPose> = (0..40)
         .map(|i| {
             let t = spec.frame_time_s(i);
@@ -48,9 +55,10 @@ fn main() {
     let opts = FitOptions {
         tier: Some(Tier::Accurate),
         effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+        mb_prefilter_var_px2: std::env::var("PRE").ok().and_then(|s| s.parse().ok()).unwrap_or(0.0),
         ..Default::default()
     };
-    for i in [18usize, 20, 24] {
+    for i in frames {
         let (a, f) = an(i);
         let ctx = FrameContext {
             current: &a,
@@ -62,18 +70,22 @@ fn main() {
         let pf = PoseDepthFlow.flow(&ctx).unwrap();
         let ferr = pf.dx.iter().zip(&f.flow.dx).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         let fmag = f.flow.dx.iter().map(|a| a.abs()).fold(0.0f32, f32::max);
-        let r = TemporalMotionDeblur::default().deblur(&ctx, &pf).unwrap();
+        let r = if sparse { TemporalMotionDeblur::sparse() } else { TemporalMotionDeblur::default() }
+            .deblur(&ctx, &pf)
+            .unwrap();
         let mut only_dof = f.truth.clone();
         only_dof.motion_blur.present = false;
         only_dof.noise.present = false;
         let sharp = synth::apply_camera_model(&f.clean, &only_dof, Some(&f.depth_m), Some(&f.flow), 0);
-        let valid_frac = r.valid.as_ref().unwrap().data.iter().filter(|v| **v > 0.5).count() as f32 / 76800.0;
+        let valid_frac = r.valid.as_ref().unwrap().data.iter().filter(|v| **v > 0.5).count() as f32 / npx as f32;
         let l = |s: &blind_augment::image::Rgb,
                  fl: &blind_augment::image::Flow,
                  v: Option<&blind_augment::image::Plane>| {
+            let second = if std::ptr::eq(s, &r.image) { r.second.as_ref() } else { None };
             fit(
                 &FitInputs {
                     motion_deblurred: Some(s),
+                    motion_deblurred_second: second,
                     flow: Some(fl),
                     reference_valid: v,
                     ..FitInputs::new(&f.image)
@@ -88,14 +100,15 @@ fn main() {
         // reference error vs true sharp in valid region
         let mut e2 = 0.0;
         let mut n = 0.0;
-        for k in 0..76800 {
+        for k in 0..npx {
             if r.valid.as_ref().unwrap().data[k] > 0.5 {
                 e2 += (r.image.channels[1][k] - sharp.channels[1][k]).powi(2);
                 n += 1.0;
             }
         }
         println!(
-            "frame {i}: flow err max {ferr:.3} of {fmag:.2}; ref rms err {:.4} valid {valid_frac:.2} sources {:?}",
+            "frame {i}: λ {:?} flow err max {ferr:.3} of {fmag:.2}; ref rms err {:.4} valid {valid_frac:.2} sources {:?}",
+            f.truth.motion_blur.exposure,
             (e2 / n as f32).sqrt(),
             r.sources
         );

@@ -12,17 +12,8 @@ fn main() {
     let img = common::mirror_tile(&common::photo("astronaut.png"), w, h);
     let depth = Plane::new(w, h, 2.0);
     let flow = Flow::uniform(w, h, 6.0, 2.0);
-    let inp = FitInputs {
-        image: &img,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
-        depth: Some(&depth),
-        depth_units: DepthUnits::MetricM,
-        flow: Some(&flow),
-        reference_valid: None,
-        neighbour: None,
-    };
+    let inp =
+        FitInputs { depth: Some(&depth), depth_units: DepthUnits::MetricM, flow: Some(&flow), ..FitInputs::new(&img) };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
     for _ in 0..3 {
         let t = std::time::Instant::now();

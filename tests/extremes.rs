@@ -15,15 +15,13 @@ use proptest::prelude::*;
 
 fn all_refs<'a>(image: &'a Rgb, clean: &'a Rgb, depth: &'a Plane, flow: &'a Flow) -> FitInputs<'a> {
     FitInputs {
-        image,
         denoised: Some(clean),
         motion_deblurred: Some(clean),
         defocus_deblurred: Some(clean),
         depth: Some(depth),
         depth_units: DepthUnits::MetricM,
         flow: Some(flow),
-        reference_valid: None,
-        neighbour: None,
+        ..FitInputs::new(image)
     }
 }
 

@@ -98,6 +98,11 @@ pub struct Reference {
     pub noise_variance_ratio: f32,
     /// Frames it was made from (their indices), for diagnostics.
     pub sources: Vec<u64>,
+    /// A second estimate of the same reference whose noise is independent of
+    /// `image`'s (made from other frames), valid where `valid` is; the motion-blur
+    /// fit then minimises a cross loss that the references' noise does not bias
+    /// (`fit::FitInputs::motion_deblurred_second`).
+    pub second: Option<Rgb>,
 }
 
 #[derive(Debug, thiserror::Error, PartialEq)]

@@ -307,6 +307,7 @@ fn tiled_reference(
         // corrected for.
         noise_variance_ratio: 0.0,
         sources: vec![frame.index],
+        second: None,
     })
 }
 

@@ -48,6 +48,32 @@ fn metric(a: &Analysed) -> Option<&Plane> {
 /// run in parallel. At 1280×960 on one core this takes about a quarter of the
 /// per-channel clamped sampling it replaces (BENCHMARKS.md).
 pub fn align(src: &Analysed, dst: &Analysed, k: &Intrinsics) -> Option<Aligned> {
+    align_rows(src, dst, k, &|_| true)
+}
+
+/// Rows in bands of this height when only part of a frame is aligned
+/// (`align_bands`): tall enough that a streak of a turning head (a few px per
+/// frame, mostly horizontal) fits inside one.
+pub const BAND_ROWS: usize = 32;
+
+/// `align` on a subset of the rows: bands of `BAND_ROWS`, every `stride`-th one
+/// (`in_band`); the other rows are invalid. Costs ~1/`stride` of
+/// `align` — what a fit that reads a sample of the frame needs (the fast tier's
+/// motion-blur reference).
+pub fn align_bands(src: &Analysed, dst: &Analysed, k: &Intrinsics, stride: usize) -> Option<Aligned> {
+    let stride = stride.max(1);
+    align_rows(src, dst, k, &|y| in_band(y, stride))
+}
+
+/// Whether row `y` is in one of `align_bands`' bands: the middle band of each run
+/// of `stride` (the frame's edges are where alignment fails first).
+pub fn in_band(y: usize, stride: usize) -> bool {
+    let stride = stride.max(1);
+    (y / BAND_ROWS) % stride == stride / 2
+}
+
+/// `align` where `row(y)`; other rows are left invalid.
+fn align_rows(src: &Analysed, dst: &Analysed, k: &Intrinsics, row: &(dyn Fn(usize) -> bool + Sync)) -> Option<Aligned> {
     use rayon::prelude::*;
     let (src_pose, dst_pose) = (src.world_from_camera?, dst.world_from_camera?);
     let (src_depth, dst_depth) = (metric(src)?, metric(dst)?);
@@ -72,6 +98,9 @@ pub fn align(src: &Analysed, dst: &Analysed, k: &Intrinsics) -> Option<Aligned> 
         .zip(valid.par_chunks_mut(w))
         .enumerate()
         .for_each(|(y, (((r, g), b), ok))| {
+            if !row(y) {
+                return;
+            }
             let row_start = rot * Vec3::new(-k.cx / k.fx, (y as f32 - k.cy) / k.fy, 1.0);
             let depth_row = &dst_depth.data[y * w..(y + 1) * w];
             let mut ray = row_start;
@@ -118,28 +147,40 @@ fn motion_difference(a: &Analysed, b: &Analysed) -> Option<f32> {
     (fa.len() == fb.len()).then(|| fa.iter().zip(fb).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0, f32::max))
 }
 
-/// Mean of `sources` aligned into `current`; valid where every source is (so the
-/// noise ratio is the same 1/m at every valid pixel). Invalid pixels hold the
-/// current frame's value.
-fn aligned_mean(current: &Analysed, sources: &[&Arc<Analysed>], k: &Intrinsics) -> Option<(Rgb, Plane)> {
-    let (w, h) = (current.frame.image.width, current.frame.image.height);
-    let mut sum = Rgb::new(w, h, [0.0; 3]);
-    let mut all_valid = vec![true; w * h];
-    for s in sources {
-        let a = align(s, current, k)?;
-        for c in 0..3 {
-            for (o, v) in sum.channels[c].iter_mut().zip(&a.image.channels[c]) {
-                *o += v;
+/// Mean of `sources` aligned into `current` (on `align_bands`' rows for `stride`);
+/// valid where every source is (so the noise ratio is the same 1/m at every valid
+/// pixel). Invalid pixels hold the current frame's value. Only the aligned rows are
+/// visited: a sparse reference costs its bands, not the frame.
+fn aligned_mean(current: &Analysed, sources: &[&Arc<Analysed>], k: &Intrinsics, stride: usize) -> Option<(Rgb, Plane)> {
+    let cur = &current.frame.image;
+    let (w, h) = (cur.width, cur.height);
+    let rows: Vec<usize> = (0..h).filter(|&y| in_band(y, stride)).collect();
+    let mut sum = cur.clone();
+    let mut all_valid = vec![false; w * h];
+    for (n, s) in sources.iter().enumerate() {
+        let a = align_bands(s, current, k, stride)?;
+        for &y in &rows {
+            let span = y * w..(y + 1) * w;
+            for c in 0..3 {
+                let (o, v) = (&mut sum.channels[c][span.clone()], &a.image.channels[c][span.clone()]);
+                if n == 0 {
+                    o.copy_from_slice(v);
+                } else {
+                    o.iter_mut().zip(v).for_each(|(o, v)| *o += v);
+                }
+            }
+            for (o, v) in all_valid[span.clone()].iter_mut().zip(&a.valid[span]) {
+                *o = (*o || n == 0) && *v;
             }
         }
-        for (o, v) in all_valid.iter_mut().zip(&a.valid) {
-            *o &= *v;
-        }
     }
-    let m = sources.len() as f32;
-    for c in 0..3 {
-        for (i, o) in sum.channels[c].iter_mut().enumerate() {
-            *o = if all_valid[i] { *o / m } else { current.frame.image.channels[c][i] };
+    let m = sources.len().max(1) as f32;
+    for &y in &rows {
+        for i in y * w..(y + 1) * w {
+            for c in 0..3 {
+                let o = &mut sum.channels[c][i];
+                *o = if all_valid[i] { *o / m } else { cur.channels[c][i] };
+            }
         }
     }
     let valid = Plane::from_vec(w, h, all_valid.into_iter().map(|v| if v { 1.0 } else { 0.0 }).collect());
@@ -158,27 +199,42 @@ fn needs<'a>(ctx: &'a FrameContext, provider: &'static str) -> Result<&'a Intrin
     Ok(k)
 }
 
-/// The mean of `picked` aligned to the current frame as a reference, refused when
-/// the aligned frames cover less than a quarter of it (`what` names them).
+/// The mean of `picked` aligned to the current frame as a reference (on every
+/// `stride`-th band of rows, `align_bands`), refused when the aligned frames cover
+/// less than a quarter of the rows aligned (`what` names them). With `split`, the
+/// first half of `picked` makes the reference and the second half
+/// `Reference::second` (valid where both are).
 fn mean_reference(
     ctx: &FrameContext,
     picked: &[&Arc<Analysed>],
     k: &Intrinsics,
+    stride: usize,
+    split: bool,
     provider: &'static str,
     what: &str,
 ) -> Result<Reference, AnalysisError> {
     let f = ctx.current.frame.index;
-    let (image, valid) = aligned_mean(ctx.current, picked, k)
-        .ok_or_else(|| AnalysisError::unavailable(f, provider, "alignment failed"))?;
-    let covered = valid.data.iter().filter(|v| **v > 0.5).count() as f32 / valid.data.len().max(1) as f32;
+    let failed = || AnalysisError::unavailable(f, provider, "alignment failed");
+    let (first, rest) = if split && picked.len() >= 2 { picked.split_at(picked.len() / 2) } else { (picked, &[][..]) };
+    let (image, mut valid) = aligned_mean(ctx.current, first, k, stride).ok_or_else(failed)?;
+    let second = if rest.is_empty() {
+        None
+    } else {
+        let (image2, valid2) = aligned_mean(ctx.current, rest, k, stride).ok_or_else(failed)?;
+        valid.data.iter_mut().zip(&valid2.data).for_each(|(a, b)| *a = a.min(*b));
+        Some(image2)
+    };
+    let rows_aligned = (0..valid.height).filter(|&y| in_band(y, stride)).count();
+    let covered = valid.data.iter().filter(|v| **v > 0.5).count() as f32 / (rows_aligned * valid.width).max(1) as f32;
     if covered < 0.25 {
         return Err(AnalysisError::unavailable(f, provider, format!("{what} overlap less than 25% of this one")));
     }
     Ok(Reference {
         image,
         valid: Some(valid),
-        noise_variance_ratio: 1.0 / picked.len() as f32,
+        noise_variance_ratio: 1.0 / first.len() as f32,
         sources: picked.iter().map(|a| a.frame.index).collect(),
+        second,
     })
 }
 
@@ -230,7 +286,7 @@ impl Denoiser for TemporalDenoiser {
                 ),
             ));
         }
-        mean_reference(ctx, &picked, k, P, "the aligned frames")
+        mean_reference(ctx, &picked, k, 1, false, P, "the aligned frames")
     }
 }
 
@@ -241,11 +297,39 @@ pub struct TemporalMotionDeblur {
     pub max_motion_px: f32,
     /// Sharp frames averaged (averaging lowers the reference's noise).
     pub frames: usize,
+    /// Align at most about this many pixels per sharp frame (`None`: all): bands of
+    /// rows spread over the frame (`align_bands`), the rest invalid. The accurate
+    /// motion-blur fit reads a few thousand pixels anyway (`mb_max_samples`), so a
+    /// sample of the rows serves it at a fraction of the alignment's cost (the fast
+    /// tier's budget).
+    pub max_aligned_px: Option<usize>,
+    /// Split the sharp frames into two halves, the reference and
+    /// `Reference::second`: two estimates of I_noMB with independent noise, for the
+    /// motion-blur fit's cross loss (`fit::motion_blur`), which a noisy reference
+    /// does not bias.
+    pub split: bool,
 }
 
 impl Default for TemporalMotionDeblur {
     fn default() -> Self {
-        Self { max_motion_px: 0.5, frames: 3 }
+        Self { max_motion_px: 0.5, frames: 3, max_aligned_px: None, split: false }
+    }
+}
+
+impl TemporalMotionDeblur {
+    /// The fast and balanced tiers': the two sharpest frames, as two independent
+    /// references (`split`), each aligned on about a sixth of a 1280×960 frame (all
+    /// of it up to 640×320). At 1280×960 one full alignment is 37 ms of one core
+    /// (BENCHMARKS.md). One frame alone, unsplit, read λ up to +0.3 high on streaks of a
+    /// few pixels at 1280×960: its noise, smoothed by the streak, lowers the loss
+    /// at long streaks.
+    pub fn sparse() -> Self {
+        Self { frames: 2, max_aligned_px: Some(204_800), split: true, ..Default::default() }
+    }
+
+    /// Band stride that keeps a `w`×`h` frame within `max_aligned_px`.
+    fn stride(&self, w: usize, h: usize) -> usize {
+        self.max_aligned_px.map_or(1, |n| (w * h).div_ceil(n.max(w * BAND_ROWS)))
     }
 }
 
@@ -274,8 +358,9 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         }
         // Sharpest first; ties to the newest.
         sharp.sort_by(|a, b| a.1.total_cmp(&b.1).then(b.0.frame.t_s.total_cmp(&a.0.frame.t_s)));
-        let picked: Vec<&Arc<Analysed>> = sharp.iter().take(self.frames).map(|(a, _)| *a).collect();
-        mean_reference(ctx, &picked, k, P, "the sharp frames")
+        let picked: Vec<&Arc<Analysed>> = sharp.iter().take(self.frames.max(1)).map(|(a, _)| *a).collect();
+        let img = &ctx.current.frame.image;
+        mean_reference(ctx, &picked, k, self.stride(img.width, img.height), self.split, P, "the sharp frames")
     }
 }
 

@@ -54,6 +54,11 @@ pub struct FitInputs<'a> {
     pub image: &'a Rgb,
     pub denoised: Option<&'a Rgb>,
     pub motion_deblurred: Option<&'a Rgb>,
+    /// A second I_noMB whose noise is independent of `motion_deblurred`'s (made
+    /// from other frames, `analysis::Reference::second`). With it the accurate
+    /// exposure fit minimises the cross loss E[(I − addMB(R₁))(I − addMB(R₂))],
+    /// which the references' own noise does not bias (see `fit::motion_blur`).
+    pub motion_deblurred_second: Option<&'a Rgb>,
     pub defocus_deblurred: Option<&'a Rgb>,
     pub depth: Option<&'a Plane>,
     pub depth_units: DepthUnits,
@@ -87,6 +92,7 @@ impl<'a> FitInputs<'a> {
             image,
             denoised: None,
             motion_deblurred: None,
+            motion_deblurred_second: None,
             defocus_deblurred: None,
             depth: None,
             depth_units: DepthUnits::MetricM,
@@ -114,6 +120,17 @@ pub struct FitOptions {
     pub dof_pyramid_from_px: Option<f32>,
     /// Most pixels the accurate exposure fit integrates (evenly thinned).
     pub mb_max_samples: usize,
+    /// Variance (px²) of a Gaussian both luma images of the accurate exposure fit
+    /// pass through first (0: none). It commutes with the streak (both are
+    /// convolutions) and removes the frequencies where a reference that is not a
+    /// true I_noMB differs from one — resampling's attenuation near Nyquist, its own
+    /// noise — which would otherwise read as blur the reference already has (λ
+    /// biased low). Only the rows the reference is valid on are filtered.
+    pub mb_prefilter_var_px2: f32,
+    /// Pixels the accurate exposure fit reads must move at least this far per frame
+    /// (px; at least 0.05). Streaks of a few px are where a reference that is not an
+    /// exact I_noMB (aligned from other frames) biases λ most.
+    pub mb_min_flow_px: f32,
 }
 
 impl Default for FitOptions {
@@ -126,6 +143,8 @@ impl Default for FitOptions {
             dof_max_sigma_px: crate::model::MAX_DOF_SIGMA_PX,
             dof_pyramid_from_px: dof::DEFAULT_PYRAMID_FROM_PX,
             mb_max_samples: motion_blur::DEFAULT_MAX_SAMPLES,
+            mb_prefilter_var_px2: 0.0,
+            mb_min_flow_px: motion_blur::MIN_FLOW_PX,
         }
     }
 }
@@ -181,6 +200,7 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     for (name, r) in [
         ("denoised", inp.denoised),
         ("motion-deblurred", inp.motion_deblurred),
+        ("motion-deblurred (second)", inp.motion_deblurred_second),
         ("defocus-deblurred", inp.defocus_deblurred),
     ] {
         if let Some(r) = r {
@@ -239,6 +259,18 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
         return Err(FitError::Option {
             option: "mb_max_samples",
             problem: format!("must be ≥ 64, got {}", opts.mb_max_samples),
+        });
+    }
+    if !(opts.mb_prefilter_var_px2.is_finite() && (0.0..=16.0).contains(&opts.mb_prefilter_var_px2)) {
+        return Err(FitError::Option {
+            option: "mb_prefilter_var_px2",
+            problem: format!("must be in [0, 16] px², got {}", opts.mb_prefilter_var_px2),
+        });
+    }
+    if !(opts.mb_min_flow_px.is_finite() && opts.mb_min_flow_px >= motion_blur::MIN_FLOW_PX) {
+        return Err(FitError::Option {
+            option: "mb_min_flow_px",
+            problem: format!("must be ≥ {} px, got {}", motion_blur::MIN_FLOW_PX, opts.mb_min_flow_px),
         });
     }
     if opts.noise_stride_px == 0 {
@@ -385,7 +417,7 @@ fn fit_motion_blur(
             None,
         ),
         (Some(flow), Tier::Accurate, Some(sharp)) => {
-            motion_blur::fit_accurate(inp.image, sharp, flow, inp.reference_valid, opts.mb_max_samples)
+            motion_blur::fit_accurate(inp.image, sharp, inp.motion_deblurred_second, flow, inp.reference_valid, opts)
         }
         (Some(flow), _, _) => motion_blur::fit_fast(luma, flow),
     }

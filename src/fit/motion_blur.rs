@@ -23,6 +23,9 @@ use crate::model::{Diagnostics, MotionBlur, Status};
 use std::time::Instant;
 
 const PROFILE_SPACING_PX: f32 = 0.2;
+/// Least flow (px per frame) of a pixel the accurate fit reads: a 0.1 px streak at
+/// most, below anything λ could be read from.
+pub const MIN_FLOW_PX: f32 = 0.05;
 const MIN_SAMPLES: usize = 64;
 /// Blind tier: pixels (each with 4 profiles) and interleaved subsets for the
 /// standard error.
@@ -56,6 +59,10 @@ struct Profiles {
     /// Flattened node values f_j and cumulative integrals C_j (t from −½), per pixel.
     f: Vec<f32>,
     c: Vec<f32>,
+    /// The same nodes on the second reference (`FitInputs::motion_deblurred_second`),
+    /// empty without one.
+    f2: Vec<f32>,
+    c2: Vec<f32>,
     offsets: Vec<usize>,
     target: Vec<f32>,
 }
@@ -65,7 +72,21 @@ impl Profiles {
     #[inline]
     fn blurred(&self, i: usize, lambda: f32) -> f32 {
         let (o0, o1) = (self.offsets[i], self.offsets[i + 1]);
-        let (f, c) = (&self.f[o0..o1], &self.c[o0..o1]);
+        Self::mean_over(&self.f[o0..o1], &self.c[o0..o1], lambda)
+    }
+
+    /// B(λ) of the second reference (the first without one).
+    #[inline]
+    fn blurred2(&self, i: usize, lambda: f32) -> f32 {
+        if self.f2.is_empty() {
+            return self.blurred(i, lambda);
+        }
+        let (o0, o1) = (self.offsets[i], self.offsets[i + 1]);
+        Self::mean_over(&self.f2[o0..o1], &self.c2[o0..o1], lambda)
+    }
+
+    #[inline]
+    fn mean_over(f: &[f32], c: &[f32], lambda: f32) -> f32 {
         let m = (f.len() - 1) as f32;
         let h = 1.0 / m;
         // Cumulative integral at t (from −½) of the piecewise-linear profile.
@@ -89,13 +110,58 @@ impl Profiles {
         self.target.len()
     }
 
+    /// E|I − B(λ)|², or with a second reference the cross loss
+    /// E[(I − B₁(λ))(I − B₂(λ))]: the references' noise n₁, n₂ is independent of
+    /// each other and of I's, so E[B(n₁)·B(n₂)] = 0 and the loss is the noise-free
+    /// one plus I's noise variance — a constant in λ. With one reference the term
+    /// E|B_λ(n₁)|² falls as the streak averages more of its noise, and pulls λ up
+    /// (measured: +0.16 on 3.6 px streaks at 1280×960, BENCHMARKS.md).
     fn loss(&self, lambda: f32) -> f64 {
         let n = self.len();
-        (0..n).map(|i| (self.target[i] - self.blurred(i, lambda)) as f64).map(|r| r * r).sum::<f64>() / n as f64
+        let t = &self.target;
+        if self.f2.is_empty() {
+            (0..n).map(|i| (t[i] - self.blurred(i, lambda)) as f64).map(|r| r * r).sum::<f64>() / n as f64
+        } else {
+            (0..n)
+                .map(|i| (t[i] - self.blurred(i, lambda)) as f64 * (t[i] - self.blurred2(i, lambda)) as f64)
+                .sum::<f64>()
+                / n as f64
+        }
+    }
+
+    /// ∂B/∂λ at pixel i by a central difference on [l0, l1] (both references'
+    /// mean with a second one).
+    fn slope(&self, i: usize, l0: f32, l1: f32) -> f64 {
+        let d = |b: &dyn Fn(usize, f32) -> f32| ((b(i, l1) - b(i, l0)) / (l1 - l0)) as f64;
+        if self.f2.is_empty() {
+            d(&|i, l| self.blurred(i, l))
+        } else {
+            0.5 * (d(&|i, l| self.blurred(i, l)) + d(&|i, l| self.blurred2(i, l)))
+        }
+    }
+
+    /// Mean squared residual against the references' mean at λ (the noise of the
+    /// Gauss–Newton standard error; with two references it keeps half their
+    /// noise, so it errs large).
+    fn residual_var(&self, lambda: f32) -> f64 {
+        let n = self.len();
+        (0..n)
+            .map(|i| (self.target[i] - 0.5 * (self.blurred(i, lambda) + self.blurred2(i, lambda))) as f64)
+            .map(|r| r * r)
+            .sum::<f64>()
+            / n as f64
     }
 }
 
-fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, valid: Option<&Plane>, max_samples: usize) -> Profiles {
+fn build_profiles(
+    image: &Plane,
+    sharp: &Plane,
+    sharp2: Option<&Plane>,
+    flow: &Flow,
+    valid: Option<&Plane>,
+    max_samples: usize,
+    min_flow_px: f32,
+) -> Profiles {
     let (w, h) = (image.width, image.height);
     // Cheap pre-filter: the sharp luma must change along the flow within one frame
     // interval (|∇Y·F| ≥ 2e-3, half an 8-bit step), then thin deterministically to
@@ -105,7 +171,7 @@ fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, valid: Option<&Plan
         for x in (0..w).step_by(2) {
             let i = y * w + x;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
-            if fx * fx + fy * fy < 0.05 * 0.05 {
+            if fx * fx + fy * fy < min_flow_px * min_flow_px {
                 continue;
             }
             // The reference must hold along the whole streak (its ends and middle).
@@ -126,7 +192,7 @@ fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, valid: Option<&Plan
         }
     }
     let keep = cand.len().div_ceil(max_samples).max(1);
-    let mut p = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
+    let mut p = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
     for &(x, y) in cand.iter().step_by(keep) {
         let i = y * w + x;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
@@ -148,6 +214,18 @@ fn build_profiles(image: &Plane, sharp: &Plane, flow: &Flow, valid: Option<&Plan
             p.f.truncate(start);
             p.c.truncate(start);
             continue;
+        }
+        if let Some(s2) = sharp2 {
+            let mut cum = 0.0f32;
+            for j in 0..=m {
+                let t = j as f32 / m as f32 - 0.5;
+                let v = s2.sample_bilinear(x as f32 + t * fx, y as f32 + t * fy);
+                if j > 0 {
+                    cum += 0.5 * (p.f2[start + j - 1] + v) / m as f32;
+                }
+                p.f2.push(v);
+                p.c2.push(cum);
+            }
         }
         p.offsets.push(p.f.len());
         p.target.push(image.get(x, y));
@@ -212,18 +290,36 @@ fn decide(
 pub fn fit_accurate(
     image: &Rgb,
     sharp: &Rgb,
+    sharp2: Option<&Rgb>,
     flow: &Flow,
     valid: Option<&Plane>,
-    max_samples: usize,
+    opts: &super::FitOptions,
 ) -> (MotionBlur, Option<MbPlotData>) {
+    let (max_samples, prefilter_var_px2, min_flow_px) =
+        (opts.mb_max_samples, opts.mb_prefilter_var_px2, opts.mb_min_flow_px);
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let prof = build_profiles(&image.luma(), &sharp.luma(), flow, valid, max_samples);
+    let (mut y, mut y_sharp, mut y_sharp2) = (image.luma(), sharp.luma(), sharp2.map(Rgb::luma));
+    if prefilter_var_px2 > 0.0 {
+        // Only the rows the reference holds on are read (`build_profiles` keeps a
+        // pixel when its streak's ends and middle are valid).
+        let rows: Vec<bool> = match valid {
+            Some(v) => (0..v.height).map(|r| v.data[r * v.width..(r + 1) * v.width].iter().any(|&m| m > 0.5)).collect(),
+            None => vec![true; y.height],
+        };
+        let k = crate::image::discrete_gaussian_kernel(prefilter_var_px2);
+        y = crate::image::blur_separable_rows(&y, &k, &|r| rows[r]);
+        y_sharp = crate::image::blur_separable_rows(&y_sharp, &k, &|r| rows[r]);
+        y_sharp2 = y_sharp2.map(|p| crate::image::blur_separable_rows(&p, &k, &|r| rows[r]));
+    }
+    st.lap("prefilter");
+    let prof = build_profiles(&y, &y_sharp, y_sharp2.as_ref(), flow, valid, max_samples, min_flow_px);
     st.lap("blur");
     let n = prof.len();
     if n < MIN_SAMPLES {
         let reason = format!(
-            "only {n} pixels have flow ≥ 0.05 px and texture along it (need {MIN_SAMPLES}): exposure not identifiable"
+            "only {n} pixels have flow ≥ {min_flow_px} px and texture along it (need {MIN_SAMPLES}): exposure not \
+             identifiable"
         );
         let mut d = super::not_identifiable("accurate", reason, started);
         d.samples_used = n as u64;
@@ -246,8 +342,9 @@ pub fn fit_accurate(
     st.lap("search");
     let eps = 1e-3f32;
     let (l0, l1) = ((lambda - eps).max(0.0), (lambda + eps).min(1.0));
-    let jj: f64 = (0..n).map(|i| ((prof.blurred(i, l1) - prof.blurred(i, l0)) / (l1 - l0)) as f64).map(|j| j * j).sum();
-    let stderr = if jj > 0.0 { (after * n as f64 / (n as f64 - 1.0) / jj).sqrt() } else { 1.0 };
+    let jj: f64 = (0..n).map(|i| prof.slope(i, l0, l1)).map(|j| j * j).sum();
+    let res = prof.residual_var(lambda);
+    let stderr = if jj > 0.0 { (res * n as f64 / (n as f64 - 1.0) / jj).sqrt() } else { 1.0 };
     st.lap("least_squares");
     let mut mb = decide("accurate", lambda, stderr, Some((losses[0], after)), n, started);
     mb.diagnostics.stages_s = st.done();
@@ -438,7 +535,7 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
     }
     let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
     // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
-    let mut prof = Profiles { f: vec![], c: vec![], offsets: vec![0], target: vec![] };
+    let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
     for &(px, py) in cand.iter().step_by(keep) {
         let i = py * w + px;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);

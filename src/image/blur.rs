@@ -16,14 +16,34 @@ pub use crate::model::kernels::discrete_gaussian_kernel;
 /// (`out[x] += w_k · src[x + k]`), which the compiler vectorises; a per-pixel dot
 /// product would be a float reduction it may not reorder.
 pub fn blur_separable(p: &Plane, kernel: &[f32]) -> Plane {
-    if kernel.len() <= 1 {
-        return p.clone();
-    }
+    blur_separable_rows(p, kernel, &|_| true)
+}
+
+/// `blur_separable` on the rows where `row(y)` only (the others are 0): the
+/// horizontal pass runs on those rows and the kernel's reach around them, so a fit
+/// that reads a few bands of a frame pays for those bands (the fast tier's
+/// motion-blur reference, `analysis::temporal::align_bands`).
+pub fn blur_separable_rows(p: &Plane, kernel: &[f32], row: &dyn Fn(usize) -> bool) -> Plane {
     let (w, h) = (p.width, p.height);
+    if kernel.len() <= 1 {
+        let mut out = p.clone();
+        for y in (0..h).filter(|&y| !row(y)) {
+            out.data[y * w..(y + 1) * w].fill(0.0);
+        }
+        return out;
+    }
     let r = kernel.len() / 2;
+    let wanted: Vec<bool> = (0..h).map(row).collect();
+    // Rows the vertical pass reads: within r of a wanted row (clamped at the edges).
+    let mut reach = vec![false; h];
+    for y in (0..h).filter(|&y| wanted[y]) {
+        for k in 0..kernel.len() {
+            reach[(y as isize + k as isize - r as isize).clamp(0, h as isize - 1) as usize] = true;
+        }
+    }
     let mut tmp = vec![0.0f32; w * h];
     let mut padded = vec![0.0f32; w + 2 * r];
-    for y in 0..h {
+    for y in (0..h).filter(|&y| reach[y]) {
         let row = &p.data[y * w..(y + 1) * w];
         for (i, v) in padded.iter_mut().enumerate() {
             *v = row[(i as isize - r as isize).clamp(0, w as isize - 1) as usize];
@@ -36,7 +56,7 @@ pub fn blur_separable(p: &Plane, kernel: &[f32]) -> Plane {
         }
     }
     let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
+    for y in (0..h).filter(|&y| wanted[y]) {
         let o = &mut out[y * w..(y + 1) * w];
         for (k, &wk) in kernel.iter().enumerate() {
             let yi = (y as isize + k as isize - r as isize).clamp(0, h as isize - 1) as usize;
@@ -86,6 +106,24 @@ mod tests {
         let off = (conv.len() - c.len()) / 2;
         for (i, v) in c.iter().enumerate() {
             assert!((conv[i + off] - v).abs() < 1e-6);
+        }
+    }
+
+    /// The row-restricted blur equals the full blur on its rows (bit for bit: the
+    /// same taps in the same order) and is 0 elsewhere, edges included.
+    #[test]
+    fn row_restricted_blur_matches_the_full_blur_on_its_rows() {
+        let (w, h) = (37, 53);
+        let p = Plane::from_vec(w, h, (0..w * h).map(|i| ((i * 7919) % 101) as f32 / 100.0).collect());
+        let k = discrete_gaussian_kernel(2.0);
+        let full = blur_separable(&p, &k);
+        let pick = |y: usize| (y / 8) % 3 == 1 || y == 0 || y == h - 1;
+        let part = blur_separable_rows(&p, &k, &pick);
+        for y in 0..h {
+            for x in 0..w {
+                let want = if pick(y) { full.get(x, y) } else { 0.0 };
+                assert_eq!(part.get(x, y), want, "({x}, {y})");
+            }
         }
     }
 }

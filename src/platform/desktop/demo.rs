@@ -106,15 +106,13 @@ fn flat_noise_std(noise: &Noise, y: f32) -> [f64; 3] {
 
 fn fit_one(image: &Rgb, reference: &Rgb, effects: Effects, depth: &Plane, flow: &Flow) -> Result<FitOutput> {
     let inputs = FitInputs {
-        image,
         denoised: effects.noise.then_some(reference),
         motion_deblurred: effects.motion_blur.then_some(reference),
         defocus_deblurred: effects.depth_of_field.then_some(reference),
         depth: Some(depth),
         depth_units: DepthUnits::MetricM,
         flow: Some(flow),
-        reference_valid: None,
-        neighbour: None,
+        ..FitInputs::new(image)
     };
     Ok(fit(&inputs, &FitOptions { effects, ..Default::default() })?)
 }
@@ -156,15 +154,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
     };
     eprintln!("fitting: fast tier (the combined frame alone, with depth and flow)");
     let fast_inputs = FitInputs {
-        image: &i_all,
-        denoised: None,
-        motion_deblurred: None,
-        defocus_deblurred: None,
         depth: Some(&disparity),
         depth_units: DepthUnits::MetricM,
         flow: Some(&flow),
-        reference_valid: None,
-        neighbour: None,
+        ..FitInputs::new(&i_all)
     };
     let fast_out = fit(&fast_inputs, &FitOptions::default())?;
 

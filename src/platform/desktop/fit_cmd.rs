@@ -156,7 +156,6 @@ impl Networks {
 fn run_one(inp: &mut Loaded, nets: &mut Networks, opts: &FitOptions) -> Result<FitOutput> {
     let valid = nets.complete(inp)?;
     let fi = FitInputs {
-        image: &inp.image,
         denoised: inp.denoised.as_ref(),
         motion_deblurred: inp.motion_deblurred.as_ref(),
         defocus_deblurred: inp.defocus_deblurred.as_ref(),
@@ -164,7 +163,7 @@ fn run_one(inp: &mut Loaded, nets: &mut Networks, opts: &FitOptions) -> Result<F
         depth_units: inp.depth_units,
         flow: inp.flow.as_ref(),
         reference_valid: valid.as_ref(),
-        neighbour: None,
+        ..FitInputs::new(&inp.image)
     };
     Ok(fit(&fi, opts)?)
 }

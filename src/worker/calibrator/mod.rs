@@ -125,7 +125,13 @@ impl CalibratorConfig {
                 CalibrationTier::Balanced => 6,
                 CalibrationTier::Accurate => 10,
             },
-            sharp_held: 3,
+            // Sharp frames (head at rest) are the motion-blur fit's I_noMB: the
+            // accurate tier averages three, the others align two sparsely as two
+            // independent references (`TemporalMotionDeblur::sparse`).
+            sharp_held: match tier {
+                CalibrationTier::Accurate => 3,
+                _ => 2,
+            },
             sharp_max_age_s: 3.0,
         }
     }
@@ -156,16 +162,20 @@ impl Providers {
             }
             CalibrationTier::Accurate => Some(Box::new(TemporalDenoiser::default())),
         };
-        let motion_deblur: Option<Box<dyn MotionDeblurrer>> = match tier {
-            CalibrationTier::Accurate => Some(Box::new(TemporalMotionDeblur::default())),
-            _ => None,
+        // I_noMB from frames taken with the head at rest, in every tier: blind, a
+        // streak of ≤ 3 px (λ = 0.25 on a slow turn) is not identifiable
+        // (BENCHMARKS.md), against the reference it is. The fast and balanced tiers
+        // align one sharp frame on a sample of rows.
+        let motion_deblur: Box<dyn MotionDeblurrer> = match tier {
+            CalibrationTier::Accurate => Box::new(TemporalMotionDeblur::default()),
+            _ => Box::new(TemporalMotionDeblur::sparse()),
         };
         Self {
             depth: None,
             flow: Box::new(PoseDepthFlow),
             flow_fallback: Some(Box::new(LucasKanadeFlow::default())),
             denoise,
-            motion_deblur,
+            motion_deblur: Some(motion_deblur),
             defocus_deblur: None,
         }
     }
@@ -302,13 +312,19 @@ struct Estimate {
 }
 
 /// Variance (px²) of the Gaussian both sides of the temporal motion-blur fit pass
-/// through.
+/// through (`FitOptions::mb_prefilter_var_px2`).
 const MB_PREFILTER_VAR_PX2: f32 = 1.0;
-
-fn prefilter(img: &crate::image::Rgb) -> crate::image::Rgb {
-    let k = crate::image::discrete_gaussian_kernel(MB_PREFILTER_VAR_PX2);
-    crate::image::Rgb::from_planes(std::array::from_fn(|c| crate::image::blur_separable(&img.plane(c), &k)))
-}
+/// Shortest flow (px per frame) a pixel of the temporal motion-blur fit may have
+/// (`FitOptions::mb_min_flow_px`). Against references aligned from other frames,
+/// short streaks read λ low: measured on the calibration video at 320×240 (two
+/// sharp frames, cross loss), λ = 0.5 read 0.18 at 1.6 px/frame, 0.44 at 4, 0.47
+/// at 6.4, 0.49 at 8 (and 0.42 at 3.6 px, 0.49 at 7 px at 1280×960) — the
+/// alignment's resampling and the references' own residual motion are a fixed
+/// blur deficit of a few hundredths of a px², which only short streaks feel.
+const MB_MIN_FLOW_PX: f32 = 4.0;
+/// A held sharp frame's age counts as this much motion per second when the
+/// oldest-or-blurriest one makes room (`Calibrator::push_frame`).
+const SHARP_AGE_PX_PER_S: f64 = 0.5;
 
 /// Scale a fitted noise model by `variance_factor` (the temporal reference's
 /// leftover noise divided out).
@@ -609,12 +625,21 @@ impl Calibrator {
                 self.window.pop_front();
             }
         }
-        if self.cfg.tier == CalibrationTier::Accurate {
+        if self.cfg.sharp_held > 0 {
             if let Some(m) = analysed.max_motion_px() {
                 if m <= 0.5 {
                     self.sharp.push_back(analysed);
+                    // Full: drop the least useful, its motion plus its age at
+                    // `SHARP_AGE_PX_PER_S` — the sharpest frames of the latest rest.
+                    // A reference with motion m carries a streak of λ·m and reads λ
+                    // low on short streaks; an old one may no longer overlap the view.
                     while self.sharp.len() > self.cfg.sharp_held {
-                        self.sharp.pop_front();
+                        let cost = |a: &Arc<Analysed>| {
+                            a.max_motion_px().unwrap_or(f32::INFINITY) as f64 + SHARP_AGE_PX_PER_S * (t_s - a.frame.t_s)
+                        };
+                        let worst = (0..self.sharp.len())
+                            .max_by(|&i, &j| cost(&self.sharp[i]).total_cmp(&cost(&self.sharp[j])));
+                        self.sharp.remove(worst.unwrap_or(0));
                     }
                 }
             }
@@ -790,19 +815,19 @@ impl Calibrator {
             }
         }
         if let Some(r) = &sharp {
-            // Both through the same small Gaussian first: it commutes with the streak
-            // (both are convolutions), and it removes the frequencies where the
-            // reference differs from a true I_noMB — resampling's attenuation near
-            // Nyquist and the reference's own noise — which would otherwise read as
-            // blur the reference already has (λ biased low).
-            let (image_lp, sharp_lp) = (prefilter(image), prefilter(&r.image));
             let inp = FitInputs {
-                image: &image_lp,
-                motion_deblurred: Some(&sharp_lp),
+                motion_deblurred: Some(&r.image),
+                motion_deblurred_second: r.second.as_ref(),
                 reference_valid: r.valid.as_ref(),
                 ..base
             };
-            match fit::fit(&inp, &FitOptions { tier: Some(fit::Tier::Accurate), ..only(false, true, false) }) {
+            let opts = FitOptions {
+                tier: Some(fit::Tier::Accurate),
+                mb_prefilter_var_px2: MB_PREFILTER_VAR_PX2,
+                mb_min_flow_px: MB_MIN_FLOW_PX,
+                ..only(false, true, false)
+            };
+            match fit::fit(&inp, &opts) {
                 Ok(o) => {
                     model.motion_blur = o.model.motion_blur;
                     model.motion_blur.diagnostics.method = "accurate (temporal reference)".into();
