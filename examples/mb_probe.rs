@@ -70,9 +70,27 @@ fn main() {
         let pf = PoseDepthFlow.flow(&ctx).unwrap();
         let ferr = pf.dx.iter().zip(&f.flow.dx).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         let fmag = f.flow.dx.iter().map(|a| a.abs()).fold(0.0f32, f32::max);
+        let t0 = std::time::Instant::now();
         let r = if sparse { TemporalMotionDeblur::sparse() } else { TemporalMotionDeblur::default() }
             .deblur(&ctx, &pf)
             .unwrap();
+        let t_ref = t0.elapsed().as_secs_f64() * 1e3;
+        let t0 = std::time::Instant::now();
+        let o = fit(
+            &FitInputs {
+                motion_deblurred: Some(&r.image),
+                motion_deblurred_second: r.second.as_ref(),
+                flow: Some(&pf),
+                reference_valid: r.valid.as_ref(),
+                ..FitInputs::new(&f.image)
+            },
+            &opts,
+        );
+        eprintln!(
+            "reference {t_ref:.1} ms, fit {:.1} ms {:?}",
+            t0.elapsed().as_secs_f64() * 1e3,
+            o.map(|o| o.model.motion_blur.diagnostics.stages_s)
+        );
         let mut only_dof = f.truth.clone();
         only_dof.motion_blur.present = false;
         only_dof.noise.present = false;

@@ -149,42 +149,40 @@ fn motion_difference(a: &Analysed, b: &Analysed) -> Option<f32> {
 
 /// Mean of `sources` aligned into `current` (on `align_bands`' rows for `stride`);
 /// valid where every source is (so the noise ratio is the same 1/m at every valid
-/// pixel). Invalid pixels hold the current frame's value. Only the aligned rows are
-/// visited: a sparse reference costs its bands, not the frame.
+/// pixel). Invalid pixels in the aligned rows hold the current frame's value; the
+/// rows not aligned hold 0 (invalid). Only the aligned rows are visited and
+/// written: a sparse reference costs its bands, not the frame (the untouched rest
+/// of a zeroed allocation is never paged in).
 fn aligned_mean(current: &Analysed, sources: &[&Arc<Analysed>], k: &Intrinsics, stride: usize) -> Option<(Rgb, Plane)> {
     let cur = &current.frame.image;
     let (w, h) = (cur.width, cur.height);
     let rows: Vec<usize> = (0..h).filter(|&y| in_band(y, stride)).collect();
-    let mut sum = cur.clone();
-    let mut all_valid = vec![false; w * h];
+    let mut sum = Rgb::new(w, h, [0.0; 3]);
+    let mut all_valid = Plane::new(w, h, 0.0);
     for (n, s) in sources.iter().enumerate() {
         let a = align_bands(s, current, k, stride)?;
         for &y in &rows {
             let span = y * w..(y + 1) * w;
             for c in 0..3 {
                 let (o, v) = (&mut sum.channels[c][span.clone()], &a.image.channels[c][span.clone()]);
-                if n == 0 {
-                    o.copy_from_slice(v);
-                } else {
-                    o.iter_mut().zip(v).for_each(|(o, v)| *o += v);
-                }
+                o.iter_mut().zip(v).for_each(|(o, v)| *o += v);
             }
-            for (o, v) in all_valid[span.clone()].iter_mut().zip(&a.valid[span]) {
-                *o = (*o || n == 0) && *v;
+            for (o, v) in all_valid.data[span.clone()].iter_mut().zip(&a.valid[span]) {
+                *o = if (n == 0 || *o > 0.5) && *v { 1.0 } else { 0.0 };
             }
         }
     }
     let m = sources.len().max(1) as f32;
     for &y in &rows {
         for i in y * w..(y + 1) * w {
+            let ok = all_valid.data[i] > 0.5;
             for c in 0..3 {
                 let o = &mut sum.channels[c][i];
-                *o = if all_valid[i] { *o / m } else { cur.channels[c][i] };
+                *o = if ok { *o / m } else { cur.channels[c][i] };
             }
         }
     }
-    let valid = Plane::from_vec(w, h, all_valid.into_iter().map(|v| if v { 1.0 } else { 0.0 }).collect());
-    Some((sum, valid))
+    Some((sum, all_valid))
 }
 
 fn needs<'a>(ctx: &'a FrameContext, provider: &'static str) -> Result<&'a Intrinsics, AnalysisError> {
@@ -217,15 +215,21 @@ fn mean_reference(
     let failed = || AnalysisError::unavailable(f, provider, "alignment failed");
     let (first, rest) = if split && picked.len() >= 2 { picked.split_at(picked.len() / 2) } else { (picked, &[][..]) };
     let (image, mut valid) = aligned_mean(ctx.current, first, k, stride).ok_or_else(failed)?;
+    let rows: Vec<usize> = (0..valid.height).filter(|&y| in_band(y, stride)).collect();
+    let w = valid.width;
     let second = if rest.is_empty() {
         None
     } else {
         let (image2, valid2) = aligned_mean(ctx.current, rest, k, stride).ok_or_else(failed)?;
-        valid.data.iter_mut().zip(&valid2.data).for_each(|(a, b)| *a = a.min(*b));
+        for &y in &rows {
+            let span = y * w..(y + 1) * w;
+            valid.data[span.clone()].iter_mut().zip(&valid2.data[span]).for_each(|(a, b)| *a = a.min(*b));
+        }
         Some(image2)
     };
-    let rows_aligned = (0..valid.height).filter(|&y| in_band(y, stride)).count();
-    let covered = valid.data.iter().filter(|v| **v > 0.5).count() as f32 / (rows_aligned * valid.width).max(1) as f32;
+    let covered_px: usize =
+        rows.iter().map(|&y| valid.data[y * w..(y + 1) * w].iter().filter(|v| **v > 0.5).count()).sum();
+    let covered = covered_px as f32 / (rows.len() * w).max(1) as f32;
     if covered < 0.25 {
         return Err(AnalysisError::unavailable(f, provider, format!("{what} overlap less than 25% of this one")));
     }

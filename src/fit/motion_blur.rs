@@ -155,19 +155,19 @@ impl Profiles {
 
 fn build_profiles(
     image: &Plane,
-    sharp: &Plane,
-    sharp2: Option<&Plane>,
+    (sharp, sharp2): (&Plane, Option<&Plane>),
     flow: &Flow,
     valid: Option<&Plane>,
     max_samples: usize,
     min_flow_px: f32,
+    row_ok: &[bool],
 ) -> Profiles {
     let (w, h) = (image.width, image.height);
     // Cheap pre-filter: the sharp luma must change along the flow within one frame
     // interval (|∇Y·F| ≥ 2e-3, half an 8-bit step), then thin deterministically to
     // `max_samples` before the (costlier) profiles are built.
     let mut cand = vec![];
-    for y in (0..h).step_by(2) {
+    for y in (0..h).step_by(2).filter(|&y| row_ok[y]) {
         for x in (0..w).step_by(2) {
             let i = y * w + x;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
@@ -175,9 +175,12 @@ fn build_profiles(
                 continue;
             }
             // The reference must hold along the whole streak (its ends and middle).
+            // Rounding by +½ and truncation (no libm call); off-frame positions
+            // clamp either way.
             if let Some(v) = valid {
                 let ok = |t: f32| {
-                    v.get_clamped((x as f32 + t * fx).round() as isize, (y as f32 + t * fy).round() as isize) > 0.5
+                    let (xs, ys) = ((x as f32 + t * fx + 0.5) as isize, (y as f32 + t * fy + 0.5) as isize);
+                    row_ok[ys.clamp(0, h as isize - 1) as usize] && v.get_clamped(xs, ys) > 0.5
                 };
                 if !(ok(-0.5) && ok(0.0) && ok(0.5)) {
                     continue;
@@ -299,21 +302,30 @@ pub fn fit_accurate(
         (opts.mb_max_samples, opts.mb_prefilter_var_px2, opts.mb_min_flow_px);
     let started = Instant::now();
     let mut st = super::Stages::start();
-    let (mut y, mut y_sharp, mut y_sharp2) = (image.luma(), sharp.luma(), sharp2.map(Rgb::luma));
+    // Only the rows the reference holds on are read (`build_profiles` keeps a pixel
+    // when its streak's ends and middle are valid), and the prefilter's reach
+    // around them.
+    let rows: Vec<bool> = match valid {
+        Some(v) => (0..v.height).map(|r| v.data[r * v.width..(r + 1) * v.width].iter().any(|&m| m > 0.5)).collect(),
+        None => vec![true; image.height],
+    };
+    let k = crate::image::discrete_gaussian_kernel(prefilter_var_px2);
+    let reach = k.len() / 2;
+    let near = |r: usize| rows[r.saturating_sub(reach)..(r + reach + 1).min(rows.len())].iter().any(|&b| b);
+    // Rows whose prefiltered values hold: every row the kernel reaches has valid
+    // pixels (a sparse reference's band edges would otherwise blend in unset rows).
+    let row_ok: Vec<bool> = (0..rows.len())
+        .map(|r| rows[r.saturating_sub(reach)..(r + reach + 1).min(rows.len())].iter().all(|&b| b))
+        .collect();
+    let (mut y, mut y_sharp, mut y_sharp2) =
+        (image.luma_rows(&near), sharp.luma_rows(&near), sharp2.map(|s| s.luma_rows(&near)));
     if prefilter_var_px2 > 0.0 {
-        // Only the rows the reference holds on are read (`build_profiles` keeps a
-        // pixel when its streak's ends and middle are valid).
-        let rows: Vec<bool> = match valid {
-            Some(v) => (0..v.height).map(|r| v.data[r * v.width..(r + 1) * v.width].iter().any(|&m| m > 0.5)).collect(),
-            None => vec![true; y.height],
-        };
-        let k = crate::image::discrete_gaussian_kernel(prefilter_var_px2);
         y = crate::image::blur_separable_rows(&y, &k, &|r| rows[r]);
         y_sharp = crate::image::blur_separable_rows(&y_sharp, &k, &|r| rows[r]);
         y_sharp2 = y_sharp2.map(|p| crate::image::blur_separable_rows(&p, &k, &|r| rows[r]));
     }
     st.lap("prefilter");
-    let prof = build_profiles(&y, &y_sharp, y_sharp2.as_ref(), flow, valid, max_samples, min_flow_px);
+    let prof = build_profiles(&y, (&y_sharp, y_sharp2.as_ref()), flow, valid, max_samples, min_flow_px, &row_ok);
     st.lap("blur");
     let n = prof.len();
     if n < MIN_SAMPLES {

@@ -101,6 +101,23 @@ impl Rgb {
     }
 
     /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
+    /// `luma` on the rows where `row(y)`, 0 elsewhere (a fit that reads a few bands
+    /// of a frame pays for those: `fit::motion_blur`).
+    pub fn luma_rows(&self, row: &dyn Fn(usize) -> bool) -> Plane {
+        let w = self.width;
+        let mut out = Plane::new(w, self.height, 0.0);
+        let [r, g, b] = &self.channels;
+        for y in (0..self.height).filter(|&y| row(y)) {
+            let span = y * w..(y + 1) * w;
+            for (o, ((r, g), b)) in
+                out.data[span.clone()].iter_mut().zip(r[span.clone()].iter().zip(&g[span.clone()]).zip(&b[span]))
+            {
+                *o = LUMA_WEIGHTS[0] * r + LUMA_WEIGHTS[1] * g + LUMA_WEIGHTS[2] * b;
+            }
+        }
+        out
+    }
+
     pub fn luma(&self) -> Plane {
         let [r, g, b] = &self.channels;
         let data = r

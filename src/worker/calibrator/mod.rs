@@ -116,7 +116,8 @@ impl CalibratorConfig {
             burst_s: 1.0,
             update_interval_s: tier.update_interval_s(),
             refit_s: match tier {
-                CalibrationTier::Fast => [0.1, 0.0, 0.5],
+                // λ against sharp frames reads ±0.002 per fit: every 0.1 s is plenty.
+                CalibrationTier::Fast => [0.1, 0.1, 0.5],
                 _ => [0.0, 0.0, 1.0],
             },
             window_s: 1.0,
@@ -322,6 +323,11 @@ const MB_PREFILTER_VAR_PX2: f32 = 1.0;
 /// alignment's resampling and the references' own residual motion are a fixed
 /// blur deficit of a few hundredths of a px², which only short streaks feel.
 const MB_MIN_FLOW_PX: f32 = 4.0;
+/// Pixels the temporal motion-blur fit reads (`FitOptions::mb_max_samples`): half
+/// the default. Two references double each sample's cost, and at 512² 2048
+/// samples already read λ within 0.001 (BENCHMARKS.md, "Motion blur (accurate):
+/// pixel budget").
+const MB_MAX_SAMPLES: usize = 2048;
 /// A held sharp frame's age counts as this much motion per second when the
 /// oldest-or-blurriest one makes room (`Calibrator::push_frame`).
 const SHARP_AGE_PX_PER_S: f64 = 0.5;
@@ -667,20 +673,28 @@ impl Calibrator {
         // one core at 1280×960). Out of phase they made two alignments per 0.1 s.
         // It waits at most one more interval.
         let aligned_now = self.aligned_previous.as_ref().is_some_and(|(i, a)| *i == index && a.is_some());
-        let mut due = |k: usize, wanted: bool| {
+        let mut due = |k: usize, wanted: bool, noise_now: bool| {
             let since = t_s - self.last_effect_fit_s[k];
             let interval = self.cfg.refit_s[k] - 1e-9;
-            let in_phase = k != 0 || aligned_now || since >= 2.0 * interval;
+            // Noise waits for an aligned frame; motion blur for an update that does
+            // not refit noise (the two costliest fits of the fast tier on separate
+            // updates). Either waits at most one more interval.
+            let in_phase = match k {
+                0 => aligned_now,
+                1 => !noise_now,
+                _ => true,
+            } || since >= 2.0 * interval;
             let ok = wanted && (in_burst || (since >= interval && in_phase));
             if ok {
                 self.last_effect_fit_s[k] = t_s;
             }
             ok
         };
+        let noise = due(0, self.cfg.effects.noise, false);
         let fx = Effects {
-            noise: due(0, self.cfg.effects.noise),
-            motion_blur: due(1, self.cfg.effects.motion_blur),
-            depth_of_field: due(2, self.cfg.effects.depth_of_field),
+            noise,
+            motion_blur: due(1, self.cfg.effects.motion_blur, noise),
+            depth_of_field: due(2, self.cfg.effects.depth_of_field, noise),
         };
         // The blind noise fit reads texture off the previous exposure aligned by pose
         // and depth (`fit::Neighbour`): on the calibration video its error falls from
@@ -825,6 +839,7 @@ impl Calibrator {
                 tier: Some(fit::Tier::Accurate),
                 mb_prefilter_var_px2: MB_PREFILTER_VAR_PX2,
                 mb_min_flow_px: MB_MIN_FLOW_PX,
+                mb_max_samples: MB_MAX_SAMPLES,
                 ..only(false, true, false)
             };
             match fit::fit(&inp, &opts) {
