@@ -545,4 +545,32 @@ mod tests {
         // column fewer where the translation's rounding puts u a hair below 2.
         assert!((58 * 44..=59 * 44).contains(&n), "valid region: {n}");
     }
+
+    /// `align_bands` is `align` on its bands (bit for bit: the same code per row) and
+    /// invalid elsewhere; every stride keeps some rows and covers ~1/stride of them.
+    #[test]
+    fn bands_are_the_full_alignment_on_their_rows() {
+        let (w, h) = (64usize, 200usize);
+        let k = Intrinsics { fx: 50.0, fy: 50.0, cx: 31.5, cy: 99.5, width: w, height: h };
+        let wall = Plane::new(w, h, 2.0);
+        let src_pose = Mat4::from_translation(Vec3::new(0.05, 0.02, 0.0));
+        let src = analysed(pattern(w, h), wall.clone(), src_pose);
+        let dst = analysed(pattern(w, h), wall, Mat4::IDENTITY);
+        let full = align(&src, &dst, &k).expect("aligned");
+        for stride in [1usize, 2, 3, 6] {
+            let part = align_bands(&src, &dst, &k, stride).expect("aligned");
+            let rows = (0..h).filter(|&y| in_band(y, stride)).count();
+            assert!(rows > 0 && rows <= h.div_ceil(stride) + BAND_ROWS, "stride {stride}: {rows} rows");
+            for i in 0..w * h {
+                if in_band(i / w, stride) {
+                    assert_eq!(part.valid[i], full.valid[i], "stride {stride}, pixel {i}");
+                    for c in 0..3 {
+                        assert_eq!(part.image.channels[c][i], full.image.channels[c][i]);
+                    }
+                } else {
+                    assert!(!part.valid[i], "stride {stride}: row {} is not aligned", i / w);
+                }
+            }
+        }
+    }
 }
