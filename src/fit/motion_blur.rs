@@ -202,16 +202,8 @@ fn build_profiles(
         let speed = (fx * fx + fy * fy).sqrt();
         let m = ((speed / PROFILE_SPACING_PX).ceil() as usize).max(8);
         let start = p.f.len();
-        let mut cum = 0.0f32;
-        for j in 0..=m {
-            let t = j as f32 / m as f32 - 0.5;
-            let v = sharp.sample_bilinear(x as f32 + t * fx, y as f32 + t * fy);
-            if j > 0 {
-                cum += 0.5 * (p.f[start + j - 1] + v) / m as f32;
-            }
-            p.f.push(v);
-            p.c.push(cum);
-        }
+        let (xf, yf) = (x as f32, y as f32);
+        let cum = append_profile(&mut p.f, &mut p.c, sharp, xf, yf, (fx, fy), m);
         // Informative: a full-exposure streak changes this pixel by ≥ 1e-3.
         if (cum - sharp.get(x, y)).abs() < 1e-3 {
             p.f.truncate(start);
@@ -219,16 +211,7 @@ fn build_profiles(
             continue;
         }
         if let Some(s2) = sharp2 {
-            let mut cum = 0.0f32;
-            for j in 0..=m {
-                let t = j as f32 / m as f32 - 0.5;
-                let v = s2.sample_bilinear(x as f32 + t * fx, y as f32 + t * fy);
-                if j > 0 {
-                    cum += 0.5 * (p.f2[start + j - 1] + v) / m as f32;
-                }
-                p.f2.push(v);
-                p.c2.push(cum);
-            }
+            append_profile(&mut p.f2, &mut p.c2, s2, xf, yf, (fx, fy), m);
         }
         p.offsets.push(p.f.len());
         p.target.push(image.get(x, y));
@@ -367,18 +350,26 @@ pub fn fit_accurate(
 fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32)) {
     let len = (dir.0 * dir.0 + dir.1 * dir.1).sqrt();
     let m = ((len / 0.5).ceil() as usize).max(4);
-    let start = prof.f.len();
+    append_profile(&mut prof.f, &mut prof.c, p, x, y, dir, m);
+    prof.offsets.push(prof.f.len());
+}
+
+/// Append the m + 1 nodes f_j = p(x + t_j·dir, y + t_j·dir), t_j = j/m − ½, and
+/// their cumulative trapezoid integrals C_j to `f` and `c`; returns C_m (the mean
+/// over the whole streak).
+fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32, dir: (f32, f32), m: usize) -> f32 {
+    let start = f.len();
     let mut cum = 0.0f32;
     for j in 0..=m {
         let t = j as f32 / m as f32 - 0.5;
         let v = p.sample_bilinear(x + t * dir.0, y + t * dir.1);
         if j > 0 {
-            cum += 0.5 * (prof.f[start + j - 1] + v) / m as f32;
+            cum += 0.5 * (f[start + j - 1] + v) / m as f32;
         }
-        prof.f.push(v);
-        prof.c.push(cum);
+        f.push(v);
+        c.push(cum);
     }
-    prof.offsets.push(prof.f.len());
+    cum
 }
 
 /// Fast tier: frame and flow only. Two estimators, the first that can answer wins:

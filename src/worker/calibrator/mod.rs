@@ -166,7 +166,7 @@ impl Providers {
         // I_noMB from frames taken with the head at rest, in every tier: blind, a
         // streak of ≤ 3 px (λ = 0.25 on a slow turn) is not identifiable
         // (BENCHMARKS.md), against the reference it is. The fast and balanced tiers
-        // align one sharp frame on a sample of rows.
+        // align two sharp frames on a sample of rows, as two independent references.
         let motion_deblur: Box<dyn MotionDeblurrer> = match tier {
             CalibrationTier::Accurate => Box::new(TemporalMotionDeblur::default()),
             _ => Box::new(TemporalMotionDeblur::sparse()),
@@ -319,9 +319,11 @@ const MB_PREFILTER_VAR_PX2: f32 = 1.0;
 /// (`FitOptions::mb_min_flow_px`). Against references aligned from other frames,
 /// short streaks read λ low: measured on the calibration video at 320×240 (two
 /// sharp frames, cross loss), λ = 0.5 read 0.18 at 1.6 px/frame, 0.44 at 4, 0.47
-/// at 6.4, 0.49 at 8 (and 0.42 at 3.6 px, 0.49 at 7 px at 1280×960) — the
-/// alignment's resampling and the references' own residual motion are a fixed
-/// blur deficit of a few hundredths of a px², which only short streaks feel.
+/// at 6.4, 0.49 at 8 (and 0.42 at 3.6 px, 0.49 at 7 px at 1280×960): a fixed
+/// blur deficit of a few hundredths of a px² along the flow, which only short
+/// streaks feel. Its cause is not pinned down (a larger prefilter made it worse, so
+/// it is not resampling's attenuation near Nyquist alone). Applied to every
+/// motion-blur reference the worker is given.
 const MB_MIN_FLOW_PX: f32 = 4.0;
 /// Pixels the temporal motion-blur fit reads (`FitOptions::mb_max_samples`): half
 /// the default. Two references double each sample's cost, and at 512² 2048
