@@ -72,6 +72,11 @@ pub fn in_band(y: usize, stride: usize) -> bool {
     (y / BAND_ROWS) % stride == stride / 2
 }
 
+/// The rows of `align_bands`' bands in a frame `h` rows tall.
+fn band_rows(h: usize, stride: usize) -> Vec<usize> {
+    (0..h).filter(|&y| in_band(y, stride)).collect()
+}
+
 /// `align` where `row(y)`; other rows are left invalid.
 fn align_rows(src: &Analysed, dst: &Analysed, k: &Intrinsics, row: &(dyn Fn(usize) -> bool + Sync)) -> Option<Aligned> {
     use rayon::prelude::*;
@@ -156,7 +161,7 @@ fn motion_difference(a: &Analysed, b: &Analysed) -> Option<f32> {
 fn aligned_mean(current: &Analysed, sources: &[&Arc<Analysed>], k: &Intrinsics, stride: usize) -> Option<(Rgb, Plane)> {
     let cur = &current.frame.image;
     let (w, h) = (cur.width, cur.height);
-    let rows: Vec<usize> = (0..h).filter(|&y| in_band(y, stride)).collect();
+    let rows = band_rows(h, stride);
     let mut sum = Rgb::new(w, h, [0.0; 3]);
     let mut all_valid = Plane::new(w, h, 0.0);
     for (n, s) in sources.iter().enumerate() {
@@ -215,7 +220,7 @@ fn mean_reference(
     let failed = || AnalysisError::unavailable(f, provider, "alignment failed");
     let (first, rest) = if split && picked.len() >= 2 { picked.split_at(picked.len() / 2) } else { (picked, &[][..]) };
     let (image, mut valid) = aligned_mean(ctx.current, first, k, stride).ok_or_else(failed)?;
-    let rows: Vec<usize> = (0..valid.height).filter(|&y| in_band(y, stride)).collect();
+    let rows = band_rows(valid.height, stride);
     let w = valid.width;
     let second = if rest.is_empty() {
         None
@@ -324,9 +329,9 @@ impl TemporalMotionDeblur {
     /// The fast and balanced tiers': the two sharpest frames, as two independent
     /// references (`split`), each aligned on about a sixth of a 1280×960 frame (all
     /// of it up to 640×320). At 1280×960 one full alignment is 37 ms of one core
-    /// (BENCHMARKS.md). One frame alone, unsplit, read λ up to +0.3 high on streaks of a
-    /// few pixels at 1280×960: its noise, smoothed by the streak, lowers the loss
-    /// at long streaks.
+    /// (BENCHMARKS.md). One frame alone, unsplit, read λ = 0.5 as 0.66 on 3.6 px
+    /// streaks at 1280×960 (`examples/mb_probe`): its noise, averaged by the streak,
+    /// lowers the loss at long λ.
     pub fn sparse() -> Self {
         Self { frames: 2, max_aligned_px: Some(204_800), split: true, ..Default::default() }
     }

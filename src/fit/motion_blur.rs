@@ -129,15 +129,11 @@ impl Profiles {
         }
     }
 
-    /// ∂B/∂λ at pixel i by a central difference on [l0, l1] (both references'
-    /// mean with a second one).
+    /// ∂B/∂λ of the references' mean at pixel i, by a central difference on
+    /// [l0, l1] (`blurred2` is `blurred` without a second reference).
     fn slope(&self, i: usize, l0: f32, l1: f32) -> f64 {
-        let d = |b: &dyn Fn(usize, f32) -> f32| ((b(i, l1) - b(i, l0)) / (l1 - l0)) as f64;
-        if self.f2.is_empty() {
-            d(&|i, l| self.blurred(i, l))
-        } else {
-            0.5 * (d(&|i, l| self.blurred(i, l)) + d(&|i, l| self.blurred2(i, l)))
-        }
+        let mean = |l: f32| 0.5 * (self.blurred(i, l) + self.blurred2(i, l));
+        ((mean(l1) - mean(l0)) / (l1 - l0)) as f64
     }
 
     /// Mean squared residual against the references' mean at λ (the noise of the
