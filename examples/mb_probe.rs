@@ -56,6 +56,9 @@ fn main() {
         tier: Some(Tier::Accurate),
         effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
         mb_prefilter_var_px2: std::env::var("PRE").ok().and_then(|s| s.parse().ok()).unwrap_or(0.0),
+        // `WORKER=1`: the worker's sample cap and shortest flow.
+        mb_max_samples: if std::env::var_os("WORKER").is_some() { 2048 } else { FitOptions::default().mb_max_samples },
+        mb_min_flow_px: if std::env::var_os("WORKER").is_some() { 4.0 } else { FitOptions::default().mb_min_flow_px },
         ..Default::default()
     };
     for i in frames {
@@ -70,6 +73,24 @@ fn main() {
         let pf = PoseDepthFlow.flow(&ctx).unwrap();
         let ferr = pf.dx.iter().zip(&f.flow.dx).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         let fmag = f.flow.dx.iter().map(|a| a.abs()).fold(0.0f32, f32::max);
+        // `REPS=n`: the fastest of n runs of the flow, one band alignment and the reference.
+        let reps: usize = std::env::var("REPS").ok().and_then(|s| s.parse().ok()).unwrap_or(0);
+        let best = |f: &mut dyn FnMut()| {
+            (0..reps)
+                .map(|_| {
+                    let t = std::time::Instant::now();
+                    f();
+                    t.elapsed().as_secs_f64() * 1e3
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        if reps > 0 {
+            let t_flow = best(&mut || drop(PoseDepthFlow.flow(&ctx)));
+            let t_align =
+                best(&mut || drop(blind_augment::analysis::temporal::align_bands(&held[0], &a, &spec.view, 6)));
+            let t_ref = best(&mut || drop(TemporalMotionDeblur::sparse().deblur(&ctx, &pf)));
+            eprintln!("best of {reps}: flow {t_flow:.1} ms, one band alignment {t_align:.1} ms, sparse reference {t_ref:.1} ms");
+        }
         let t0 = std::time::Instant::now();
         let r = if sparse { TemporalMotionDeblur::sparse() } else { TemporalMotionDeblur::default() }
             .deblur(&ctx, &pf)

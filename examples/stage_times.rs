@@ -12,8 +12,17 @@ fn main() {
     let img = common::mirror_tile(&common::photo("astronaut.png"), w, h);
     let depth = Plane::new(w, h, 2.0);
     let flow = Flow::uniform(w, h, 6.0, 2.0);
-    let inp =
-        FitInputs { depth: Some(&depth), depth_units: DepthUnits::MetricM, flow: Some(&flow), ..FitInputs::new(&img) };
+    // `NEIGHBOUR=1`: the noise fit with an aligned neighbour (the frame itself,
+    // all valid: the cost is the same as with another exposure).
+    let valid = Plane::new(w, h, 1.0);
+    let with_neighbour = std::env::var("NEIGHBOUR").is_ok_and(|v| v == "1");
+    let inp = FitInputs {
+        depth: Some(&depth),
+        depth_units: DepthUnits::MetricM,
+        flow: Some(&flow),
+        neighbour: with_neighbour.then_some(blind_augment::fit::Neighbour { image: &img, valid: &valid }),
+        ..FitInputs::new(&img)
+    };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
     for _ in 0..3 {
         let t = std::time::Instant::now();

@@ -160,6 +160,14 @@ pub trait DepthProvider: Send {
 pub trait FlowProvider: Send {
     fn name(&self) -> &str;
     fn flow(&mut self, ctx: &FrameContext) -> Result<Flow, AnalysisError>;
+    /// The flow where `row(y)`; other rows may hold 0. For a caller that reads part
+    /// of the frame (the motion-blur fit against a sparse reference,
+    /// `MotionDeblurrer::rows`). A provider that cannot restrict its work computes
+    /// every row.
+    fn flow_rows(&mut self, ctx: &FrameContext, row: &(dyn Fn(usize) -> bool + Sync)) -> Result<Flow, AnalysisError> {
+        let _ = row;
+        self.flow(ctx)
+    }
 }
 
 /// I_noNoise.
@@ -172,6 +180,20 @@ pub trait Denoiser: Send {
 pub trait MotionDeblurrer: Send {
     fn name(&self) -> &str;
     fn deblur(&mut self, ctx: &FrameContext, flow: &Flow) -> Result<Reference, AnalysisError>;
+    /// The rows (`[y]`) a reference for a `width`×`height` frame can be valid on, when
+    /// it is known to be fewer than all (None: any row): the flow is then needed
+    /// there only (`FlowProvider::flow_rows`).
+    fn rows(&self, width: usize, height: usize) -> Option<Vec<bool>> {
+        let _ = (width, height);
+        None
+    }
+    /// A reference this provider made, which its caller is done with, unchanged: the
+    /// provider may reuse its buffers (a frame-sized buffer's first touch costs page
+    /// faults; `TemporalMotionDeblur` writes only its bands). By default it is
+    /// dropped.
+    fn recycle(&mut self, spare: Reference) {
+        let _ = spare;
+    }
 }
 
 /// I_noDoF, given the frame's depth.

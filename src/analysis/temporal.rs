@@ -72,28 +72,29 @@ pub fn in_band(y: usize, stride: usize) -> bool {
     (y / BAND_ROWS) % stride == stride / 2
 }
 
+/// The band stride (`in_band`) that keeps a `w`×`h` frame's bands within about
+/// `max_px` pixels (1: every row).
+pub fn band_stride(w: usize, h: usize, max_px: usize) -> usize {
+    (w * h).div_ceil(max_px.max(w * BAND_ROWS).max(1)).max(1)
+}
+
 /// The rows of `align_bands`' bands in a frame `h` rows tall.
 fn band_rows(h: usize, stride: usize) -> Vec<usize> {
     (0..h).filter(|&y| in_band(y, stride)).collect()
 }
 
-/// `align` where `row(y)`; other rows are left invalid.
-fn align_rows(src: &Analysed, dst: &Analysed, k: &Intrinsics, row: &(dyn Fn(usize) -> bool + Sync)) -> Option<Aligned> {
+/// `align` where `row(y)`; other rows are left invalid (and cost nothing but their
+/// share of the zeroed allocation): what a caller that reads part of the frame
+/// needs (the worker's noise probe and its noise fit's strip).
+pub fn align_rows(
+    src: &Analysed,
+    dst: &Analysed,
+    k: &Intrinsics,
+    row: &(dyn Fn(usize) -> bool + Sync),
+) -> Option<Aligned> {
     use rayon::prelude::*;
-    let (src_pose, dst_pose) = (src.world_from_camera?, dst.world_from_camera?);
-    let (src_depth, dst_depth) = (metric(src)?, metric(dst)?);
-    let (w, h) = (dst.frame.image.width, dst.frame.image.height);
-    if (src.frame.image.width, src.frame.image.height) != (w, h)
-        || (dst_depth.width, dst_depth.height) != (w, h)
-        || (src_depth.width, src_depth.height) != (w, h)
-    {
-        return None;
-    }
-    let src_from_dst = src_pose.inverse() * dst_pose;
-    let rot = glam::Mat3::from_mat4(src_from_dst);
-    let t = src_from_dst.w_axis.truncate();
-    let step = rot * Vec3::new(1.0 / k.fx, 0.0, 0.0);
-    let src_img = &src.frame.image;
+    let warp = Warp::new(src, dst, k)?;
+    let (w, h) = (warp.w, warp.h);
     let mut image = Rgb::new(w, h, [0.0; 3]);
     let mut valid = vec![false; w * h];
     let [r, g, b] = &mut image.channels;
@@ -102,48 +103,90 @@ fn align_rows(src: &Analysed, dst: &Analysed, k: &Intrinsics, row: &(dyn Fn(usiz
         .zip(b.par_chunks_mut(w))
         .zip(valid.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, (((r, g), b), ok))| {
-            if !row(y) {
-                return;
-            }
-            let row_start = rot * Vec3::new(-k.cx / k.fx, (y as f32 - k.cy) / k.fy, 1.0);
-            let depth_row = &dst_depth.data[y * w..(y + 1) * w];
-            let mut ray = row_start;
-            for x in 0..w {
-                // A running sum, re-anchored every 32 px: its rounding stays below
-                // ~1e-6 of the ray (≪ 0.01 px) where 1280 unanchored adds drift up to
-                // ~1e-4 (0.05 px); start + x·step at every pixel costs 15% more here.
-                if x % 32 == 0 {
-                    ray = row_start + step * x as f32;
-                }
-                let z = depth_row[x];
-                let q = ray * z + t;
-                ray += step;
-                if !(z.is_finite() && z > 0.0) || q.z <= 1e-3 {
-                    continue;
-                }
-                let inv_z = 1.0 / q.z;
-                let (u, v) = (k.fx * q.x * inv_z + k.cx, k.fy * q.y * inv_z + k.cy);
-                if !(u >= BORDER_PX
-                    && v >= BORDER_PX
-                    && u <= w as f32 - 1.0 - BORDER_PX
-                    && v <= h as f32 - 1.0 - BORDER_PX)
-                {
-                    continue;
-                }
-                // u, v ≥ 2: adding ½ and truncating rounds without a libm call.
-                let zs = src_depth.get((u + 0.5) as usize, (v + 0.5) as usize);
-                if zs.is_finite() && zs < q.z * (1.0 - OCCLUSION_TOLERANCE) {
-                    continue;
-                }
-                // BORDER_PX ≥ 2 keeps every tap inside, so this is always Some.
-                if let Some([sr, sg, sb]) = sample_bicubic_rgb_interior(src_img, u, v) {
-                    (r[x], g[x], b[x]) = (sr, sg, sb);
-                    ok[x] = true;
-                }
-            }
-        });
+        .filter(|(y, _)| row(*y))
+        .for_each(|(y, (((r, g), b), ok))| warp.row(y, [r, g, b], ok));
     Some(Aligned { image, valid })
+}
+
+/// One source frame's warp into a destination camera (`align`), row by row.
+struct Warp<'a> {
+    w: usize,
+    h: usize,
+    k: Intrinsics,
+    rot: glam::Mat3,
+    t: Vec3,
+    step: Vec3,
+    src_img: &'a Rgb,
+    src_depth: &'a Plane,
+    dst_depth: &'a Plane,
+}
+
+impl<'a> Warp<'a> {
+    fn new(src: &'a Analysed, dst: &'a Analysed, k: &Intrinsics) -> Option<Self> {
+        let (src_pose, dst_pose) = (src.world_from_camera?, dst.world_from_camera?);
+        let (src_depth, dst_depth) = (metric(src)?, metric(dst)?);
+        let (w, h) = (dst.frame.image.width, dst.frame.image.height);
+        if (src.frame.image.width, src.frame.image.height) != (w, h)
+            || (dst_depth.width, dst_depth.height) != (w, h)
+            || (src_depth.width, src_depth.height) != (w, h)
+        {
+            return None;
+        }
+        let src_from_dst = src_pose.inverse() * dst_pose;
+        let rot = glam::Mat3::from_mat4(src_from_dst);
+        Some(Self {
+            w,
+            h,
+            k: *k,
+            rot,
+            t: src_from_dst.w_axis.truncate(),
+            step: rot * Vec3::new(1.0 / k.fx, 0.0, 0.0),
+            src_img: &src.frame.image,
+            src_depth,
+            dst_depth,
+        })
+    }
+
+    /// Row `y` of the warped source into `rgb` and `ok` (each `w` long); pixels that
+    /// do not hold are left as they are, `ok` false.
+    fn row(&self, y: usize, rgb: [&mut [f32]; 3], ok: &mut [bool]) {
+        let (w, h, k) = (self.w, self.h, &self.k);
+        let [r, g, b] = rgb;
+        let row_start = self.rot * Vec3::new(-k.cx / k.fx, (y as f32 - k.cy) / k.fy, 1.0);
+        let depth_row = &self.dst_depth.data[y * w..(y + 1) * w];
+        let mut ray = row_start;
+        for x in 0..w {
+            ok[x] = false;
+            // A running sum, re-anchored every 32 px: its rounding stays below
+            // ~1e-6 of the ray (≪ 0.01 px) where 1280 unanchored adds drift up to
+            // ~1e-4 (0.05 px); start + x·step at every pixel costs 15% more here.
+            if x % 32 == 0 {
+                ray = row_start + self.step * x as f32;
+            }
+            let z = depth_row[x];
+            let q = ray * z + self.t;
+            ray += self.step;
+            if !(z.is_finite() && z > 0.0) || q.z <= 1e-3 {
+                continue;
+            }
+            let inv_z = 1.0 / q.z;
+            let (u, v) = (k.fx * q.x * inv_z + k.cx, k.fy * q.y * inv_z + k.cy);
+            if !(u >= BORDER_PX && v >= BORDER_PX && u <= w as f32 - 1.0 - BORDER_PX && v <= h as f32 - 1.0 - BORDER_PX)
+            {
+                continue;
+            }
+            // u, v ≥ 2: adding ½ and truncating rounds without a libm call.
+            let zs = self.src_depth.get((u + 0.5) as usize, (v + 0.5) as usize);
+            if zs.is_finite() && zs < q.z * (1.0 - OCCLUSION_TOLERANCE) {
+                continue;
+            }
+            // BORDER_PX ≥ 2 keeps every tap inside, so this is always Some.
+            if let Some([sr, sg, sb]) = sample_bicubic_rgb_interior(self.src_img, u, v) {
+                (r[x], g[x], b[x]) = (sr, sg, sb);
+                ok[x] = true;
+            }
+        }
+    }
 }
 
 /// Largest difference in sparse-grid motion between two frames (px per interval).
@@ -155,39 +198,76 @@ fn motion_difference(a: &Analysed, b: &Analysed) -> Option<f32> {
 /// Mean of `sources` aligned into `current` (on `align_bands`' rows for `stride`);
 /// valid where every source is (so the noise ratio is the same 1/m at every valid
 /// pixel). Invalid pixels in the aligned rows hold the current frame's value; the
-/// rows not aligned hold 0 (invalid). Only the aligned rows are visited and
-/// written: a sparse reference costs its bands, not the frame (the untouched rest
-/// of a zeroed allocation is never paged in).
-fn aligned_mean(current: &Analysed, sources: &[&Arc<Analysed>], k: &Intrinsics, stride: usize) -> Option<(Rgb, Plane)> {
+/// rows not aligned hold 0 (invalid). Each source is warped a row at a time into a
+/// row buffer and summed there: a sparse reference costs its bands, and no
+/// frame-sized buffer besides its output (the per-source frames it used to
+/// allocate, zeroed, cost as much as the alignment itself at 1280×960).
+fn aligned_mean(
+    current: &Analysed,
+    sources: &[&Arc<Analysed>],
+    k: &Intrinsics,
+    stride: usize,
+    pool: &mut Pool,
+) -> Option<(Rgb, Plane)> {
+    use rayon::prelude::*;
     let cur = &current.frame.image;
     let (w, h) = (cur.width, cur.height);
-    let rows = band_rows(h, stride);
-    let mut sum = Rgb::new(w, h, [0.0; 3]);
-    let mut all_valid = Plane::new(w, h, 0.0);
-    for (n, s) in sources.iter().enumerate() {
-        let a = align_bands(s, current, k, stride)?;
-        for &y in &rows {
+    let warps: Vec<Warp> = sources.iter().map(|s| Warp::new(s, current, k)).collect::<Option<_>>()?;
+    let m = warps.len().max(1) as f32;
+    pool.keep_only((w, h, stride));
+    let mut out = pool.rgb.pop().unwrap_or_else(|| Rgb::new(w, h, [0.0; 3]));
+    let mut valid = pool.plane.pop().unwrap_or_else(|| Plane::new(w, h, 0.0));
+    let [r, g, b] = &mut out.channels;
+    r.par_chunks_mut(w)
+        .zip(g.par_chunks_mut(w))
+        .zip(b.par_chunks_mut(w))
+        .zip(valid.data.par_chunks_mut(w))
+        .enumerate()
+        .filter(|(y, _)| in_band(*y, stride))
+        .for_each(|(y, (((r, g), b), v))| {
+            // A recycled buffer holds the last reference here.
+            [&mut *r, &mut *g, &mut *b].into_iter().for_each(|o| o.fill(0.0));
+            let mut buf = [vec![0.0; w], vec![0.0; w], vec![0.0; w]];
+            let (mut ok, mut all) = (vec![false; w], vec![true; w]);
+            for warp in &warps {
+                let [br, bg, bb] = &mut buf;
+                warp.row(y, [br, bg, bb], &mut ok);
+                for (o, s) in [&mut *r, &mut *g, &mut *b].into_iter().zip(&buf) {
+                    o.iter_mut().zip(s).for_each(|(o, s)| *o += s);
+                }
+                all.iter_mut().zip(&ok).for_each(|(a, o)| *a &= *o);
+            }
             let span = y * w..(y + 1) * w;
-            for c in 0..3 {
-                let (o, v) = (&mut sum.channels[c][span.clone()], &a.image.channels[c][span.clone()]);
-                o.iter_mut().zip(v).for_each(|(o, v)| *o += v);
+            for (c, o) in [&mut *r, &mut *g, &mut *b].into_iter().enumerate() {
+                for ((o, a), cv) in o.iter_mut().zip(&all).zip(&cur.channels[c][span.clone()]) {
+                    *o = if *a { *o / m } else { *cv };
+                }
             }
-            for (o, v) in all_valid.data[span.clone()].iter_mut().zip(&a.valid[span]) {
-                *o = if (n == 0 || *o > 0.5) && *v { 1.0 } else { 0.0 };
-            }
+            v.iter_mut().zip(&all).for_each(|(v, a)| *v = if *a { 1.0 } else { 0.0 });
+        });
+    Some((out, valid))
+}
+
+/// Frame-sized buffers of earlier references, for a sparse reference to reuse
+/// (`MotionDeblurrer::recycle`): only its bands are written, so a recycled buffer's
+/// other rows still hold the zeros of its first allocation, and its pages are
+/// mapped already. Fresh, a 1280×960 sparse reference's buffers cost more in page
+/// faults (when written and when the fit first reads them) than its alignment.
+#[derive(Clone, Debug, Default)]
+struct Pool {
+    /// (width, height, band stride) the buffers were made for.
+    key: (usize, usize, usize),
+    rgb: Vec<Rgb>,
+    plane: Vec<Plane>,
+}
+
+impl Pool {
+    /// Drop buffers made for another size or set of bands.
+    fn keep_only(&mut self, key: (usize, usize, usize)) {
+        if self.key != key {
+            *self = Self { key, ..Default::default() };
         }
     }
-    let m = sources.len().max(1) as f32;
-    for &y in &rows {
-        for i in y * w..(y + 1) * w {
-            let ok = all_valid.data[i] > 0.5;
-            for c in 0..3 {
-                let o = &mut sum.channels[c][i];
-                *o = if ok { *o / m } else { cur.channels[c][i] };
-            }
-        }
-    }
-    Some((sum, all_valid))
 }
 
 fn needs<'a>(ctx: &'a FrameContext, provider: &'static str) -> Result<&'a Intrinsics, AnalysisError> {
@@ -210,26 +290,28 @@ fn needs<'a>(ctx: &'a FrameContext, provider: &'static str) -> Result<&'a Intrin
 fn mean_reference(
     ctx: &FrameContext,
     picked: &[&Arc<Analysed>],
-    k: &Intrinsics,
     stride: usize,
     split: bool,
     provider: &'static str,
     what: &str,
+    pool: &mut Pool,
 ) -> Result<Reference, AnalysisError> {
+    let k = needs(ctx, provider)?;
     let f = ctx.current.frame.index;
     let failed = || AnalysisError::unavailable(f, provider, "alignment failed");
     let (first, rest) = if split && picked.len() >= 2 { picked.split_at(picked.len() / 2) } else { (picked, &[][..]) };
-    let (image, mut valid) = aligned_mean(ctx.current, first, k, stride).ok_or_else(failed)?;
+    let (image, mut valid) = aligned_mean(ctx.current, first, k, stride, pool).ok_or_else(failed)?;
     let rows = band_rows(valid.height, stride);
     let w = valid.width;
     let second = if rest.is_empty() {
         None
     } else {
-        let (image2, valid2) = aligned_mean(ctx.current, rest, k, stride).ok_or_else(failed)?;
+        let (image2, valid2) = aligned_mean(ctx.current, rest, k, stride, pool).ok_or_else(failed)?;
         for &y in &rows {
             let span = y * w..(y + 1) * w;
             valid.data[span.clone()].iter_mut().zip(&valid2.data[span]).for_each(|(a, b)| *a = a.min(*b));
         }
+        pool.plane.push(valid2);
         Some(image2)
     };
     let covered_px: usize =
@@ -272,7 +354,7 @@ impl Denoiser for TemporalDenoiser {
 
     fn denoise(&mut self, ctx: &FrameContext) -> Result<Reference, AnalysisError> {
         const P: &str = "temporal denoiser";
-        let k = needs(ctx, P)?;
+        needs(ctx, P)?;
         let f = ctx.current.frame.index;
         // Newest first: the scene changes least.
         let picked: Vec<&Arc<Analysed>> = ctx
@@ -295,7 +377,7 @@ impl Denoiser for TemporalDenoiser {
                 ),
             ));
         }
-        mean_reference(ctx, &picked, k, 1, false, P, "the aligned frames")
+        mean_reference(ctx, &picked, 1, false, P, "the aligned frames", &mut Pool::default())
     }
 }
 
@@ -317,11 +399,13 @@ pub struct TemporalMotionDeblur {
     /// motion-blur fit's cross loss (`fit::motion_blur`), which a noisy reference
     /// does not bias.
     pub split: bool,
+    /// Buffers of recycled references (`MotionDeblurrer::recycle`).
+    pool: Pool,
 }
 
 impl Default for TemporalMotionDeblur {
     fn default() -> Self {
-        Self { max_motion_px: 0.5, frames: 3, max_aligned_px: None, split: false }
+        Self { max_motion_px: 0.5, frames: 3, max_aligned_px: None, split: false, pool: Pool::default() }
     }
 }
 
@@ -338,7 +422,7 @@ impl TemporalMotionDeblur {
 
     /// Band stride that keeps a `w`×`h` frame within `max_aligned_px`.
     fn stride(&self, w: usize, h: usize) -> usize {
-        self.max_aligned_px.map_or(1, |n| (w * h).div_ceil(n.max(w * BAND_ROWS)))
+        self.max_aligned_px.map_or(1, |n| band_stride(w, h, n))
     }
 }
 
@@ -347,9 +431,14 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         "sharpest aligned frames"
     }
 
+    fn rows(&self, width: usize, height: usize) -> Option<Vec<bool>> {
+        let stride = self.stride(width, height);
+        (stride > 1).then(|| (0..height).map(|y| in_band(y, stride)).collect())
+    }
+
     fn deblur(&mut self, ctx: &FrameContext, _flow: &Flow) -> Result<Reference, AnalysisError> {
         const P: &str = "temporal motion deblur";
-        let k = needs(ctx, P)?;
+        needs(ctx, P)?;
         let f = ctx.current.frame.index;
         let mut sharp: Vec<(&Arc<Analysed>, f32)> = ctx
             .window
@@ -369,7 +458,17 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         sharp.sort_by(|a, b| a.1.total_cmp(&b.1).then(b.0.frame.t_s.total_cmp(&a.0.frame.t_s)));
         let picked: Vec<&Arc<Analysed>> = sharp.iter().take(self.frames.max(1)).map(|(a, _)| *a).collect();
         let img = &ctx.current.frame.image;
-        mean_reference(ctx, &picked, k, self.stride(img.width, img.height), self.split, P, "the sharp frames")
+        let stride = self.stride(img.width, img.height);
+        mean_reference(ctx, &picked, stride, self.split, P, "the sharp frames", &mut self.pool)
+    }
+
+    fn recycle(&mut self, spare: Reference) {
+        let (w, h) = (spare.image.width, spare.image.height);
+        // Only buffers of this size and band set (`Pool::keep_only`).
+        if self.pool.key == (w, h, self.stride(w, h)) {
+            self.pool.rgb.extend(std::iter::once(spare.image).chain(spare.second));
+            self.pool.plane.extend(spare.valid);
+        }
     }
 }
 
@@ -387,12 +486,15 @@ pub fn pose_matrix(p: &super::timing::TimedPose) -> Mat4 {
 /// an estimate of it — alignment low-passes the previous frame's noise and motion
 /// differs slightly between frames — but a quantity with a steady bias, whose
 /// steps are steps of the camera's noise.
-pub fn noise_probe(a: &Aligned, current: &Analysed) -> Option<f32> {
+///
+/// It reads the rows where `row(y)` (the caller keeps them the same from frame to
+/// frame, so the probes compare like with like).
+pub fn noise_probe(a: &Aligned, current: &Analysed, row: &dyn Fn(usize) -> bool) -> Option<f32> {
     let img = &current.frame.image;
     let (w, h) = (img.width, img.height);
     let g = &img.channels[1];
     let mut cand: Vec<(f32, f32)> = vec![];
-    for y in (1..h.saturating_sub(1)).step_by(2) {
+    for y in (1..h.saturating_sub(1)).step_by(2).filter(|&y| row(y)) {
         for x in (1..w.saturating_sub(1)).step_by(2) {
             let i = y * w + x;
             if !(a.valid[i] && a.valid[i - 1] && a.valid[i + 1] && a.valid[i - w] && a.valid[i + w]) {
@@ -577,5 +679,51 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A sparse reference made in recycled buffers (`MotionDeblurrer::recycle`) is
+    /// the one made in fresh ones, bit for bit: the last reference leaves nothing
+    /// behind, in its bands or outside them.
+    #[test]
+    fn a_recycled_reference_is_a_fresh_one() {
+        let (w, h) = (64usize, 200usize);
+        let k = Intrinsics { fx: 50.0, fy: 50.0, cx: 31.5, cy: 99.5, width: w, height: h };
+        let at_rest = |image: Rgb, x_m: f32, index: u64| {
+            let mut a = analysed(image, Plane::new(w, h, 2.0), Mat4::from_translation(Vec3::new(x_m, 0.0, 0.0)));
+            a.frame.index = index;
+            a.sparse_flow = Some(vec![[0.1, 0.0]; 4]);
+            Arc::new(a)
+        };
+        let shifted = |d: f32| {
+            let mut img = pattern(w, h);
+            img.channels.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v = (*v + d).min(1.0)));
+            img
+        };
+        let window = [at_rest(pattern(w, h), 0.03, 1), at_rest(shifted(0.1), -0.02, 2)];
+        let other = [at_rest(shifted(0.2), 0.01, 3), at_rest(shifted(0.05), 0.04, 4)];
+        let reference = |p: &mut TemporalMotionDeblur, window: &[Arc<Analysed>], x_m: f32| {
+            let current =
+                analysed(pattern(w, h), Plane::new(w, h, 2.0), Mat4::from_translation(Vec3::new(x_m, 0.0, 0.0)));
+            let ctx = FrameContext {
+                current: &current,
+                window,
+                poses: None,
+                intrinsics: Some(&k),
+                frame_interval_s: 1.0 / 30.0,
+            };
+            p.deblur(&ctx, &Flow::uniform(w, h, 0.0, 0.0)).expect("reference")
+        };
+        let sparse = || TemporalMotionDeblur { max_aligned_px: Some(w * h / 3 + 1), ..TemporalMotionDeblur::sparse() };
+        assert_eq!(sparse().stride(w, h), 3);
+        let mut recycled = sparse();
+        let first = reference(&mut recycled, &window, 0.0);
+        recycled.recycle(first);
+        let again = reference(&mut recycled, &other, 0.01);
+        let fresh = reference(&mut sparse(), &other, 0.01);
+        assert!(recycled.pool.rgb.is_empty() && recycled.pool.plane.len() == 1, "the buffers were reused");
+        assert_eq!(again.image, fresh.image);
+        assert_eq!(again.second, fresh.second);
+        assert_eq!(again.valid, fresh.valid);
+        assert!(fresh.second.is_some() && fresh.valid.as_ref().is_some_and(|v| v.data.iter().any(|v| *v > 0.5)));
     }
 }

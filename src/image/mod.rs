@@ -33,6 +33,11 @@ impl Plane {
         Self { width, height, data }
     }
 
+    /// The `w`×`h` rectangle at (`x0`, `y0`), copied (None where it does not fit).
+    pub fn crop(&self, x0: usize, y0: usize, w: usize, h: usize) -> Option<Plane> {
+        crop_slice(&self.data, self.width, self.height, x0, y0, w, h).map(|d| Self::from_vec(w, h, d))
+    }
+
     #[inline]
     pub fn get(&self, x: usize, y: usize) -> f32 {
         self.data[y * self.width + x]
@@ -64,6 +69,26 @@ impl Plane {
         let bottom = c + (d - c) * fx;
         top + (bottom - top) * fy
     }
+}
+
+/// The `w`×`h` rectangle at (`x0`, `y0`) of a row-major `width`×`height` image.
+fn crop_slice<T: Copy>(
+    data: &[T],
+    width: usize,
+    height: usize,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+) -> Option<Vec<T>> {
+    if x0 + w > width || y0 + h > height || data.len() != width * height {
+        return None;
+    }
+    let mut out = Vec::with_capacity(w * h);
+    for y in y0..y0 + h {
+        out.extend_from_slice(&data[y * width + x0..y * width + x0 + w]);
+    }
+    Some(out)
 }
 
 /// Three planar colour channels (R, G, B) of equal size.
@@ -100,7 +125,13 @@ impl Rgb {
         Self { width: r.width, height: r.height, channels: [r.data, g.data, b.data] }
     }
 
-    /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
+    /// The `w`×`h` rectangle at (`x0`, `y0`), copied (None where it does not fit).
+    pub fn crop(&self, x0: usize, y0: usize, w: usize, h: usize) -> Option<Rgb> {
+        let channels = [0, 1, 2].map(|c| crop_slice(&self.channels[c], self.width, self.height, x0, y0, w, h));
+        let [r, g, b] = channels;
+        Some(Self { width: w, height: h, channels: [r?, g?, b?] })
+    }
+
     /// `luma` on the rows where `row(y)`, 0 elsewhere (a fit that reads a few bands
     /// of a frame pays for those: `fit::motion_blur`).
     pub fn luma_rows(&self, row: &dyn Fn(usize) -> bool) -> Plane {
@@ -118,6 +149,7 @@ impl Rgb {
         out
     }
 
+    /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
     pub fn luma(&self) -> Plane {
         let [r, g, b] = &self.channels;
         let data = r
@@ -232,4 +264,21 @@ pub fn first_non_finite(v: &[f32]) -> Option<usize> {
             chunk.iter().position(|x| !x.is_finite()).map(|i| b * BLOCK + i)
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A crop holds the rectangle's pixels in order; one that does not fit is None.
+    #[test]
+    fn crop_copies_the_rectangle_and_refuses_one_outside() {
+        let p = Plane::from_vec(4, 3, (0..12).map(|v| v as f32).collect());
+        assert_eq!(p.crop(1, 1, 2, 2).map(|c| c.data), Some(vec![5.0, 6.0, 9.0, 10.0]));
+        assert_eq!(p.crop(0, 0, 4, 3), Some(p.clone()));
+        assert!(p.crop(3, 0, 2, 1).is_none() && p.crop(0, 2, 1, 2).is_none());
+        let img = Rgb::from_planes([p.clone(), p.clone(), p]);
+        let c = img.crop(0, 2, 4, 1).expect("fits");
+        assert_eq!((c.width, c.height, c.channels[2].clone()), (4, 1, vec![8.0, 9.0, 10.0, 11.0]));
+    }
 }

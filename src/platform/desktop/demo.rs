@@ -447,14 +447,15 @@ fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &Camera
     // The side-by-side: naive | matched, left eye, at the sequence's fastest moment
     // (frame 0 and SEQUENCE_FRAMES/2 move fastest), plus a 3× zoom on the object.
     let pick = SEQUENCE_FRAMES / 2;
-    let left = |img: &Rgb| crop_rgb(img, 0, 0, w, h);
-    let (naive, matched) = (left(&rendered[pick].naive), left(&rendered[pick].matched));
+    let left = |img: &Rgb| img.crop(0, 0, w, h).context("the left eye's crop");
+    let (naive, matched) = (left(&rendered[pick].naive)?, left(&rendered[pick].matched)?);
     io::save_rgb(&out.join("composite_side_by_side.png"), &side_by_side(&[&naive, &matched], 6), BitDepth::Eight)?;
     let (zx, zy, zw, zh) = (w / 2 - 150, h / 2 - 90, 130, 110);
-    let zoom = |img: &Rgb| upscale(&crop_rgb(img, zx.min(w - zw), zy.min(h - zh), zw, zh), 3);
+    let zoom =
+        |img: &Rgb| img.crop(zx.min(w - zw), zy.min(h - zh), zw, zh).map(|c| upscale(&c, 3)).context("the zoomed crop");
     io::save_rgb(
         &out.join("composite_zoom.png"),
-        &side_by_side(&[&zoom(&naive), &zoom(&matched), &zoom(&frames[pick])], 6),
+        &side_by_side(&[&zoom(&naive)?, &zoom(&matched)?, &zoom(&frames[pick])?], 6),
         BitDepth::Eight,
     )?;
     let mut snapshot_model = fitted.clone();
@@ -683,17 +684,6 @@ impl LiveCalibration {
         let last_model = seen.last().map(|s| s.1.model.clone()).unwrap_or_else(|| self.channel.latest().model.clone());
         Ok(LiveReport { markdown: md, last_model })
     }
-}
-
-fn crop_rgb(img: &Rgb, x0: usize, y0: usize, w: usize, h: usize) -> Rgb {
-    let mut out = Rgb::new(w, h, [0.0; 3]);
-    for c in 0..3 {
-        for y in 0..h {
-            let src = (y0 + y) * img.width + x0;
-            out.channels[c][y * w..(y + 1) * w].copy_from_slice(&img.channels[c][src..src + w]);
-        }
-    }
-    out
 }
 
 fn upscale(img: &Rgb, k: usize) -> Rgb {

@@ -2,9 +2,16 @@
 //! confident exposure estimates, and what a detected change does to the state.
 
 use super::*;
+use crate::analysis::temporal::{band_stride, in_band};
 
 /// Video time between noise probes (change detection), every tier.
 pub(super) const PROBE_INTERVAL_S: f64 = 0.1;
+
+/// Pixels the temporal noise probe reads at most: above this, bands of rows spread
+/// over the frame (`temporal::in_band`), the same ones every time. Its threshold was
+/// set at 320×240, where it reads every row; at 1280×960 it reads a quarter of
+/// them (4× the samples it was set on) and aligns only those.
+pub(super) const PROBE_PX: usize = 307_200;
 
 /// A noise probe's value.
 #[derive(Clone, Copy, Debug)]
@@ -92,7 +99,9 @@ impl Calibrator {
     pub(super) fn noise_probe(&mut self, current: &Analysed) -> Option<f32> {
         if self.cfg.intrinsics.is_some() {
             let aligned = self.aligned_previous(current)?;
-            return crate::analysis::temporal::noise_probe(&aligned, current);
+            let img = &current.frame.image;
+            let stride = band_stride(img.width, img.height, PROBE_PX);
+            return crate::analysis::temporal::noise_probe(&aligned, current, &|y| in_band(y, stride));
         }
         let opts = FitOptions {
             tier: Some(fit::Tier::Fast),
@@ -107,7 +116,8 @@ impl Calibrator {
     /// The previous frame aligned into `current` by pose and depth (None without
     /// intrinsics, poses or depth, or when the previous frame is more than 2.5 frame
     /// intervals old), made once per frame: the noise probe and the blind noise fit
-    /// both read it.
+    /// both read it, so it holds the rows of both — the probe's bands and the noise
+    /// fit's next strip (`Calibrator::noise_strip`) — and no others.
     pub(super) fn aligned_previous(&mut self, current: &Analysed) -> Option<Arc<crate::analysis::temporal::Aligned>> {
         let index = current.frame.index;
         if let Some((i, a)) = &self.aligned_previous {
@@ -115,13 +125,17 @@ impl Calibrator {
                 return a.clone();
             }
         }
+        let img = &current.frame.image;
+        let strip = self.noise_strip(img.width, img.height);
         let aligned = self.cfg.intrinsics.as_ref().and_then(|k| {
             let prev = self.window.back()?;
             if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
                 return None;
             }
             let t0 = Instant::now();
-            let aligned = crate::analysis::temporal::align(prev, current, k).map(Arc::new);
+            let stride = band_stride(img.width, img.height, PROBE_PX);
+            let row = |y: usize| in_band(y, stride) || strip.contains(&y);
+            let aligned = crate::analysis::temporal::align_rows(prev, current, k, &row).map(Arc::new);
             self.stages.add("alignment", t0);
             aligned
         });

@@ -104,6 +104,11 @@ pub struct CalibratorConfig {
     /// Sharp frames (head at rest) held, and how long (s).
     pub sharp_held: usize,
     pub sharp_max_age_s: f64,
+    /// The blind noise fit reads a strip of full rows of about this many pixels per
+    /// refit (at least `MIN_STRIP_ROWS` rows), the next strip down each time, and
+    /// aligns only that strip of the previous frame (`None`: the whole frame every
+    /// time). Aggregation (the median over `window_s`) then sees the whole frame.
+    pub noise_strip_px: Option<usize>,
 }
 
 impl CalibratorConfig {
@@ -134,9 +139,23 @@ impl CalibratorConfig {
                 _ => 2,
             },
             sharp_max_age_s: 3.0,
+            noise_strip_px: Some(NOISE_STRIP_PX),
         }
     }
 }
+
+/// Pixels per blind noise refit (`CalibratorConfig::noise_strip_px`): a quarter of
+/// 1280×960 (its 960 rows in 4 strips of 240), all of 640×480. The fit samples
+/// ~20 000 points per level whatever the size, so a strip is not short of samples;
+/// its pyramid and the alignment are what scale with the pixels (60 + 37 ms of one
+/// core for the whole 1280×960 frame).
+pub const NOISE_STRIP_PX: usize = 320 * 1024;
+/// Fewest rows in a noise strip: the fit's coarsest structure band is 1/32 of the
+/// resolution.
+pub const MIN_STRIP_ROWS: usize = 128;
+/// Longest an effect's refit waits, past its interval, for an update that is not
+/// busy with another costly fit (`Calibrator::fit_frame`).
+const PHASE_WAIT_S: f64 = 0.1;
 
 /// The providers per role. `for_tier` picks the defaults; `--onnx` replaces them.
 pub struct Providers {
@@ -369,6 +388,8 @@ pub struct Calibrator {
     /// The previous frame aligned into the frame of this index (`change::
     /// aligned_previous`): made once, read by the noise probe and the blind noise fit.
     aligned_previous: Option<(u64, Option<Arc<crate::analysis::temporal::Aligned>>)>,
+    /// Blind noise refits so far: which strip the next one reads (`noise_strip`).
+    noise_strips_fitted: usize,
     /// This frame's stage times.
     stages: Stages,
 }
@@ -413,6 +434,7 @@ impl Calibrator {
             presence: Default::default(),
             published: None,
             aligned_previous: None,
+            noise_strips_fitted: 0,
             stages: Stages::default(),
         })
     }
@@ -506,6 +528,17 @@ impl Calibrator {
         v.sort_by(|a, b| a.frame.t_s.total_cmp(&b.frame.t_s));
         v.dedup_by(|a, b| a.frame.index == b.frame.index);
         v
+    }
+
+    /// The rows the next blind noise refit reads (`CalibratorConfig::noise_strip_px`):
+    /// strips of a whole number of 16-row blocks (compression blocks keep their
+    /// phase), top to bottom in turn.
+    fn noise_strip(&self, w: usize, h: usize) -> std::ops::Range<usize> {
+        let Some(px) = self.cfg.noise_strip_px else { return 0..h };
+        let n = (w * h).div_ceil(px.max(w * MIN_STRIP_ROWS).max(1)).max(1);
+        let rows = h.div_ceil(n).next_multiple_of(16).min(h).max(1);
+        let y0 = (self.noise_strips_fitted % h.div_ceil(rows)) * rows;
+        y0..(y0 + rows).min(h)
     }
 
     /// Analyse `frame`, fit when due, publish when the aggregate changes.
@@ -675,17 +708,17 @@ impl Calibrator {
         // one core at 1280×960). Out of phase they made two alignments per 0.1 s.
         // It waits at most one more interval.
         let aligned_now = self.aligned_previous.as_ref().is_some_and(|(i, a)| *i == index && a.is_some());
-        let mut due = |k: usize, wanted: bool, noise_now: bool| {
+        let mut due = |k: usize, wanted: bool, busy: bool| {
             let since = t_s - self.last_effect_fit_s[k];
             let interval = self.cfg.refit_s[k] - 1e-9;
             // Noise waits for an aligned frame; motion blur for an update that does
-            // not refit noise (the two costliest fits of the fast tier on separate
-            // updates). Either waits at most one more interval.
+            // not refit noise; depth of field for one that refits neither (the
+            // costly fits of the fast tier on separate updates). Each waits at most
+            // `PHASE_WAIT_S` past its interval.
             let in_phase = match k {
                 0 => aligned_now,
-                1 => !noise_now,
-                _ => true,
-            } || since >= 2.0 * interval;
+                _ => !busy,
+            } || since >= interval + PHASE_WAIT_S;
             let ok = wanted && (in_burst || (since >= interval && in_phase));
             if ok {
                 self.last_effect_fit_s[k] = t_s;
@@ -693,10 +726,11 @@ impl Calibrator {
             ok
         };
         let noise = due(0, self.cfg.effects.noise, false);
+        let motion_blur = due(1, self.cfg.effects.motion_blur, noise);
         let fx = Effects {
             noise,
-            motion_blur: due(1, self.cfg.effects.motion_blur, noise),
-            depth_of_field: due(2, self.cfg.effects.depth_of_field, noise),
+            motion_blur,
+            depth_of_field: due(2, self.cfg.effects.depth_of_field, noise || motion_blur),
         };
         // The blind noise fit reads texture off the previous exposure aligned by pose
         // and depth (`fit::Neighbour`): on the calibration video its error falls from
@@ -710,53 +744,21 @@ impl Calibrator {
             intrinsics: self.cfg.intrinsics.as_ref(),
             frame_interval_s: self.cfg.frame_interval_s,
         };
-        let tflow = Instant::now();
-        let flow = if fx.motion_blur {
-            match self.providers.flow.flow(&ctx) {
-                Ok(f) => Some(f),
-                Err(e) => {
-                    let fallback = self.providers.flow_fallback.as_mut().map(|p| p.flow(&ctx));
-                    match fallback {
-                        Some(Ok(f)) => {
-                            events
-                                .push(Event::Degraded {
-                                    frame: index, reason: format!("{e}; Lucas–Kanade flow used")
-                                });
-                            Some(f)
-                        }
-                        Some(Err(e2)) => {
-                            events.push(Event::Degraded { frame: index, reason: format!("{e}; {e2}") });
-                            None
-                        }
-                        None => {
-                            events.push(Event::Degraded { frame: index, reason: e.to_string() });
-                            None
-                        }
-                    }
-                }
-            }
-        } else {
-            None
+        // The flow where the motion-blur reference can be valid (`MotionDeblurrer::
+        // rows`: a sparse reference's bands); every row if the reference fails and
+        // the fit runs blind.
+        let image = &current.frame.image;
+        let rows = match (fx.motion_blur, self.providers.motion_deblur.as_ref()) {
+            (true, Some(p)) => p.rows(image.width, image.height),
+            _ => None,
         };
+        let tflow = Instant::now();
+        let mut flow =
+            if fx.motion_blur { flow_on(&mut self.providers, &ctx, rows.as_deref(), index, events) } else { None };
         if fx.motion_blur {
             self.stages.add("flow", tflow);
         }
         let depth = current.depth.as_ref();
-        let image = &current.frame.image;
-        let neighbour_valid = neighbour.as_ref().map(|a| {
-            let (w, h) = (image.width, image.height);
-            crate::image::Plane::from_vec(w, h, a.valid.iter().map(|&v| if v { 1.0 } else { 0.0 }).collect())
-        });
-        let base = FitInputs {
-            depth: depth.map(|d| &d.depth),
-            depth_units: depth.map_or(crate::model::DepthUnits::MetricM, |d| d.units),
-            flow: flow.as_ref(),
-            neighbour: neighbour
-                .as_ref()
-                .zip(neighbour_valid.as_ref())
-                .map(|(a, v)| fit::Neighbour { image: &a.image, valid: v }),
-            ..FitInputs::new(image)
-        };
         let only = |n, m, d| FitOptions {
             effects: Effects { noise: n, motion_blur: m, depth_of_field: d },
             ..Default::default()
@@ -811,13 +813,57 @@ impl Calibrator {
         if asked {
             self.stages.add("references", t_refs);
         }
-        let mut model = match fit::fit(&base, &fast_opts(blind)) {
+        if sharp.is_none() && rows.is_some() && flow.is_some() {
+            let tflow = Instant::now();
+            flow = flow_on(&mut self.providers, &ctx, None, index, events);
+            self.stages.add("flow", tflow);
+        }
+        let base = FitInputs {
+            depth: depth.map(|d| &d.depth),
+            depth_units: depth.map_or(crate::model::DepthUnits::MetricM, |d| d.units),
+            flow: flow.as_ref(),
+            ..FitInputs::new(image)
+        };
+        // Blind noise on this update's strip (`noise_strip`), with the previous frame
+        // aligned there; the other blind effects on the whole frame.
+        let mut model = match fit::fit(&base, &fast_opts(Effects { noise: false, ..blind })) {
             Ok(o) => o.model,
             Err(e) => {
                 events.push(Event::Skipped { frame: index, reason: e.to_string() });
                 return None;
             }
         };
+        if blind.noise {
+            let t0 = Instant::now();
+            let (w, h) = (image.width, image.height);
+            let strip = self.noise_strip(w, h);
+            self.noise_strips_fitted += 1;
+            let (y0, rows) = (strip.start, strip.len());
+            let crop = |img: &crate::image::Rgb| img.crop(0, y0, w, rows);
+            let neighbour_strip = neighbour.as_ref().and_then(|a| {
+                let valid = a.valid[y0 * w..strip.end * w].iter().map(|&v| if v { 1.0 } else { 0.0 }).collect();
+                Some((crop(&a.image)?, crate::image::Plane::from_vec(w, rows, valid)))
+            });
+            let strip_image = crop(image);
+            let glue_s = t0.elapsed().as_secs_f64();
+            match strip_image {
+                Some(strip_image) => {
+                    let inp = FitInputs {
+                        neighbour: neighbour_strip.as_ref().map(|(image, valid)| fit::Neighbour { image, valid }),
+                        ..FitInputs::new(&strip_image)
+                    };
+                    match fit::fit(&inp, &fast_opts(only(true, false, false).effects)) {
+                        Ok(o) => model.noise = o.model.noise,
+                        Err(e) => events.push(Event::Degraded { frame: index, reason: format!("noise fit: {e}") }),
+                    }
+                }
+                None => {
+                    events.push(Event::Degraded { frame: index, reason: format!("noise strip {strip:?} of {h} rows") })
+                }
+            }
+            // The strip's copies count with the fit.
+            model.noise.diagnostics.fit_time_s += glue_s;
+        }
         if let Some(r) = &denoised {
             let inp = FitInputs { denoised: Some(&r.image), reference_valid: r.valid.as_ref(), ..base };
             match fit::fit(&inp, &FitOptions { tier: Some(fit::Tier::Accurate), ..only(true, false, false) }) {
@@ -859,6 +905,10 @@ impl Calibrator {
                 Err(e) => events.push(Event::Degraded { frame: index, reason: format!("DoF fit: {e}") }),
             }
         }
+        // Its frame-sized buffers serve the next update (`recycle`: no page faults).
+        if let (Some(r), Some(p)) = (sharp, self.providers.motion_deblur.as_mut()) {
+            p.recycle(r);
+        }
         // Each fit's own timer (the accurate refits replaced the blind ones' models).
         self.stages.push("fit.noise", model.noise.diagnostics.fit_time_s);
         self.stages.push("fit.motion_blur", model.motion_blur.diagnostics.fit_time_s);
@@ -866,6 +916,36 @@ impl Calibrator {
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
         model.validate().ok().map(|_| model)
+    }
+}
+
+/// The flow of `ctx`'s frame from the providers (the fallback when the primary one
+/// cannot serve it; either failure is an event), on the rows where `rows[y]` (None:
+/// every row).
+fn flow_on(
+    providers: &mut Providers,
+    ctx: &FrameContext,
+    rows: Option<&[bool]>,
+    index: u64,
+    events: &mut Vec<Event>,
+) -> Option<crate::image::Flow> {
+    let row = |y: usize| rows.map_or(true, |r| r.get(y).copied().unwrap_or(false));
+    match providers.flow.flow_rows(ctx, &row) {
+        Ok(f) => Some(f),
+        Err(e) => match providers.flow_fallback.as_mut().map(|p| p.flow_rows(ctx, &row)) {
+            Some(Ok(f)) => {
+                events.push(Event::Degraded { frame: index, reason: format!("{e}; Lucas–Kanade flow used") });
+                Some(f)
+            }
+            Some(Err(e2)) => {
+                events.push(Event::Degraded { frame: index, reason: format!("{e}; {e2}") });
+                None
+            }
+            None => {
+                events.push(Event::Degraded { frame: index, reason: e.to_string() });
+                None
+            }
+        },
     }
 }
 
