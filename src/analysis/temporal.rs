@@ -224,27 +224,30 @@ fn aligned_mean(
         .zip(valid.data.par_chunks_mut(w))
         .enumerate()
         .filter(|(y, _)| in_band(*y, stride))
-        .for_each(|(y, (((r, g), b), v))| {
-            // A recycled buffer holds the last reference here.
-            [&mut *r, &mut *g, &mut *b].into_iter().for_each(|o| o.fill(0.0));
-            let mut buf = [vec![0.0; w], vec![0.0; w], vec![0.0; w]];
-            let (mut ok, mut all) = (vec![false; w], vec![true; w]);
-            for warp in &warps {
-                let [br, bg, bb] = &mut buf;
-                warp.row(y, [br, bg, bb], &mut ok);
-                for (o, s) in [&mut *r, &mut *g, &mut *b].into_iter().zip(&buf) {
-                    o.iter_mut().zip(s).for_each(|(o, s)| *o += s);
+        // Row buffers: one set per worker thread, not per row.
+        .for_each_init(
+            || ([vec![0.0; w], vec![0.0; w], vec![0.0; w]], vec![false; w], vec![true; w]),
+            |(buf, ok, all), (y, (((r, g), b), v))| {
+                // A recycled buffer holds the last reference here.
+                [&mut *r, &mut *g, &mut *b].into_iter().for_each(|o| o.fill(0.0));
+                all.fill(true);
+                for warp in &warps {
+                    let [br, bg, bb] = buf;
+                    warp.row(y, [br, bg, bb], ok);
+                    for (o, s) in [&mut *r, &mut *g, &mut *b].into_iter().zip(buf.iter()) {
+                        o.iter_mut().zip(s).for_each(|(o, s)| *o += s);
+                    }
+                    all.iter_mut().zip(ok.iter()).for_each(|(a, o)| *a &= *o);
                 }
-                all.iter_mut().zip(&ok).for_each(|(a, o)| *a &= *o);
-            }
-            let span = y * w..(y + 1) * w;
-            for (c, o) in [&mut *r, &mut *g, &mut *b].into_iter().enumerate() {
-                for ((o, a), cv) in o.iter_mut().zip(&all).zip(&cur.channels[c][span.clone()]) {
-                    *o = if *a { *o / m } else { *cv };
+                let span = y * w..(y + 1) * w;
+                for (c, o) in [&mut *r, &mut *g, &mut *b].into_iter().enumerate() {
+                    for ((o, a), cv) in o.iter_mut().zip(all.iter()).zip(&cur.channels[c][span.clone()]) {
+                        *o = if *a { *o / m } else { *cv };
+                    }
                 }
-            }
-            v.iter_mut().zip(&all).for_each(|(v, a)| *v = if *a { 1.0 } else { 0.0 });
-        });
+                v.iter_mut().zip(all.iter()).for_each(|(v, a)| *v = if *a { 1.0 } else { 0.0 });
+            },
+        );
     Some((out, valid))
 }
 

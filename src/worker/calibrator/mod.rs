@@ -710,7 +710,6 @@ impl Calibrator {
         // aligned (the probe runs every `PROBE_INTERVAL_S`): both read the same
         // aligned previous frame, the largest single cost of a fast update (37 ms of
         // one core at 1280×960). Out of phase they made two alignments per 0.1 s.
-        // It waits at most one more interval.
         let aligned_now = self.aligned_previous.as_ref().is_some_and(|(i, a)| *i == index && a.is_some());
         let mut due = |k: usize, wanted: bool, busy: bool| {
             let since = t_s - self.last_effect_fit_s[k];
