@@ -57,9 +57,9 @@ pub fn align(src: &Analysed, dst: &Analysed, k: &Intrinsics) -> Option<Aligned> 
 pub const BAND_ROWS: usize = 32;
 
 /// `align` on a subset of the rows: bands of `BAND_ROWS`, every `stride`-th one
-/// (`in_band`); the other rows are invalid. Costs ~1/`stride` of
-/// `align` — what a fit that reads a sample of the frame needs (the fast tier's
-/// motion-blur reference).
+/// (`in_band`); the other rows are invalid. Costs ~1/`stride` of `align`: the rows
+/// a sparse `TemporalMotionDeblur` reference covers (which warps them itself, a row
+/// at a time, `aligned_mean`).
 pub fn align_bands(src: &Analysed, dst: &Analysed, k: &Intrinsics, stride: usize) -> Option<Aligned> {
     let stride = stride.max(1);
     align_rows(src, dst, k, &|y| in_band(y, stride))

@@ -116,8 +116,8 @@ impl Calibrator {
     /// The previous frame aligned into `current` by pose and depth (None without
     /// intrinsics, poses or depth, or when the previous frame is more than 2.5 frame
     /// intervals old), made once per frame: the noise probe and the blind noise fit
-    /// both read it, so it holds the rows of both — the probe's bands and the noise
-    /// fit's next strip (`Calibrator::noise_strip`) — and no others.
+    /// both read it, so it holds the rows of both — the probe's bands and, where the
+    /// noise fit is blind, its next strip (`Calibrator::noise_strip`) — and no others.
     pub(super) fn aligned_previous(&mut self, current: &Analysed) -> Option<Arc<crate::analysis::temporal::Aligned>> {
         let index = current.frame.index;
         if let Some((i, a)) = &self.aligned_previous {
@@ -126,7 +126,13 @@ impl Calibrator {
             }
         }
         let img = &current.frame.image;
-        let strip = self.noise_strip(img.width, img.height);
+        // The strip only where the noise fit reads the neighbour (blind noise: no
+        // denoiser); the slower tiers' probe aligns its bands alone.
+        let strip = if self.cfg.effects.noise && self.providers.denoise.is_none() {
+            self.noise_strip(img.width, img.height)
+        } else {
+            0..0
+        };
         let aligned = self.cfg.intrinsics.as_ref().and_then(|k| {
             let prev = self.window.back()?;
             if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {

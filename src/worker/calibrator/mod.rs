@@ -855,7 +855,8 @@ impl Calibrator {
                         neighbour: neighbour_strip.as_ref().map(|(image, valid)| fit::Neighbour { image, valid }),
                         ..FitInputs::new(&strip_image)
                     };
-                    match fit::fit(&inp, &fast_opts(only(true, false, false).effects)) {
+                    match fit::fit(&inp, &fast_opts(Effects { noise: true, motion_blur: false, depth_of_field: false }))
+                    {
                         Ok(o) => model.noise = o.model.noise,
                         Err(e) => events.push(Event::Degraded { frame: index, reason: format!("noise fit: {e}") }),
                     }
