@@ -13,8 +13,12 @@ fn main() {
     let w: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(320);
     let scene = motorcycle().unwrap();
     let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, frames, Some(frames as f64 / 60.0));
-    let mut cal =
-        Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier)).unwrap();
+    let mut cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
+    // WINDOW=s: the aggregation window (a tiny one publishes each fit as it is).
+    if let Some(w) = std::env::var("WINDOW").ok().and_then(|s| s.parse().ok()) {
+        cfg.window_s = w;
+    }
+    let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).unwrap();
     let pose = |i: usize| {
         let t = spec.frame_time_s(i);
         let m = spec.path.world_from_camera(t);
@@ -23,6 +27,10 @@ fn main() {
     };
     cal.push_poses(&[pose(0), pose(1)]).unwrap();
     let depths: Vec<f32> = (1..10).map(|i| 2.0 + 0.4 * i as f32).collect();
+    // (t_s, λ error, noise error, δ RMSE over the truth's depth range) per publication,
+    // for the summary: the bench's statistics (medians over the second before the
+    // change and over the last second).
+    let mut errs: Vec<(f64, f32, Option<f32>, Option<f32>)> = vec![];
     for i in 0..frames {
         cal.push_poses(&[pose(i + 2)]).unwrap();
         let f = spec.frame(&scene, i);
@@ -39,6 +47,18 @@ fn main() {
             .unwrap();
         let dt = t0.elapsed().as_secs_f64();
         for e in &ev {
+            if let Event::Published(u) = e {
+                let r = truth.depth_of_field.depth_range;
+                let d16: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
+                errs.push((
+                    u.t_s,
+                    exposure_error(&u.model, &truth),
+                    noise_relative_error(&u.model.noise, &truth.noise),
+                    dof_rmse_px(&u.model.depth_of_field, &truth.depth_of_field, &d16),
+                ));
+            }
+        }
+        for e in &ev {
             match e {
                 Event::Published(u) if std::env::var_os("MB").is_some() => {
                     println!(
@@ -46,6 +66,34 @@ fn main() {
                         u.t_s,
                         exposure_error(&u.model, &truth),
                         u.model.motion_blur.diagnostics.reason
+                    )
+                }
+                Event::Published(u) if std::env::var_os("NOISE").is_some() => {
+                    // Signed per-level error (fit/truth − 1, %) at luma 0.3 / 0.5 / 0.7, green.
+                    let (n, t) = (&u.model.noise, &truth.noise);
+                    let per: Vec<String> = n
+                        .levels
+                        .iter()
+                        .zip(&t.levels)
+                        .take(4)
+                        .map(|(lf, lt)| {
+                            [0.3f32, 0.5, 0.7]
+                                .iter()
+                                .map(|&y| {
+                                    let yf = y.clamp(n.luminance_range[0], n.luminance_range[1]);
+                                    format!("{:+.0}", 100.0 * (lf.std(n.form, 1, yf) / lt.std(t.form, 1, y) - 1.0))
+                                })
+                                .collect::<Vec<_>>()
+                                .join("/")
+                        })
+                        .collect();
+                    println!(
+                        "{i:3} t={:.2} noise_err={:?} per level (g, luma .3/.5/.7, %): {} [{}] range {:?}",
+                        u.t_s,
+                        noise_relative_error(n, t),
+                        per.join("  "),
+                        n.diagnostics.method,
+                        n.luminance_range
                     )
                 }
                 Event::Published(u) => println!(
@@ -65,5 +113,22 @@ fn main() {
                 other => println!("    {other:?}"),
             }
         }
+    }
+    let change_s = spec.change.as_ref().map_or(spec.frame_time_s(frames - 1) + 1.0, |c| c.0);
+    let med = |v: Vec<f32>| {
+        let mut v: Vec<f32> = v.into_iter().filter(|x| x.is_finite()).collect();
+        v.sort_by(f32::total_cmp);
+        v.get(v.len() / 2).copied()
+    };
+    let end_s = spec.frame_time_s(frames - 1);
+    for (name, from, to) in [("before change", change_s - 1.0, change_s), ("last second", end_s - 1.0, end_s + 1.0)] {
+        let seg: Vec<_> = errs.iter().filter(|e| e.0 >= from && e.0 < to).collect();
+        println!(
+            "summary {name} [{from:.2}, {to:.2}): {} publications, median λ err {:?}, noise err {:?}, δ RMSE {:?}",
+            seg.len(),
+            med(seg.iter().map(|e| e.1).collect()),
+            med(seg.iter().filter_map(|e| e.2).collect()),
+            med(seg.iter().filter_map(|e| e.3).collect()),
+        );
     }
 }

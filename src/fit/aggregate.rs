@@ -6,12 +6,15 @@
 use super::FitError;
 use crate::model::{CameraModel, Diagnostics, Status};
 
+/// The median; of an even count, the mean of the middle two (the upper one alone
+/// made a window of two estimates publish the larger: a contaminated noise fit
+/// beside a clean one read +45% at the calibration video's level 3).
 fn median(mut v: Vec<f32>) -> f32 {
     v.sort_by(|a, b| a.total_cmp(b));
-    if v.is_empty() {
-        0.0
-    } else {
-        v[v.len() / 2]
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 0 => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+        n => v[n / 2],
     }
 }
 

@@ -21,7 +21,7 @@ pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::DofPlotData;
 pub use motion_blur::MbPlotData;
-pub use noise::{effective_stride as effective_noise_stride, NoisePlotData};
+pub use noise::{effective_stride as effective_noise_stride, NoisePlotData, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO};
 
 use crate::image::{Flow, Plane, Rgb};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, MotionBlur, Noise, SCHEMA};
@@ -131,6 +131,15 @@ pub struct FitOptions {
     /// (px; at least 0.05). Streaks of a few px are where a reference that is not an
     /// exact I_noMB (aligned from other frames) biases λ most.
     pub mb_min_flow_px: f32,
+    /// The accurate noise fit refuses ("not identifiable") where its reference
+    /// leaks image structure into the residual: some band level's median sample
+    /// below this share of the fit (`noise::leaks`; `NOISE_MIN_LEAK_RATIO`). None:
+    /// the leak is reported in the reason, the fit kept. The worker refuses fits on
+    /// references aligned from other frames, one estimate of several in its window
+    /// (BENCHMARKS.md: the accurate tier's noise 5.8% → 1.9%); a single reference
+    /// is kept — the shipped denoiser's always leak at the coarse levels (its 11-px
+    /// receptive field), and a refusal there would leave nothing.
+    pub noise_min_leak_ratio: Option<f32>,
 }
 
 impl Default for FitOptions {
@@ -145,6 +154,7 @@ impl Default for FitOptions {
             mb_max_samples: motion_blur::DEFAULT_MAX_SAMPLES,
             mb_prefilter_var_px2: 0.0,
             mb_min_flow_px: motion_blur::MIN_FLOW_PX,
+            noise_min_leak_ratio: None,
         }
     }
 }

@@ -870,7 +870,15 @@ impl Calibrator {
         }
         if let Some(r) = &denoised {
             let inp = FitInputs { denoised: Some(&r.image), reference_valid: r.valid.as_ref(), ..base };
-            match fit::fit(&inp, &FitOptions { tier: Some(fit::Tier::Accurate), ..only(true, false, false) }) {
+            // A reference aligned from other frames is refused where it leaks (one
+            // estimate of several in the window); a network's is kept.
+            let refuse = (!r.sources.is_empty()).then_some(fit::NOISE_MIN_LEAK_RATIO);
+            let opts = FitOptions {
+                tier: Some(fit::Tier::Accurate),
+                noise_min_leak_ratio: refuse,
+                ..only(true, false, false)
+            };
+            match fit::fit(&inp, &opts) {
                 Ok(o) => {
                     model.noise = o.model.noise;
                     // I − mean carries (1 + ratio)·σ².
