@@ -96,7 +96,10 @@ pub struct Reference {
     pub image: Rgb,
     pub valid: Option<Plane>,
     pub noise_variance_ratio: f32,
-    /// Frames it was made from (their indices), for diagnostics.
+    /// Frames it was made from (their indices): for diagnostics, and the worker
+    /// refuses leaking noise fits on such references (one estimate of several,
+    /// `fit::FitOptions::noise_min_leak_ratio`); empty for a single-frame one (a
+    /// network's).
     pub sources: Vec<u64>,
     /// A second estimate of the same reference whose noise is independent of
     /// `image`'s (made from other frames), valid where `valid` is; the motion-blur

@@ -494,7 +494,7 @@ const LEAK_Z: f32 = 3.0;
 /// structure a reference left behind is not a minority of samples but the bulk:
 /// on the calibration video a reference of three frames moving 8 px per frame
 /// read ×0.56 at level 3 (the fit +93% there, still +42% scaled to its median),
-/// while clean references read ×0.80 at worst (level 3, ~300 samples). Such a fit
+/// while the video's other fits read ×0.80 at worst (level 3, ~300 samples). Such a fit
 /// says "not identifiable" instead.
 pub const MIN_LEAK_RATIO: f32 = 0.75;
 
@@ -1505,15 +1505,16 @@ mod valid_mask_tests {
 mod leakage_tests {
     use super::*;
 
-    /// Random grey tiles (16 px, 0.2 … 0.8, softened by a 3-tap blur) sampled at
-    /// x + `dx`: the edges are what a misregistered reference leaves behind.
+    /// Random grey tiles (16 px, 0.2 … 0.8, 1-px linear ramps between them)
+    /// sampled at x + `dx`: the edges are what a misregistered reference leaves
+    /// behind.
     fn tiles(w: usize, h: usize, dx: f32) -> Rgb {
         let tile = |tx: i64, ty: i64| {
             let v = crate::synth::gaussian(tx as u32, ty as u32, 0, 0x711e);
             0.5 + 0.3 * (v / 3.0).clamp(-1.0, 1.0)
         };
         let at = |x: f32, y: f32| {
-            // Box-filtered tile edges (1 px wide ramps): no aliasing to shift.
+            // Ramps, not steps: a sub-pixel shift then moves the edge by exactly dx.
             let (fx, fy) = (x / 16.0, y / 16.0);
             let (tx, ty) = (fx.floor() as i64, fy.floor() as i64);
             let (ux, uy) = (((fx - tx as f32) * 16.0).min(1.0), ((fy - ty as f32) * 16.0).min(1.0));
