@@ -26,7 +26,6 @@ fn main() {
         TimedPose { t_ns: (t * 1e9).round() as i64, position_m: p, orientation: q }
     };
     cal.push_poses(&[pose(0), pose(1)]).unwrap();
-    let depths: Vec<f32> = (1..10).map(|i| 2.0 + 0.4 * i as f32).collect();
     // (t_s, λ error, noise error, δ RMSE over the truth's depth range) per publication,
     // for the summary: the bench's statistics (medians over the second before the
     // change and over the last second).
@@ -46,15 +45,16 @@ fn main() {
             })
             .unwrap();
         let dt = t0.elapsed().as_secs_f64();
+        // The bench's depths: 16 over the truth's range.
+        let r = truth.depth_of_field.depth_range;
+        let depths: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
         for e in &ev {
             if let Event::Published(u) = e {
-                let r = truth.depth_of_field.depth_range;
-                let d16: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
                 errs.push((
                     u.t_s,
                     exposure_error(&u.model, &truth),
                     noise_relative_error(&u.model.noise, &truth.noise),
-                    dof_rmse_px(&u.model.depth_of_field, &truth.depth_of_field, &d16),
+                    dof_rmse_px(&u.model.depth_of_field, &truth.depth_of_field, &depths),
                 ));
             }
         }

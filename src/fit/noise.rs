@@ -375,11 +375,10 @@ fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity, with_linear: bo
             // Affine variance: v ≈ a + b·y.
             let (mut a, mut b, _, mut cov) = ols(y, v, wts.as_deref())?;
             for _ in 0..3 {
-                let pred: Vec<f64> = y.iter().map(|&yi| a + b * yi as f64).collect();
-                let w = precision_weights(&pred, wts.as_deref());
+                let w = precision_weights(&predicted(NoiseForm::AffineVariance, a, b, y, y2), wts.as_deref());
                 (a, b, _, cov) = ols(y, v, Some(&w))?;
             }
-            let pred_aff: Vec<f64> = y.iter().map(|&yi| a + b * yi as f64).collect();
+            let pred_aff = predicted(NoiseForm::AffineVariance, a, b, y, y2);
             affine[l].intercept[c] = a as f32;
             affine[l].slope[c] = b as f32;
             covs[l][c] = cov;
@@ -399,9 +398,7 @@ fn fit_levels(points: &[LevelPoints], intensity: NoiseIntensity, with_linear: bo
                 continue;
             }
             // Linear std: v ≈ (a + b·y)².
-            let lin_pred = |a: f64, b: f64| -> Vec<f64> {
-                (0..y.len()).map(|i| a * a + 2.0 * a * b * y[i] as f64 + b * b * y2[i] as f64).collect()
-            };
+            let lin_pred = |a: f64, b: f64| predicted(NoiseForm::LinearStd, a, b, y, y2);
             let (mut la, mut lb, _) = fit_linear_std(y, y2, v, wts.as_deref())?;
             for _ in 0..3 {
                 let w = precision_weights(&lin_pred(la, lb), wts.as_deref());
@@ -455,17 +452,23 @@ fn fit_levels_any_intensity(points: &[LevelPoints]) -> Option<LevelFit> {
     fit_levels(points, intensity, true)
 }
 
+/// Predicted local variance of samples with window moments m1 = B(Y), m2 = B(Y²)
+/// under a level map (a, b) of `form`: a + b·m1, or B((a + b·Y)²) = a² + 2ab·m1 +
+/// b²·m2 (see `fit_linear_std`).
+fn predicted(form: NoiseForm, a: f64, b: f64, m1: &[f32], m2: &[f32]) -> Vec<f64> {
+    match form {
+        NoiseForm::AffineVariance => m1.iter().map(|&y| a + b * y as f64).collect(),
+        NoiseForm::LinearStd => {
+            m1.iter().zip(m2).map(|(&y, &y2)| a * a + 2.0 * a * b * y as f64 + b * b * y2 as f64).collect()
+        }
+    }
+}
+
 /// The fit's predicted local variance of every sample of level `l`, channel `c`.
 fn level_pred(fit: &LevelFit, pts: &LevelPoints, l: usize, c: usize) -> Option<Vec<f64>> {
     let (y, y2) = pts.regressor(fit.intensity, c)?;
     let lv = fit.levels.get(l)?;
-    let (a, b) = (lv.intercept[c] as f64, lv.slope[c] as f64);
-    Some(match fit.form {
-        NoiseForm::AffineVariance => y.iter().map(|&yi| a + b * yi as f64).collect(),
-        NoiseForm::LinearStd => {
-            y.iter().zip(y2).map(|(&m1, &m2)| a * a + 2.0 * a * b * m1 as f64 + b * b * m2 as f64).collect()
-        }
-    })
+    Some(predicted(fit.form, lv.intercept[c] as f64, lv.slope[c] as f64, y, y2))
 }
 
 /// A band level and channel whose median sample reads below its least-squares
