@@ -6,6 +6,9 @@ use blind_augment::model::DepthUnits;
 use blind_augment::synth::sequence::*;
 use blind_augment::worker::*;
 
+/// (t_s, λ error, noise error, δ RMSE, δ RMSE against truth ⊕ the photograph's pixel).
+type Errors = (f64, f32, Option<f32>, Option<f32>, Option<f32>);
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let tier = CalibrationTier::parse(args.get(1).map(|s| s.as_str()).unwrap_or("fast")).unwrap();
@@ -29,7 +32,8 @@ fn main() {
     // (t_s, λ error, noise error, δ RMSE over the truth's depth range) per publication,
     // for the summary: the bench's statistics (medians over the second before the
     // change and over the last second).
-    let mut errs: Vec<(f64, f32, Option<f32>, Option<f32>)> = vec![];
+    let mut errs: Vec<Errors> = vec![];
+    let floor_px = spec.source_pixel_blur_px(&scene);
     for i in 0..frames {
         cal.push_poses(&[pose(i + 2)]).unwrap();
         let f = spec.frame(&scene, i);
@@ -55,6 +59,7 @@ fn main() {
                     exposure_error(&u.model, &truth),
                     noise_relative_error(&u.model.noise, &truth.noise),
                     dof_rmse_px(&u.model.depth_of_field, &truth.depth_of_field, &depths),
+                    dof_rmse_px_over_floor(&u.model.depth_of_field, &truth.depth_of_field, &depths, floor_px),
                 ));
             }
         }
@@ -66,6 +71,18 @@ fn main() {
                         u.t_s,
                         exposure_error(&u.model, &truth),
                         u.model.motion_blur.diagnostics.reason
+                    )
+                }
+                Event::Published(u) if std::env::var_os("DOF").is_some() => {
+                    let fl = spec.source_pixel_blur_px(&scene);
+                    let d = &u.model.depth_of_field;
+                    println!(
+                        "{i:3} t={:.2} δ RMSE {:?} (⊕ pixel {:?}) δ at the depths {:?}: {}",
+                        u.t_s,
+                        dof_rmse_px(d, &truth.depth_of_field, &depths),
+                        dof_rmse_px_over_floor(d, &truth.depth_of_field, &depths, fl),
+                        depths.iter().step_by(3).map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>(),
+                        d.diagnostics.reason.chars().take(60).collect::<String>()
                     )
                 }
                 Event::Published(u) if std::env::var_os("NOISE").is_some() => {
@@ -124,11 +141,12 @@ fn main() {
     for (name, from, to) in [("before change", change_s - 1.0, change_s), ("last second", end_s - 1.0, end_s + 1.0)] {
         let seg: Vec<_> = errs.iter().filter(|e| e.0 >= from && e.0 < to).collect();
         println!(
-            "summary {name} [{from:.2}, {to:.2}): {} publications, median λ err {:?}, noise err {:?}, δ RMSE {:?}",
+            "summary {name} [{from:.2}, {to:.2}): {} publications, median λ err {:?}, noise err {:?}, δ RMSE {:?} (against truth ⊕ the photograph's pixel: {:?})",
             seg.len(),
             med(seg.iter().map(|e| e.1).collect()),
             med(seg.iter().filter_map(|e| e.2).collect()),
             med(seg.iter().filter_map(|e| e.3).collect()),
+            med(seg.iter().filter_map(|e| e.4).collect()),
         );
     }
 }

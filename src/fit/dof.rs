@@ -28,7 +28,9 @@
 //!
 //! Blind (Zhuo & Sim 2011): at edges (gradient-magnitude maxima along the gradient,
 //! ≥ 0.03 per px), re-blur with σ0 = 3 px; for a Gaussian-blurred step the gradient
-//! ratio R = |∇I| / |∇(I ∗ G_σ0)| gives σ = σ0/√(R² − 1). The central difference
+//! ratio R = |∇I| / |∇(I ∗ G_σ0)| gives σ = σ0/√(R² − 1). Both gradients are
+//! averaged over 5 pixels along the edge (`EDGE_TANGENT_TAPS`): noise at the
+//! gradient maximum otherwise reads δ low (−45% on a noisy 2 px test frame). The central difference
 //! and pixel sampling bias that formula at small σ, so the raw value is mapped
 //! through a table from a 1-D simulation of ideally sampled blurred steps (sub-pixel
 //! phases averaged): an estimator calibration, not a camera calibration.
@@ -500,6 +502,24 @@ fn reblur_grad(half: &Plane, x: usize, y: usize) -> (f32, f32) {
 
 const ZS_SIGMA0: f32 = 3.0;
 
+/// Least gradient magnitude (per px) of an edge sample, on the pixel's own central
+/// difference and again on the average along the edge.
+const EDGE_MIN_GRAD: f32 = 0.03;
+
+/// Each edge sample's gradients (frame and re-blurred) are the mean of 2k + 1
+/// pixels along the edge's tangent (rounded to one of 8 directions, so every tap
+/// is a pixel and nothing is interpolated). A straight edge's gradient is the same
+/// along its tangent, so the mean keeps the edge profile the table was simulated
+/// for while dividing the noise variance by 2k + 1. Why it matters: the ratio
+/// takes the frame's gradient at its maximum, where noise adds to it — on the
+/// calibration video at 1280×960 (noise std ≈ 0.02, edges blurred 1.4–2.9 px)
+/// single-pixel ratios read δ up to 0.7 px (25%) low, and noise maxima in flat
+/// regions (|∇n| of white noise exceeds 0.03 in ~10% of pixels there) entered as
+/// sharp edges. k = 2 measured (BENCHMARKS.md): the noisy and the noise-free
+/// frames then read within ~0.1 px of each other; k = 4 read curved edges wider
+/// (+0.2–0.3 px on noise-free frames).
+const EDGE_TANGENT_TAPS: isize = 2;
+
 /// Most edge samples the fast tier's curve fit takes (see `fit_fast`): 1280×960
 /// frames give ~32 000; 8 192 keep the standard error within 2× of all of them at a
 /// quarter of the cost.
@@ -561,7 +581,7 @@ pub fn fit_fast(
             }
             let (gx, gy) = grad(y, px, py);
             let m = (gx * gx + gy * gy).sqrt();
-            if m < 0.03 {
+            if m < EDGE_MIN_GRAD {
                 continue;
             }
             // Non-maximum suppression along the (rounded) gradient direction.
@@ -574,8 +594,32 @@ pub fn fit_fast(
             if m < mag(xi + sx, yi + sy) || m < mag(xi - sx, yi - sy) {
                 continue;
             }
-            let (rx, ry) = reblur_grad(&re, px, py);
-            let mr = (rx * rx + ry * ry).sqrt();
+            // The gradients averaged along the edge (its rounded tangent, ±
+            // `EDGE_TANGENT_TAPS` px; see the constant), and the edge threshold
+            // applied again to the average.
+            let (tx, ty) = (-sy, sx);
+            let k = EDGE_TANGENT_TAPS;
+            let inside = |t: isize| {
+                let (x, yy) = (xi + t * tx, yi + t * ty);
+                x >= 2 && yy >= 2 && x < w as isize - 2 && yy < h as isize - 2
+            };
+            if !inside(-k) || !inside(k) {
+                continue;
+            }
+            let (mut g, mut gr) = ((0.0f32, 0.0f32), (0.0f32, 0.0f32));
+            for t in -k..=k {
+                let (qx, qy) = ((xi + t * tx) as usize, (yi + t * ty) as usize);
+                let (a, b) = grad(y, qx, qy);
+                let (c, d) = reblur_grad(&re, qx, qy);
+                g = (g.0 + a, g.1 + b);
+                gr = (gr.0 + c, gr.1 + d);
+            }
+            let taps = (2 * k + 1) as f32;
+            let m = (g.0 * g.0 + g.1 * g.1).sqrt() / taps;
+            if m < EDGE_MIN_GRAD {
+                continue;
+            }
+            let mr = (gr.0 * gr.0 + gr.1 * gr.1).sqrt() / taps;
             if mr <= 0.0 {
                 continue;
             }

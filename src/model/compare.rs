@@ -59,6 +59,21 @@ pub fn dof_rmse_px(fit: &DepthOfField, truth: &DepthOfField, depths: &[f32]) -> 
     Some((s / d.len() as f32).sqrt())
 }
 
+/// RMSE (px) of δ(Z) over `depths` against the truth composed with a blur the
+/// frames carry besides it, `floor_px` (Gaussian std; variances add):
+/// √(δ_truth² + floor²). For a synthetic video rendered from a photograph at a
+/// magnification, the photograph's own pixel widens every edge
+/// (`SequenceSpec::source_pixel_blur_px`); a blind estimator, which measures edge
+/// widths, sees that blur as well.
+pub fn dof_rmse_px_over_floor(fit: &DepthOfField, truth: &DepthOfField, depths: &[f32], floor_px: f32) -> Option<f32> {
+    let d: Vec<f32> = depths.iter().copied().filter(|z| z.is_finite() && *z > 0.0).collect();
+    if d.is_empty() {
+        return None;
+    }
+    let s: f32 = d.iter().map(|&z| (fit.sigma_px(z) - truth.sigma_px(z).hypot(floor_px)).powi(2)).sum();
+    Some((s / d.len() as f32).sqrt())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

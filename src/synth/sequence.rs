@@ -318,6 +318,16 @@ impl SequenceSpec {
         Self { frames, fps, view, path: HeadPath::default(), truth, change, seed: 7 }
     }
 
+    /// The blur (Gaussian std, px of the view) the frames carry besides the
+    /// truth's δ(Z): the photograph's own pixel, a box one source pixel wide
+    /// (variance 1/12 source px²), magnified by the view (view px per source px).
+    /// At 320×240 the view is about 1:1 (0.29 px); at 1280×960 it is 4× (1.15 px).
+    /// The blind DoF estimator reads effect-free frames of the video at 0.22–0.36 px
+    /// and 1.05–1.31 px (`examples/dof_probe`, BENCHMARKS.md).
+    pub fn source_pixel_blur_px(&self, scene: &Scene) -> f32 {
+        (self.view.fx / scene.intrinsics.fx) / 12f32.sqrt()
+    }
+
     pub fn truth_at(&self, t_s: f64) -> &CameraModel {
         match &self.change {
             Some((t, after)) if t_s >= *t => after,
