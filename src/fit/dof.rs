@@ -30,8 +30,9 @@
 //! ≥ 0.03 per px), re-blur with σ0 = 3 px; for a Gaussian-blurred step the gradient
 //! ratio R = |∇I| / |∇(I ∗ G_σ0)| gives σ = σ0/√(R² − 1). Both gradients are
 //! averaged over 5 pixels along the edge (`EDGE_TANGENT_TAPS`): noise at the
-//! gradient maximum otherwise reads δ low (−45% on a noisy 2 px test frame). The central difference
-//! and pixel sampling bias that formula at small σ, so the raw value is mapped
+//! gradient maximum otherwise reads δ low (−45% on a noisy 2 px test frame). The
+//! central difference and pixel sampling bias that formula at small σ, so the raw
+//! value is mapped
 //! through a table from a 1-D simulation of ideally sampled blurred steps (sub-pixel
 //! phases averaged): an estimator calibration, not a camera calibration.
 //! The re-blurred image is built at half resolution (`reblur_half`: the pyramid's

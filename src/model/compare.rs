@@ -51,12 +51,7 @@ pub fn exposure_error(fit: &CameraModel, truth: &CameraModel) -> f32 {
 
 /// RMS of δ_fit − δ_true over `depths` (px); absent effects as δ = 0.
 pub fn dof_rmse_px(fit: &DepthOfField, truth: &DepthOfField, depths: &[f32]) -> Option<f32> {
-    let d: Vec<f32> = depths.iter().copied().filter(|z| z.is_finite() && *z > 0.0).collect();
-    if d.is_empty() {
-        return None;
-    }
-    let s: f32 = d.iter().map(|&z| (fit.sigma_px(z) - truth.sigma_px(z)).powi(2)).sum();
-    Some((s / d.len() as f32).sqrt())
+    dof_rmse_px_over_floor(fit, truth, depths, 0.0)
 }
 
 /// RMSE (px) of δ(Z) over `depths` against the truth composed with a blur the
