@@ -32,9 +32,9 @@
 //! averaged over 5 pixels along the edge (`EDGE_TANGENT_TAPS`): noise at the
 //! gradient maximum otherwise reads δ low (−45% on a noisy 2 px test frame). The
 //! central difference and pixel sampling bias that formula at small σ, so the raw
-//! value is mapped
-//! through a table from a 1-D simulation of ideally sampled blurred steps (sub-pixel
-//! phases averaged): an estimator calibration, not a camera calibration.
+//! value is mapped through a table from a 1-D simulation of ideally sampled
+//! blurred steps (sub-pixel phases averaged): an estimator calibration, not a
+//! camera calibration.
 //! The re-blurred image is built at half resolution (`reblur_half`: the pyramid's
 //! reduce, variance 1 px², then the remaining 8 px² at half resolution — the
 //! σ0 = 3 px blur is band-limited far below the half-resolution Nyquist) and its
@@ -517,7 +517,7 @@ const EDGE_MIN_GRAD: f32 = 0.03;
 /// single-pixel ratios read δ up to 0.7 px (25%) low, and noise maxima in flat
 /// regions (|∇n| of white noise exceeds 0.03 in ~10% of pixels there) entered as
 /// sharp edges. k = 2 measured (BENCHMARKS.md): the noisy and the noise-free
-/// frames then read within ~0.1 px of each other; k = 4 read curved edges wider
+/// frames then read within 0.16 px of each other; k = 4 read curved edges wider
 /// (+0.2–0.3 px on noise-free frames).
 const EDGE_TANGENT_TAPS: isize = 2;
 
