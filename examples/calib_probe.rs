@@ -15,7 +15,9 @@ fn main() {
     let frames: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(60);
     let w: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(320);
     let scene = motorcycle().unwrap();
-    let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, frames, Some(frames as f64 / 60.0));
+    // NOCHANGE=1: no camera change (the bench's 1280×960 run).
+    let change = std::env::var_os("NOCHANGE").is_none().then_some(frames as f64 / 60.0);
+    let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, frames, change);
     let mut cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
     // WINDOW=s: the aggregation window (a tiny one publishes each fit as it is).
     if let Some(w) = std::env::var("WINDOW").ok().and_then(|s| s.parse().ok()) {
@@ -76,13 +78,23 @@ fn main() {
                 Event::Published(u) if std::env::var_os("DOF").is_some() => {
                     let fl = spec.source_pixel_blur_px(&scene);
                     let d = &u.model.depth_of_field;
+                    let tr = &truth.depth_of_field;
+                    let want: Vec<f32> = depths
+                        .iter()
+                        .step_by(3)
+                        .map(|&z| ((tr.sigma_px(z).powi(2) + fl * fl).sqrt() * 100.0).round() / 100.0)
+                        .collect();
                     println!(
-                        "{i:3} t={:.2} δ RMSE {:?} (⊕ pixel {:?}) δ at the depths {:?}: {}",
+                        "{i:3} t={:.2} δ RMSE {:?} (⊕ pixel {:?}) δ at the depths {:?} (truth ⊕ pixel {want:?}): {}",
                         u.t_s,
                         dof_rmse_px(d, &truth.depth_of_field, &depths),
                         dof_rmse_px_over_floor(d, &truth.depth_of_field, &depths, fl),
                         depths.iter().step_by(3).map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>(),
-                        d.diagnostics.reason.chars().take(60).collect::<String>()
+                        d.diagnostics
+                            .reason
+                            .chars()
+                            .take(std::env::var("DOF").ok().and_then(|s| s.parse().ok()).unwrap_or(60))
+                            .collect::<String>()
                     )
                 }
                 Event::Published(u) if std::env::var_os("NOISE").is_some() => {

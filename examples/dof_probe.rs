@@ -25,6 +25,64 @@ fn main() {
             .map(|&z| (truth.depth_of_field.sigma_px(z).hypot(floor) * 100.0).round() / 100.0)
             .collect::<Vec<_>>()
     );
+    // POOL=i,j,…: those frames (every effect on), each frame's curve, the pooled
+    // curve (`fit::fit_fast_pooled`) and the raw edge samples' median per depth bin.
+    if let Ok(list) = std::env::var("POOL") {
+        let idx: Vec<usize> = list.split(',').filter_map(|s| s.parse().ok()).collect();
+        let edges: Vec<(Vec<f32>, f32, f32)> = vec![];
+        let mut plots = vec![];
+        for &i in &idx {
+            let f = spec.frame(&scene, i);
+            let inp =
+                FitInputs { depth: Some(&f.depth_m), depth_units: DepthUnits::MetricM, ..FitInputs::new(&f.image) };
+            let opts = FitOptions {
+                tier: Some(Tier::Fast),
+                effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
+                ..Default::default()
+            };
+            let o = fit::fit(&inp, &opts).unwrap();
+            let d = &o.model.depth_of_field;
+            let motion = f.flow.dx.iter().zip(&f.flow.dy).map(|(x, y)| x.hypot(*y)).fold(0.0f32, f32::max);
+            let still: f32 = std::env::var("STILL").ok().and_then(|s| s.parse().ok()).unwrap_or(f32::INFINITY);
+            if motion > still {
+                continue;
+            }
+            println!(
+                "frame {i:3} (motion {motion:.1} px/frame): {:?}",
+                depths.iter().map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>()
+            );
+            if let Some(p) = o.plots.depth_of_field {
+                plots.push(p);
+            }
+        }
+        let _ = edges;
+        let refs: Vec<&fit::DofPlotData> = plots.iter().collect();
+        let (d, _) = fit::fit_fast_pooled(&refs, DepthUnits::MetricM, blind_augment::model::DofKernel::Gaussian);
+        println!(
+            "pooled   : {:?}",
+            depths.iter().map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>()
+        );
+        // Raw samples' median per bin of the 8 depths (± half a bin).
+        let half = 0.5 * (r[1] - r[0]) / 8.0;
+        let med: Vec<String> = depths
+            .iter()
+            .map(|&z| {
+                let mut v: Vec<f32> = plots
+                    .iter()
+                    .flat_map(|p| p.depth.iter().zip(&p.sigma_px))
+                    .filter(|(d, _)| (**d - z).abs() <= half)
+                    .map(|(_, s)| *s)
+                    .collect();
+                v.sort_by(f32::total_cmp);
+                match v.len() {
+                    0 => "-".into(),
+                    n => format!("{:.2}({n})", v[n / 2]),
+                }
+            })
+            .collect();
+        println!("raw median per depth bin (samples): {}", med.join(" "));
+        return;
+    }
     let cases = std::env::var("CASES").unwrap_or("all,dof only,none".into());
     for case in cases.split(',') {
         for i in [10usize, 40, 70, 100] {

@@ -78,6 +78,10 @@ pub struct DofPlotData {
     pub sigma_px: Vec<f32>,
     pub quadratic: Option<crate::model::DofCurve>,
     pub thin_lens: Option<crate::model::DofCurve>,
+    /// The depths the frame held (0.5–99.5th percentile of its valid depth), the
+    /// evaluation range's outer bound (`evaluation_range`); pooled fits take the
+    /// union over their frames.
+    pub frame_depth_span: Option<[f32; 2]>,
 }
 
 fn valid_depth(z: f32, units: DepthUnits) -> bool {
@@ -220,7 +224,13 @@ fn finish(
         stderr: Some(fit.stderr_px),
         stages_s: st.done(),
     };
-    let plot = DofPlotData { depth: z, sigma_px: s, quadratic: fit.quadratic, thin_lens: fit.thin_lens };
+    let plot = DofPlotData {
+        depth: z,
+        sigma_px: s,
+        quadratic: fit.quadratic,
+        thin_lens: fit.thin_lens,
+        frame_depth_span: frame_span,
+    };
     (dof, Some(plot))
 }
 
@@ -705,6 +715,49 @@ pub fn fit_fast(
     (dof, plot)
 }
 
+/// Most edge samples a pooled fit takes (`fit_fast_pooled`): twice one frame's
+/// (`FAST_MAX_EDGE_SAMPLES`), so pooling a window of frames costs the curve fit of
+/// two frames, not of all of them.
+pub const POOLED_MAX_EDGE_SAMPLES: usize = 2 * FAST_MAX_EDGE_SAMPLES;
+
+/// One δ(Z) curve fitted on the edge samples of several blind fits (`fit_fast`'s
+/// plot data) of one fixed-focus camera: every frame gives an equal share of at
+/// most `POOLED_MAX_EDGE_SAMPLES` (every k-th of its samples), the evaluation
+/// range bounds extrapolation by the union of the frames' depths. Why: one frame's
+/// curve follows the depths its view holds textured — on the calibration video
+/// views differ by 0.2–0.4 px RMSE — while the camera's δ(Z) is one curve; the
+/// union of views pins it over the depths all of them saw.
+/// `kernel` is the kernel the samples' σ were calibrated for (`fit_fast` maps
+/// each edge ratio through that kernel's table): callers pool frames of one
+/// kernel. Below `MIN_SAMPLES` in all: absent, status not identifiable.
+pub fn fit_fast_pooled(
+    frames: &[&DofPlotData],
+    units: DepthUnits,
+    kernel: DofKernel,
+) -> (DepthOfField, Option<DofPlotData>) {
+    let started = Instant::now();
+    let mut st = super::Stages::start();
+    let share = POOLED_MAX_EDGE_SAMPLES / frames.len().max(1);
+    let (mut z, mut s) = (vec![], vec![]);
+    let mut span: Option<[f32; 2]> = None;
+    for f in frames {
+        let n = f.depth.len().min(f.sigma_px.len());
+        let keep = n.div_ceil(share.max(1)).max(1);
+        z.extend(f.depth[..n].iter().step_by(keep));
+        s.extend(f.sigma_px[..n].iter().step_by(keep));
+        if let Some([lo, hi]) = f.frame_depth_span {
+            span = Some(span.map_or([lo, hi], |[a, b]| [a.min(lo), b.max(hi)]));
+        }
+    }
+    st.lap("pool");
+    let method = format!("fast (edges pooled over {} frames)", frames.len());
+    let (mut dof, plot) = finish(&method, z, s, units, span, started, st, |_| None);
+    if dof.curve.is_some() {
+        dof.kernel = kernel;
+    }
+    (dof, plot)
+}
+
 /// The depth range when the frame holds one depth (inverse depth's 5–95% spread
 /// within 2% of its median, over every 4th pixel), else `None`.
 fn constant_depth(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
@@ -765,5 +818,50 @@ mod range_tests {
         let r = evaluation_range([-0.5, 0.5], Some([-10.0, 10.0]), DepthUnits::RelativeInverse);
         assert_eq!(r, [-1.5, 1.5]);
         assert_eq!(evaluation_range([2.0, 2.0], Some([0.1, 50.0]), m), [2.0, 2.0]);
+    }
+}
+
+#[cfg(test)]
+mod pooled_tests {
+    use super::*;
+
+    /// Edge samples of a thin lens (k = 4 px per m⁻¹, focus 2.5 m, c0 0.3 px) at the
+    /// depths `z`, with a deterministic ±0.3 px scatter (a robust fit's noise).
+    fn frame(z: Vec<f32>, span: [f32; 2]) -> DofPlotData {
+        let truth = |z: f32| 4.0 * (1.0 / z - 1.0 / 2.5).abs() + 0.3;
+        let sigma_px =
+            z.iter().enumerate().map(|(i, &z)| truth(z) + 0.3 * ((i * 7919) % 13) as f32 / 6.0 - 0.3).collect();
+        DofPlotData { depth: z, sigma_px, quadratic: None, thin_lens: None, frame_depth_span: Some(span) }
+    }
+
+    /// Two views of one camera, one seeing only near depths (1–2 m, ten times the
+    /// samples), one only far (3–6 m): the pooled curve follows the camera over
+    /// both (RMSE ≤ 0.1 px: the samples' scatter averaged over thousands, plus the
+    /// thin lens's focus search on a grid), each view gets an equal share of the
+    /// sample budget (the near view alone would not pin the far side), and the
+    /// evaluation range is the union of the views' depths.
+    #[test]
+    fn pooled_views_pin_the_curve_over_their_union() {
+        let near = frame((0..20_000).map(|i| 1.0 + (i % 1000) as f32 / 1000.0).collect(), [1.0, 2.0]);
+        let far = frame((0..2_000).map(|i| 3.0 + 3.0 * (i % 500) as f32 / 500.0).collect(), [3.0, 6.0]);
+        let (dof, plot) = fit_fast_pooled(&[&near, &far], DepthUnits::MetricM, DofKernel::Gaussian);
+        assert!(dof.present, "{}", dof.diagnostics.reason);
+        assert_eq!(dof.depth_range, [1.0, 6.0]);
+        let plot = plot.expect("plot data");
+        let from_far = plot.depth.iter().filter(|&&z| z >= 3.0).count();
+        assert!(from_far >= 2_000 && plot.depth.len() <= POOLED_MAX_EDGE_SAMPLES, "{from_far} of {}", plot.depth.len());
+        let truth = |z: f32| 4.0 * (1.0 / z - 1.0 / 2.5).abs() + 0.3;
+        let zs: Vec<f32> = (0..50).map(|i| 1.0 + 5.0 * i as f32 / 49.0).collect();
+        let rmse = (zs.iter().map(|&z| (dof.sigma_px(z) - truth(z)).powi(2)).sum::<f32>() / zs.len() as f32).sqrt();
+        assert!(rmse <= 0.1, "pooled RMSE {rmse} px: {}", dof.diagnostics.reason);
+        assert!(dof.diagnostics.method.contains("2 frames"), "{}", dof.diagnostics.method);
+    }
+
+    /// No samples at all: absent and not identifiable, never a curve.
+    #[test]
+    fn an_empty_pool_is_not_identifiable() {
+        let (dof, plot) = fit_fast_pooled(&[], DepthUnits::MetricM, DofKernel::Gaussian);
+        assert!(!dof.present && dof.curve.is_none() && plot.is_none());
+        assert_eq!(dof.diagnostics.status, Status::NotIdentifiable);
     }
 }

@@ -19,7 +19,7 @@ pub mod streak_spectrum;
 
 pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};
-pub use dof::DofPlotData;
+pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
 pub use motion_blur::MbPlotData;
 pub use noise::{effective_stride as effective_noise_stride, NoisePlotData, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO};
 

@@ -394,8 +394,38 @@ pub struct Calibrator {
     aligned_previous: Option<(u64, Option<Arc<crate::analysis::temporal::Aligned>>)>,
     /// Blind noise refits so far: which strip the next one reads (`noise_strip`).
     noise_strips_fitted: usize,
+    /// The blind DoF fits' edge samples of the last `DOF_POOL_S` (`pool_dof`).
+    dof_pool: VecDeque<PooledEdges>,
     /// This frame's stage times.
     stages: Stages,
+}
+
+/// One blind DoF fit's edge samples, kept for the pooled fit (`Calibrator::pool_dof`).
+#[derive(Debug)]
+struct PooledEdges {
+    t_s: f64,
+    units: crate::model::DepthUnits,
+    kernel: crate::model::DofKernel,
+    edges: fit::DofPlotData,
+}
+
+/// How long a blind DoF fit's edge samples stay in the pool (s of video), and the
+/// most frames it holds. A fixed-focus camera's δ(Z) only changes with a detected
+/// change (which empties the pool from then back), so the pool may reach past the
+/// aggregation window: 3 s of a head looking around are several views.
+const DOF_POOL_S: f64 = 3.0;
+const DOF_POOL_FRAMES: usize = 32;
+/// Most motion (px per frame interval, over the sparse grid) of a frame whose
+/// edges enter the DoF pool. Motion blur widens every edge across the flow's
+/// direction: on the calibration video at 1280×960 (λ = 0.5, turns of 7–37
+/// px/frame) mid-turn frames read δ 0.4–1 px high. At 1 px/frame the streak (≤ 1
+/// px, variance ≤ 1/12 px²) moves a 2 px edge by ≤ 0.02 px. Frames without a
+/// sparse flow (no pose or depth) count as at rest: nothing says otherwise.
+const DOF_POOL_MAX_MOTION_PX: f32 = 1.0;
+
+/// Whether `a`'s edges may enter the DoF pool (`DOF_POOL_MAX_MOTION_PX`).
+fn dof_still(a: &Analysed) -> bool {
+    a.max_motion_px().is_none_or(|m| m <= DOF_POOL_MAX_MOTION_PX)
 }
 
 /// Head motion no tracker reports for a real head (m/s, rad/s): a tracking loss.
@@ -439,6 +469,7 @@ impl Calibrator {
             published: None,
             aligned_previous: None,
             noise_strips_fitted: 0,
+            dof_pool: VecDeque::new(),
             stages: Stages::default(),
         })
     }
@@ -532,6 +563,36 @@ impl Calibrator {
         v.sort_by(|a, b| a.frame.t_s.total_cmp(&b.frame.t_s));
         v.dedup_by(|a, b| a.frame.index == b.frame.index);
         v
+    }
+
+    /// The pooled blind δ(Z) (`fit::fit_fast_pooled`) replaces this frame's own: one
+    /// curve on the edge samples of every blind fit of the last `DOF_POOL_S` taken
+    /// with the head at rest (`dof_still`), with this frame's depth units and kernel
+    /// (older or other entries dropped; at most `DOF_POOL_FRAMES`). `edges`: this
+    /// frame's samples, if it is at rest. With the pool empty and the frame moving,
+    /// the frame's own curve stands. The pooled fit's time counts with the DoF fit's.
+    fn pool_dof(&mut self, t_s: f64, edges: Option<fit::DofPlotData>, model: &mut CameraModel) {
+        let (units, kernel) = (model.depth_of_field.units, model.depth_of_field.kernel);
+        let own_curve = model.depth_of_field.curve.is_some();
+        if let Some(edges) = edges.filter(|_| own_curve) {
+            self.dof_pool.push_back(PooledEdges { t_s, units, kernel, edges });
+        }
+        self.dof_pool.retain(|p| t_s - p.t_s <= DOF_POOL_S && p.units == units && p.kernel == kernel);
+        while self.dof_pool.len() > DOF_POOL_FRAMES {
+            self.dof_pool.pop_front();
+        }
+        // One frame in the pool: the frame's own fit when it is that frame.
+        if self.dof_pool.is_empty() || (self.dof_pool.len() == 1 && self.dof_pool[0].t_s == t_s) {
+            return;
+        }
+        let frames: Vec<&fit::DofPlotData> = self.dof_pool.iter().map(|p| &p.edges).collect();
+        let (mut pooled, _) = fit::fit_fast_pooled(&frames, units, kernel);
+        if pooled.curve.is_some() {
+            let own = &model.depth_of_field.diagnostics;
+            pooled.diagnostics.fit_time_s += own.fit_time_s;
+            pooled.diagnostics.reason = format!("{}; this frame alone: {}", pooled.diagnostics.reason, own.reason);
+            model.depth_of_field = pooled;
+        }
     }
 
     /// The rows the next blind noise refit reads (`CalibratorConfig::noise_strip_px`):
@@ -730,11 +791,10 @@ impl Calibrator {
         };
         let noise = due(0, self.cfg.effects.noise, false);
         let motion_blur = due(1, self.cfg.effects.motion_blur, noise);
-        let fx = Effects {
-            noise,
-            motion_blur,
-            depth_of_field: due(2, self.cfg.effects.depth_of_field, noise || motion_blur),
-        };
+        // Depth of field waits for a frame with the head at rest once the edge pool
+        // holds one (`pool_dof`): a moving frame's edges carry motion blur.
+        let dof_wanted = self.cfg.effects.depth_of_field && (self.dof_pool.is_empty() || dof_still(current));
+        let fx = Effects { noise, motion_blur, depth_of_field: due(2, dof_wanted, noise || motion_blur) };
         // The blind noise fit reads texture off the previous exposure aligned by pose
         // and depth (`fit::Neighbour`): on the calibration video its error falls from
         // ~20% to ~5% (BENCHMARKS.md).
@@ -830,7 +890,14 @@ impl Calibrator {
         // Blind noise on this update's strip (`noise_strip`), with the previous frame
         // aligned there; the other blind effects on the whole frame.
         let mut model = match fit::fit(&base, &fast_opts(Effects { noise: false, ..blind })) {
-            Ok(o) => o.model,
+            Ok(o) => {
+                let mut model = o.model;
+                if blind.depth_of_field {
+                    let edges = o.plots.depth_of_field.filter(|_| dof_still(current));
+                    self.pool_dof(t_s, edges, &mut model);
+                }
+                model
+            }
             Err(e) => {
                 events.push(Event::Skipped { frame: index, reason: e.to_string() });
                 return None;
