@@ -425,7 +425,7 @@ const DOF_POOL_MAX_MOTION_PX: f32 = 1.0;
 
 /// Whether `a`'s edges may enter the DoF pool (`DOF_POOL_MAX_MOTION_PX`).
 fn dof_still(a: &Analysed) -> bool {
-    a.max_motion_px().is_none_or(|m| m <= DOF_POOL_MAX_MOTION_PX)
+    a.max_motion_px().map_or(true, |m| m <= DOF_POOL_MAX_MOTION_PX)
 }
 
 /// Head motion no tracker reports for a real head (m/s, rad/s): a tracking loss.
