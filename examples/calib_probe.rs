@@ -14,7 +14,12 @@ fn main() {
     let tier = CalibrationTier::parse(args.get(1).map(|s| s.as_str()).unwrap_or("fast")).unwrap();
     let frames: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(60);
     let w: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(320);
-    let scene = motorcycle().unwrap();
+    let mut scene = motorcycle().unwrap();
+    // SCENE=procedural: the Motorcycle's depth under a texture of known blur, 4×
+    // (`synth::sequence::procedural`).
+    if std::env::var("SCENE").is_ok_and(|s| s == "procedural") {
+        scene = procedural(&scene, 4, 11);
+    }
     // NOCHANGE=1: no camera change (the bench's 1280×960 run).
     let change = std::env::var_os("NOCHANGE").is_none().then_some(frames as f64 / 60.0);
     let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, frames, change);

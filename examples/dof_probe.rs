@@ -7,7 +7,12 @@ use blind_augment::synth::sequence::*;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let w: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(320);
-    let scene = motorcycle().unwrap();
+    let mut scene = motorcycle().unwrap();
+    // SCENE=procedural: the Motorcycle's depth under a texture of known blur, 4×
+    // (`synth::sequence::procedural`).
+    if std::env::var("SCENE").is_ok_and(|s| s == "procedural") {
+        scene = procedural(&scene, 4, 11);
+    }
     let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, 150, None);
     let truth = spec.truth.clone();
     let r = truth.depth_of_field.depth_range;
