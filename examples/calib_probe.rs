@@ -15,10 +15,11 @@ fn main() {
     let frames: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(60);
     let w: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(320);
     let mut scene = motorcycle().unwrap();
-    // SCENE=procedural: the Motorcycle's depth under a texture of known blur, 4×
+    // SCENE=procedural: the Motorcycle's depth under a texture of known blur, one
+    // source pixel per view pixel from 1280 px wide
     // (`synth::sequence::procedural`).
     if std::env::var("SCENE").is_ok_and(|s| s == "procedural") {
-        scene = procedural(&scene, 4, 11);
+        scene = procedural(&scene, (w / 320).max(1), 11);
     }
     // NOCHANGE=1: no camera change (the bench's 1280×960 run).
     let change = std::env::var_os("NOCHANGE").is_none().then_some(frames as f64 / 60.0);

@@ -8,10 +8,11 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let w: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(320);
     let mut scene = motorcycle().unwrap();
-    // SCENE=procedural: the Motorcycle's depth under a texture of known blur, 4×
+    // SCENE=procedural: the Motorcycle's depth under a texture of known blur, one
+    // source pixel per view pixel from 1280 px wide
     // (`synth::sequence::procedural`).
     if std::env::var("SCENE").is_ok_and(|s| s == "procedural") {
-        scene = procedural(&scene, 4, 11);
+        scene = procedural(&scene, (w / 320).max(1), 11);
     }
     let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, 150, None);
     let truth = spec.truth.clone();

@@ -540,6 +540,17 @@ const EDGE_TANGENT_TAPS: isize = 2;
 /// quarter of the cost.
 const FAST_MAX_EDGE_SAMPLES: usize = 8192;
 
+/// Least re-blurred gradient magnitude (per px, averaged along the edge like the
+/// frame's) of an edge sample. The frame's own gradient threshold selects edges
+/// whose gradient noise happened to push them over it, and those read δ low (a
+/// larger frame gradient, a larger ratio); the re-blurred gradient is nearly
+/// noise-free, so selecting on it does not bias the ratio, and at 0.04 the frame's
+/// threshold no longer binds (the frame's gradient is the re-blurred one × R > 1).
+/// Blurry edges have the lowest gradients, so they felt it most: on the
+/// procedural texture at 1280×960 with the video's noise, δ 2.7 px read for 2.87
+/// at the near end, 2.81 with this threshold (noise-free: 2.82–2.85).
+const EDGE_MIN_REBLUR_GRAD: f32 = 0.04;
+
 /// How far along the normal another edge biases the re-blur ratio: the re-blurred
 /// gradient at the edge weighs a neighbour at distance d by exp(−d²/2σ0²) — 0.14
 /// at 2σ0 = 6 px, 0.07 at 7 px.
@@ -684,7 +695,7 @@ pub fn fit_fast(
                 continue;
             }
             let mr = (gr.0 * gr.0 + gr.1 * gr.1).sqrt() / taps;
-            if mr <= 0.0 {
+            if mr < EDGE_MIN_REBLUR_GRAD {
                 continue;
             }
             let r = m / mr;
