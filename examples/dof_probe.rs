@@ -54,8 +54,15 @@ fn main() {
                 continue;
             }
             println!(
-                "frame {i:3} (motion {motion:.1} px/frame): {:?}",
-                depths.iter().map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>()
+                "frame {i:3} (motion {motion:.1} px/frame): {:?} [{:.1} ms: {}]",
+                depths.iter().map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>(),
+                d.diagnostics.fit_time_s * 1e3,
+                d.diagnostics
+                    .stages_s
+                    .iter()
+                    .map(|(k, v)| format!("{k} {:.1}", v * 1e3))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             if let Some(p) = o.plots.depth_of_field {
                 plots.push(p);
@@ -65,7 +72,9 @@ fn main() {
         let refs: Vec<&fit::DofPlotData> = plots.iter().collect();
         let (d, _) = fit::fit_fast_pooled(&refs, DepthUnits::MetricM, blind_augment::model::DofKernel::Gaussian);
         println!(
-            "pooled   : {:?}",
+            "pooled ({:.1} ms: {}): {:?}",
+            d.diagnostics.fit_time_s * 1e3,
+            d.diagnostics.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect::<Vec<_>>().join(", "),
             depths.iter().map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>()
         );
         // Raw samples' median per bin of the 8 depths (± half a bin).
