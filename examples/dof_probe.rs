@@ -35,18 +35,10 @@ fn main() {
     // curve (`fit::fit_fast_pooled`) and the raw edge samples' median per depth bin.
     if let Ok(list) = std::env::var("POOL") {
         let idx: Vec<usize> = list.split(',').filter_map(|s| s.parse().ok()).collect();
-        let edges: Vec<(Vec<f32>, f32, f32)> = vec![];
         let mut plots = vec![];
         for &i in &idx {
             let f = spec.frame(&scene, i);
-            let inp =
-                FitInputs { depth: Some(&f.depth_m), depth_units: DepthUnits::MetricM, ..FitInputs::new(&f.image) };
-            let opts = FitOptions {
-                tier: Some(Tier::Fast),
-                effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
-                ..Default::default()
-            };
-            let o = fit::fit(&inp, &opts).unwrap();
+            let o = fit_dof(&f);
             let d = &o.model.depth_of_field;
             let motion = f.flow.dx.iter().zip(&f.flow.dy).map(|(x, y)| x.hypot(*y)).fold(0.0f32, f32::max);
             let still: f32 = std::env::var("STILL").ok().and_then(|s| s.parse().ok()).unwrap_or(f32::INFINITY);
@@ -68,7 +60,6 @@ fn main() {
                 plots.push(p);
             }
         }
-        let _ = edges;
         let refs: Vec<&fit::DofPlotData> = plots.iter().collect();
         let (d, _) = fit::fit_fast_pooled(&refs, DepthUnits::MetricM, blind_augment::model::DofKernel::Gaussian);
         println!(
@@ -116,15 +107,7 @@ fn main() {
                 }
                 _ => {}
             }
-            let f = s.frame(&scene, i);
-            let inp =
-                FitInputs { depth: Some(&f.depth_m), depth_units: DepthUnits::MetricM, ..FitInputs::new(&f.image) };
-            let opts = FitOptions {
-                tier: Some(Tier::Fast),
-                effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
-                ..Default::default()
-            };
-            let o = fit::fit(&inp, &opts).unwrap();
+            let o = fit_dof(&s.frame(&scene, i));
             let d = &o.model.depth_of_field;
             println!(
                 "{case:9} frame {i:3}: {:?}  [{}]",
@@ -133,4 +116,15 @@ fn main() {
             );
         }
     }
+}
+
+/// The blind DoF fit alone on one frame of the video.
+fn fit_dof(f: &SequenceFrame) -> fit::FitOutput {
+    let inp = FitInputs { depth: Some(&f.depth_m), depth_units: DepthUnits::MetricM, ..FitInputs::new(&f.image) };
+    let opts = FitOptions {
+        tier: Some(Tier::Fast),
+        effects: Effects { noise: false, motion_blur: false, depth_of_field: true },
+        ..Default::default()
+    };
+    fit::fit(&inp, &opts).unwrap()
 }

@@ -131,7 +131,7 @@ fn fast_exposure_uncertainty_covers_its_error_under_defocus() {
 ///   photograph (blurs of independent causes add in variance) 0.091 / 0.055 px;
 ///   tolerance 0.2 px (that composition is itself an estimate from one fit).
 ///
-/// Before edges were required to be isolated (`fit::dof::isolated`) the procedural
+/// Before edges were required to be isolated (`fit::dof::blind::isolated`) the procedural
 /// texture read 0.244 / 0.195 px (thin bars' two edges cancel in the re-blur and
 /// read δ low), and the astronaut against the truth ⊕ its own blur 0.142 / 0.062
 /// before edges were selected on the re-blurred gradient.

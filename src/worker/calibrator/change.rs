@@ -49,7 +49,7 @@ impl Calibrator {
         self.after_change = true;
         self.window.retain(|a| a.frame.t_s >= since_s);
         self.sharp.retain(|a| a.frame.t_s >= since_s);
-        self.dof_pool.retain(|p| p.t_s >= since_s);
+        self.forget_dof_before(since_s);
     }
 
     /// Change detection on the noise probes (every `PROBE_INTERVAL_S`), each

@@ -1,44 +1,18 @@
-//! Depth of field δ(Z), accurate and blind.
+//! Depth of field δ(Z), blind: the frame and its depth alone.
 //!
-//! Accurate (paper eq. 4 and its three stages): (1) per-pixel σ search over
-//! [0, 10] px; (2) textureless pixels rejected; (3) robust fit of δ(Z) (`curve`).
-//! Stage 1 runs on luma (DoF blur is linear and achromatic, so it commutes with
-//! luma) over the same cascaded discrete-Gaussian stack `synth::add_defocus` uses,
-//! with nodes every `node_spacing` px, continued at half and quarter resolution
-//! once it is band-limited (`stack_levels`). Between nodes S_k, S_{k+1} the blend weight
-//! that best explains a 3×3 patch of I is closed-form,
-//! w = ⟨I − S_k, S_{k+1} − S_k⟩ / |S_{k+1} − S_k|², clamped to [0, 1], and
-//! σ² = σ_k² + w(σ_{k+1}² − σ_k²): a continuous σ, not a 0.1 px grid, and one pass
-//! over the stack instead of 100 blurs.
-//!
-//! Textureless rule: a sample is kept when the mean squared luma gradient of the
-//! sharp image over its 3×3 patch is ≥ 1e-4 (a 1%-per-pixel ramp) — below that the
-//! patch looks the same at every σ. Pixels with invalid depth (non-finite, or ≤ 0
-//! for metric depth) are skipped.
-//!
-//! Range: the curve is fitted on the textured samples' depths and evaluated over
-//! the depths the frame holds (0.5–99.5th percentile of its valid depth), with at
-//! most `EXTRAPOLATION_FRACTION` of the textured inverse-depth span of
-//! extrapolation on each side — δ(Z) clamps Z into that range, so content nearer
-//! than every textured sample no longer takes the nearest sample's blur.
-//!
-//! Present when the fitted curve reaches ≥ 0.1 px somewhere in the range (a 0.1 px
-//! Gaussian removes 5% of the contrast at Nyquist: invisible) and its maximum
-//! exceeds 3 standard errors.
-//!
-//! Blind (Zhuo & Sim 2011): at edges (gradient-magnitude maxima along the gradient,
-//! ≥ 0.03 per px), re-blur with σ0 = 3 px; for a Gaussian-blurred step the gradient
-//! ratio R = |∇I| / |∇(I ∗ G_σ0)| gives σ = σ0/√(R² − 1). Both gradients are
-//! averaged over 5 pixels along the edge (`EDGE_TANGENT_TAPS`): noise at the
-//! gradient maximum otherwise reads δ low (−45% on a noisy 2 px test frame). Only
-//! isolated edges count (`isolated`: no other edge within 7 px along the normal):
-//! the ratio assumes one step, and a thin bar's two edges cancel in the re-blur
-//! (δ read low; on a texture of known blur RMSE 0.24 px before, 0.045 px after).
-//! The
-//! central difference and pixel sampling bias that formula at small σ, so the raw
-//! value is mapped through a table from a 1-D simulation of ideally sampled
-//! blurred steps (sub-pixel phases averaged): an estimator calibration, not a
-//! camera calibration.
+//! Zhuo & Sim 2011: at edges (gradient-magnitude maxima along the gradient, ≥ 0.03
+//! per px), re-blur with σ0 = 3 px; for a Gaussian-blurred step the gradient ratio
+//! R = |∇I| / |∇(I ∗ G_σ0)| gives σ = σ0/√(R² − 1). Three guards keep the ratio to
+//! what it assumes, one step seen through noise: both gradients are averaged over 5
+//! pixels along the edge (`EDGE_TANGENT_TAPS`; noise at the gradient maximum read δ
+//! −45% on a noisy 2 px test frame); edges are selected on the nearly noise-free
+//! re-blurred gradient (`EDGE_MIN_REBLUR_GRAD`; the frame's own threshold picked
+//! noise-raised gradients); only isolated edges count (`isolated`: a thin bar's two
+//! edges cancel in the re-blur and read δ low — on a texture of known blur RMSE
+//! 0.24 px before, 0.056 px after, `tests/fast_path.rs`). The central difference
+//! and pixel sampling bias the formula at small σ, so the raw value is mapped
+//! through a table from a 1-D simulation of ideally sampled blurred steps (sub-pixel
+//! phases averaged): an estimator calibration, not a camera calibration.
 //! The re-blurred image is built at half resolution (`reblur_half`: the pyramid's
 //! reduce, variance 1 px², then the remaining 8 px² at half resolution — the
 //! σ0 = 3 px blur is band-limited far below the half-resolution Nyquist) and its
@@ -55,385 +29,7 @@
 //! uniformly defocused page of text are biased by its thin strokes (they read
 //! 1.96 px for the 2.79 px of tests/real_blur.rs).
 
-use super::curve::fit_dof_curve;
-use crate::image::{blur_separable, discrete_gaussian_kernel, gradient_sq, reduce, Plane, Rgb};
-use crate::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, DofKernel, Status};
-use std::sync::OnceLock;
-use std::time::Instant;
-
-/// Node spacing of the fitting stack. 0.5 px keeps the stack 2× cheaper than the
-/// synth reference's 0.25 px; the variance-matched blend makes the mismatch a
-/// higher-order effect (measured in tests/validation.rs and BENCHMARKS.md).
-pub const DEFAULT_NODE_SPACING_PX: f32 = 0.5;
-/// Default handoff of the DoF stack to half resolution (see `stack_levels`).
-/// Measured at 512² (BENCHMARKS.md): at 5 px the strong-blur RMSE is 0.009 px
-/// (full resolution: 0.005) for two thirds of the time; at 3 px it is 0.046 px,
-/// too close to the 0.05 px tolerance for 6 ms.
-pub const DEFAULT_PYRAMID_FROM_PX: Option<f32> = Some(5.0);
-const TEXTURE_MIN_GRAD_SQ: f32 = 1e-4;
-/// Sample centres on multiples of 4, so each one is also a pixel of the half- and
-/// quarter-resolution levels (pixel j there ↔ pixel 2j / 4j here).
-const SAMPLE_STRIDE: usize = 4;
-const MIN_SAMPLES: usize = 32;
-
-#[derive(Clone, Debug, Default)]
-pub struct DofPlotData {
-    pub depth: Vec<f32>,
-    pub sigma_px: Vec<f32>,
-    pub quadratic: Option<crate::model::DofCurve>,
-    pub thin_lens: Option<crate::model::DofCurve>,
-    /// The depths the frame held (0.5–99.5th percentile of its valid depth), the
-    /// evaluation range's outer bound (`evaluation_range`); pooled fits take the
-    /// union over their frames.
-    pub frame_depth_span: Option<[f32; 2]>,
-}
-
-fn valid_depth(z: f32, units: DepthUnits) -> bool {
-    z.is_finite() && (units == DepthUnits::RelativeInverse || z > 0.0)
-}
-
-fn depth_range(z: &[f32]) -> [f32; 2] {
-    let lo = z.iter().cloned().fold(f32::INFINITY, f32::min);
-    let hi = z.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-    [lo, hi]
-}
-
-/// The valid depths of every `step`-th pixel in x and y.
-fn valid_depths(depth: &Plane, units: DepthUnits, step: usize) -> Vec<f32> {
-    (0..depth.height)
-        .step_by(step)
-        .flat_map(|y| (0..depth.width).step_by(step).map(move |x| (x, y)))
-        .map(|(x, y)| depth.get(x, y))
-        .filter(|&v| valid_depth(v, units))
-        .collect()
-}
-
-/// The depths the frame holds: 0.5th–99.5th percentile of its valid depths (every
-/// other pixel in x and y), or `None` without valid depth.
-fn frame_depth_span(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
-    let mut z = valid_depths(depth, units, 2);
-    if z.is_empty() {
-        return None;
-    }
-    let k = |q: f64| ((z.len() - 1) as f64 * q).round() as usize;
-    let (klo, khi) = (k(0.005), k(0.995));
-    let lo = *z.select_nth_unstable_by(klo, |a, b| a.total_cmp(b)).1;
-    let hi = *z.select_nth_unstable_by(khi, |a, b| a.total_cmp(b)).1;
-    Some([lo, hi])
-}
-
-/// Extrapolation beyond the textured depths, as a fraction of their span in inverse
-/// depth (where the thin lens is linear), toward the depths the frame holds. Chosen
-/// by measurement (tests/independent_forward.rs, BENCHMARKS.md): on five scenes —
-/// two fully textured, one with 14% of the frame textureless and nearer than every
-/// textured sample (thin lens and quadratic truth), one with a textureless far band
-/// — 0 (the textured depths only: nearer content took the nearest sample's blur,
-/// 0.68 px frame RMSE) / 0.5 / 1 / 2 / unbounded gave worst-case frame RMSE 0.68 /
-/// 0.35 / 0.20 / 0.23 / 0.23 px and medians 0.090 / 0.076 / 0.067 / 0.066 / 0.066 px:
-/// 1 has the best worst case, and bounds how far a curve fitted on a narrow textured
-/// span is trusted.
-pub const EXTRAPOLATION_FRACTION: f32 = 1.0;
-
-/// The range the model is evaluated over (δ(Z) clamps Z into it): the textured
-/// samples' depths, extended toward the frame's depths by at most
-/// `EXTRAPOLATION_FRACTION` of their inverse-depth span on each side.
-fn evaluation_range(textured: [f32; 2], frame: Option<[f32; 2]>, units: DepthUnits) -> [f32; 2] {
-    let Some(frame) = frame else { return textured };
-    let m = EXTRAPOLATION_FRACTION;
-    // Inverse depth u: near is large u for metric depth, and z itself for
-    // relative inverse depth.
-    let u = |z: f32| units.inverse_depth(z);
-    let from_u = |u: f32| match units {
-        DepthUnits::MetricM => 1.0 / u,
-        DepthUnits::RelativeInverse => u,
-    };
-    let (ua, ub) = (u(textured[0]), u(textured[1]));
-    let (ulo, uhi) = (ua.min(ub), ua.max(ub));
-    let span = (uhi - ulo).max(0.0);
-    let (fa, fb) = (u(frame[0]), u(frame[1]));
-    let (flo, fhi) = (fa.min(fb), fa.max(fb));
-    let new_lo = flo.max(ulo - m * span).min(ulo);
-    let new_hi = fhi.min(uhi + m * span).max(uhi);
-    // Metric depth: u ≤ 0 is infinitely far, so keep the far end finite; relative
-    // inverse depth may be ≤ 0 (it is affine in 1/Z) and is taken as it is.
-    let new_lo = if units == DepthUnits::MetricM { new_lo.max(1e-6) } else { new_lo };
-    let (za, zb) = (from_u(new_lo), from_u(new_hi));
-    [za.min(zb), za.max(zb)]
-}
-
-/// Turn per-pixel (Z, σ) into the model; `residuals` = (before, after) if known.
-#[allow(clippy::too_many_arguments)]
-fn finish(
-    method: &str,
-    z: Vec<f32>,
-    s: Vec<f32>,
-    units: DepthUnits,
-    frame_span: Option<[f32; 2]>,
-    started: Instant,
-    mut st: super::Stages,
-    residual_at: impl Fn(&DepthOfField) -> Option<(f64, f64)>,
-) -> (DepthOfField, Option<DofPlotData>) {
-    let n = z.len();
-    if n < MIN_SAMPLES {
-        let reason = format!("only {n} textured pixels with valid depth (need {MIN_SAMPLES}): δ(Z) not identifiable");
-        let mut d = super::not_identifiable(method, reason, started);
-        d.samples_used = n as u64;
-        return (DepthOfField::absent(units, d), None);
-    }
-    let textured = depth_range(&z);
-    let range = evaluation_range(textured, frame_span, units);
-    st.lap("search");
-    let Some(fit) = fit_dof_curve(&z, &s, units, textured) else {
-        let mut d = super::not_identifiable(method, "robust depth-model fit failed (degenerate design)", started);
-        d.samples_used = n as u64;
-        return (DepthOfField::absent(units, d), None);
-    };
-    let mut dof = DepthOfField {
-        present: true,
-        units,
-        curve: Some(fit.curve),
-        depth_range: range,
-        kernel: crate::model::DofKernel::Gaussian,
-        diagnostics: Diagnostics::not_fitted(""),
-    };
-    let max_sigma =
-        (0..=64).map(|i| dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0)).fold(0.0f32, f32::max);
-    let present = max_sigma >= 0.1 && (max_sigma as f64) > 3.0 * fit.stderr_px;
-    st.lap("least_squares");
-    let residuals = residual_at(&dof);
-    let form = match fit.curve {
-        crate::model::DofCurve::Quadratic { .. } => "quadratic",
-        crate::model::DofCurve::ThinLens { .. } => "thin_lens",
-        crate::model::DofCurve::Constant { .. } => "constant",
-    };
-    dof.present = present;
-    dof.diagnostics = Diagnostics {
-        status: if present { Status::Present } else { Status::Absent },
-        reason: format!(
-            "{form} kept (lower mean Huber loss, thin lens on ties; flat curves become constants); max δ {max_sigma:.3} px, \
-             robust residual scale {:.3} px; fitted on textured depths [{:.3}, {:.3}], evaluated over [{:.3}, {:.3}] \
-             (the frame's depths, extrapolated at most {EXTRAPOLATION_FRACTION} textured inverse-depth span); {}",
-            fit.scale,
-            textured[0],
-            textured[1],
-            range[0],
-            range[1],
-            if present { "visible (≥ 0.1 px) and above 3 standard errors" } else { "below 0.1 px or within 3 standard errors" }
-        ),
-        method: method.into(),
-        residual_before: residuals.map(|r| r.0),
-        residual_after: residuals.map(|r| r.1),
-        samples_used: n as u64,
-        fit_time_s: started.elapsed().as_secs_f64(),
-        stderr: Some(fit.stderr_px),
-        stages_s: st.done(),
-    };
-    let plot = DofPlotData {
-        depth: z,
-        sigma_px: s,
-        quadratic: fit.quadratic,
-        thin_lens: fit.thin_lens,
-        frame_depth_span: frame_span,
-    };
-    (dof, Some(plot))
-}
-
-/// Per-sample sufficient statistics per stack interval, so that the residual at any
-/// σ (the fitted curve's) can be evaluated after the fit: Σa², Σa·d, Σd².
-struct IntervalStats {
-    aa: Vec<f32>,
-    ad: Vec<f32>,
-    dd: Vec<f32>,
-}
-
-/// One resolution of the multi-resolution stack: pixels of `1 << shift` full-res
-/// pixels, nodes σ_k = `lo + k·spacing` (full-res px) up to `hi`.
-struct StackLevel {
-    shift: usize,
-    lo: f32,
-    hi: f32,
-}
-
-/// The stack's resolutions for a handoff σ_h (`FitOptions::dof_pyramid_from_px`):
-/// full resolution to σ_h + 0.5, half resolution from σ_h to 2σ_h + 0.5, quarter
-/// resolution from 2σ_h on; `None` keeps everything at full resolution (exactly the
-/// reference's stack). Past σ_h the stack is band-limited (at σ_h = 3 its response at
-/// the half-res Nyquist frequency is e^(−2π²·9/16) ≈ 1.5e-5), but a discrete Gaussian
-/// of variance t/4 on the coarse grid is not the full-res one of variance t: their
-/// responses differ in the 4th order, which biases coarse-level σ slightly (measured
-/// in BENCHMARKS.md: the speed/accuracy trade of this option). Levels overlap by
-/// 0.5 px so a sample near a boundary is judged where its minimum is interior.
-fn stack_levels(handoff_px: Option<f32>) -> Vec<StackLevel> {
-    match handoff_px {
-        None => vec![StackLevel { shift: 0, lo: 0.0, hi: f32::INFINITY }],
-        Some(h) => vec![
-            StackLevel { shift: 0, lo: 0.0, hi: h + 0.5 },
-            StackLevel { shift: 1, lo: h, hi: 2.0 * h + 0.5 },
-            StackLevel { shift: 2, lo: 2.0 * h, hi: f32::INFINITY },
-        ],
-    }
-}
-
-/// Every other pixel in x and y (pixel j ↔ pixel 2j): no prefilter; callers only
-/// decimate band-limited planes (or the frame, whose relevant pixels are blurred).
-fn decimate(p: &Plane) -> Plane {
-    let (w, h) = (p.width.div_ceil(2), p.height.div_ceil(2));
-    let mut out = Vec::with_capacity(w * h);
-    for y in 0..h {
-        for x in 0..w {
-            out.push(p.get(2 * x, 2 * y));
-        }
-    }
-    Plane::from_vec(w, h, out)
-}
-
-/// Accurate tier: I, I_noDoF and Z.
-pub fn fit_accurate(
-    image: &Rgb,
-    sharp: &Rgb,
-    depth: &Plane,
-    units: DepthUnits,
-    opts: &super::FitOptions,
-) -> (DepthOfField, Option<DofPlotData>) {
-    let started = Instant::now();
-    let mut st = super::Stages::start();
-    let (yi, ys) = (image.luma(), sharp.luma());
-    let grad = gradient_sq(&ys);
-    let (w, h) = (yi.width, yi.height);
-    // Sample centres on a stride grid; each owns a 3×3 patch.
-    let mut centres = vec![];
-    for y in (SAMPLE_STRIDE..h.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
-        for x in (SAMPLE_STRIDE..w.saturating_sub(1)).step_by(SAMPLE_STRIDE) {
-            let z = depth.get(x, y);
-            if !valid_depth(z, units) {
-                continue;
-            }
-            let g: f32 = (0..9).map(|k| grad.get(x + k % 3 - 1, y + k / 3 - 1)).sum::<f32>() / 9.0;
-            if g >= TEXTURE_MIN_GRAD_SQ {
-                centres.push((x, y));
-            }
-        }
-    }
-    let n = centres.len();
-    let spacing = opts.dof_node_spacing_px;
-    let max_sigma = opts.dof_max_sigma_px;
-    // Per level: (first node σ, number of intervals, statistics).
-    let mut levels: Vec<(f32, usize, IntervalStats)> = vec![];
-    if n >= MIN_SAMPLES {
-        let mut frame = yi.clone();
-        let mut start_plane = ys.clone();
-        let stack = stack_levels(opts.dof_pyramid_from_px);
-        for level in stack.iter() {
-            if level.lo >= max_sigma {
-                break;
-            }
-            let lo = (level.lo / spacing).floor() * spacing;
-            let hi = level.hi.min(max_sigma);
-            let intervals = ((hi - lo) / spacing).ceil().max(1.0) as usize;
-            let scale = (1usize << level.shift) as f32;
-            let mut st = IntervalStats {
-                aa: vec![0.0; n * intervals],
-                ad: vec![0.0; n * intervals],
-                dd: vec![0.0; n * intervals],
-            };
-            let (fw, fh) = (frame.width, frame.height);
-            let mut handoff: Option<Plane> = None;
-            let next_lo = stack.get(level.shift + 1).map(|l| (l.lo / spacing).floor() * spacing);
-            let mut prev = start_plane.clone();
-            for k in 0..intervals {
-                let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
-                if Some(s0) == next_lo {
-                    handoff = Some(prev.clone());
-                }
-                // Increment in this level's pixel units: variances scale by 1/scale².
-                let next = blur_separable(&prev, &discrete_gaussian_kernel((s1 * s1 - s0 * s0) / (scale * scale)));
-                for (s, &(x, y)) in centres.iter().enumerate() {
-                    let (cx, cy) =
-                        ((x >> level.shift).clamp(1, fw.max(3) - 2), (y >> level.shift).clamp(1, fh.max(3) - 2));
-                    let (mut aa, mut ad, mut dd) = (0.0f32, 0.0f32, 0.0f32);
-                    for j in cy.saturating_sub(1)..(cy + 2).min(fh) {
-                        for i in cx.saturating_sub(1)..(cx + 2).min(fw) {
-                            let idx = j * fw + i;
-                            let av = frame.data[idx] - prev.data[idx];
-                            let dv = next.data[idx] - prev.data[idx];
-                            aa += av * av;
-                            ad += av * dv;
-                            dd += dv * dv;
-                        }
-                    }
-                    let o = s * intervals + k;
-                    st.aa[o] = aa;
-                    st.ad[o] = ad;
-                    st.dd[o] = dd;
-                }
-                prev = next;
-            }
-            if Some(lo + intervals as f32 * spacing) == next_lo {
-                handoff = Some(prev.clone());
-            }
-            levels.push((lo, intervals, st));
-            match handoff {
-                Some(p) if fw > 3 && fh > 3 => {
-                    start_plane = decimate(&p);
-                    frame = decimate(&frame);
-                }
-                _ => break,
-            }
-        }
-    }
-    st.lap("blur");
-    // Residual and best blend of sample s in interval k of a level.
-    let eval = |lv: &(f32, usize, IntervalStats), s: usize, k: usize, wgt: Option<f32>| -> (f32, f32) {
-        let (lo, intervals, st) = lv;
-        let o = s * intervals + k;
-        let wgt = wgt.unwrap_or(if st.dd[o] > 1e-12 { (st.ad[o] / st.dd[o]).clamp(0.0, 1.0) } else { 0.0 });
-        let r = (st.aa[o] - 2.0 * wgt * st.ad[o] + wgt * wgt * st.dd[o]).max(0.0);
-        let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
-        (r, (s0 * s0 + wgt * (s1 * s1 - s0 * s0)).sqrt())
-    };
-    // Coarse-to-fine choice: a level's answer stands if its minimum is interior
-    // (below the next level's start + 0.25 px), else the next level decides.
-    let mut zs = Vec::with_capacity(n);
-    let mut sig = Vec::with_capacity(n);
-    for (s, &(x, y)) in centres.iter().enumerate() {
-        let mut chosen = 0.0f32;
-        for (li, lv) in levels.iter().enumerate() {
-            let best = (0..lv.1).map(|k| eval(lv, s, k, None)).min_by(|a, b| a.0.total_cmp(&b.0));
-            if let Some((_, sigma)) = best {
-                chosen = sigma;
-                let limit = levels.get(li + 1).map_or(f32::INFINITY, |next| next.0 + 0.25);
-                if sigma < limit {
-                    break;
-                }
-            }
-        }
-        zs.push(depth.get(x, y));
-        sig.push(chosen);
-    }
-    // Residual at σ: from the level whose range holds σ (coarser levels see every
-    // 2nd/4th pixel of the same residual field, so the means are comparable).
-    let residual = |s: usize, sigma: f32| -> f32 {
-        let li = levels.iter().rposition(|lv| sigma >= lv.0 + 0.25 || lv.0 == 0.0).unwrap_or(0);
-        let lv = &levels[li];
-        let k = (((sigma - lv.0) / spacing).floor().max(0.0) as usize).min(lv.1 - 1);
-        let (s0, s1) = (lv.0 + k as f32 * spacing, lv.0 + (k + 1) as f32 * spacing);
-        let wgt = ((sigma * sigma - s0 * s0) / (s1 * s1 - s0 * s0)).clamp(0.0, 1.0);
-        eval(lv, s, k, Some(wgt)).0
-    };
-    let residual_at = |dof: &DepthOfField| -> Option<(f64, f64)> {
-        if levels.is_empty() {
-            return None;
-        }
-        let (mut before, mut after) = (0.0f64, 0.0f64);
-        for s in 0..n {
-            before += residual(s, 0.0) as f64;
-            after += residual(s, dof.sigma_px(zs[s])) as f64;
-        }
-        let m = (9 * n).max(1) as f64;
-        Some((before / m, after / m))
-    };
-    finish("accurate", zs.clone(), sig, units, frame_depth_span(depth, units), started, st, residual_at)
-}
+use super::*;
 
 /// Edge-spread function of a unit step at distance `d` (px) blurred by `kernel` of
 /// second-moment std `sigma`: erf for the Gaussian; for the disc of radius R the
@@ -631,13 +227,13 @@ fn calibrate(raw: f32, kernel: DofKernel) -> f32 {
 
 /// Fast tier: the frame and Z (Zhuo & Sim 2011 edge re-blur ratio).
 pub fn fit_fast(
-    luma: &super::SharedLuma,
+    luma: &crate::fit::SharedLuma,
     depth: &Plane,
     units: DepthUnits,
-    opts: &super::FitOptions,
+    opts: &crate::fit::FitOptions,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
-    let mut st = super::Stages::start();
+    let mut st = crate::fit::Stages::start();
     let (y, re) = (luma.full(), reblur_half(luma.half()));
     st.lap("blur");
     let (w, h) = (y.width, y.height);
@@ -716,7 +312,7 @@ pub fn fit_fast(
     let tile_ok = |x0: usize, y0: usize, t: usize| {
         (y0..y0 + t).step_by(8).all(|yy| (x0..x0 + t).step_by(8).all(|x| valid_depth(depth.get(x, yy), units)))
     };
-    let spectrum = super::defocus_spectrum::disc_signature(y, tile_ok);
+    let spectrum = crate::fit::defocus_spectrum::disc_signature(y, tile_ok);
     st.lap("search.spectrum");
     let kernel = match &spectrum {
         Some(s) if s.is_disc => DofKernel::Disc,
@@ -732,8 +328,8 @@ pub fn fit_fast(
             s.ring_z,
             s.radius_px,
             s.notch_contrast,
-            super::defocus_spectrum::RING_MIN_Z,
-            super::defocus_spectrum::NOTCH_MIN_CONTRAST
+            crate::fit::defocus_spectrum::RING_MIN_Z,
+            crate::fit::defocus_spectrum::NOTCH_MIN_CONTRAST
         ),
         None => "kernel gaussian (too few textured tiles with valid depth for the spectrum)".into(),
     };
@@ -805,7 +401,7 @@ pub fn fit_fast_pooled(
     kernel: DofKernel,
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
-    let mut st = super::Stages::start();
+    let mut st = crate::fit::Stages::start();
     let share = POOLED_MAX_EDGE_SAMPLES / frames.len().max(1);
     let (mut z, mut s) = (vec![], vec![]);
     let mut span: Option<[f32; 2]> = None;
@@ -863,30 +459,6 @@ mod tests {
             }
             assert_eq!(calibrate(t[0].0, kernel), 0.0);
         }
-    }
-}
-
-#[cfg(test)]
-mod range_tests {
-    use super::*;
-
-    /// The evaluation range at the extremes: no frame depths → the textured range;
-    /// a frame far wider than the textured span → at most one span on each side (in
-    /// inverse depth); relative inverse depth below zero stays below zero; a single
-    /// textured depth does not extend.
-    #[test]
-    fn evaluation_range_is_bounded_and_keeps_units() {
-        let m = DepthUnits::MetricM;
-        assert_eq!(evaluation_range([1.0, 2.0], None, m), [1.0, 2.0]);
-        // Textured u ∈ [0.5, 1]: span 0.5 → u ∈ [0, 1.5] at most → z ∈ [0.667, 1e6].
-        let r = evaluation_range([1.0, 2.0], Some([0.01, 1e9]), m);
-        assert!((r[0] - 1.0 / 1.5).abs() < 1e-5 && r[1] == 1e6, "{r:?}");
-        // Inside the bound the frame's own depths are used.
-        let r = evaluation_range([1.0, 2.0], Some([0.8, 3.0]), m);
-        assert!((r[0] - 0.8).abs() < 1e-5 && (r[1] - 3.0).abs() < 1e-4, "{r:?}");
-        let r = evaluation_range([-0.5, 0.5], Some([-10.0, 10.0]), DepthUnits::RelativeInverse);
-        assert_eq!(r, [-1.5, 1.5]);
-        assert_eq!(evaluation_range([2.0, 2.0], Some([0.1, 50.0]), m), [2.0, 2.0]);
     }
 }
 
