@@ -182,8 +182,7 @@ fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32),
             let mut p = 0.0;
             for j in -k..=k {
                 let (qx, qy) = ((cx + j * t.0) as usize, (cy + j * t.1) as usize);
-                let gx = 0.5 * (y.get(qx + 1, qy) - y.get(qx - 1, qy));
-                let gy = 0.5 * (y.get(qx, qy + 1) - y.get(qx, qy - 1));
+                let (gx, gy) = grad(y, qx, qy);
                 p += gx * normal.0 + gy * normal.1;
             }
             p /= taps;
@@ -194,6 +193,12 @@ fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32),
         }
     }
     true
+}
+
+/// Central-difference gradient of `p` at interior pixel (x, y), per px.
+#[inline]
+fn grad(p: &Plane, x: usize, y: usize) -> (f32, f32) {
+    (0.5 * (p.get(x + 1, y) - p.get(x - 1, y)), 0.5 * (p.get(x, y + 1) - p.get(x, y - 1)))
 }
 
 /// Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7), enough for a calibration table.
@@ -237,9 +242,6 @@ pub fn fit_fast(
     let (y, re) = (luma.full(), reblur_half(luma.half()));
     st.lap("blur");
     let (w, h) = (y.width, y.height);
-    let grad = |p: &Plane, x: usize, yy: usize| -> (f32, f32) {
-        (0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy)), 0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1)))
-    };
     let (mut zs, mut sig) = (vec![], vec![]);
     // Every other row and column above 400k pixels: edges are lines, so a quarter of
     // their pixels still gives thousands of samples, at a quarter of the scan.

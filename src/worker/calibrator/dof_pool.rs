@@ -41,8 +41,13 @@ impl Calibrator {
     /// frame's samples, if it is at rest. With the pool empty and the frame moving,
     /// the frame's own curve stands. The pooled fit's time counts with the DoF fit's.
     pub(super) fn pool_dof(&mut self, t_s: f64, edges: Option<fit::DofPlotData>, model: &mut CameraModel) {
-        let (units, kernel) = (model.depth_of_field.units, model.depth_of_field.kernel);
+        // A frame whose own fit found no curve says nothing of the kernel: the
+        // pool's newest entry does (else one failed frame would empty a disc pool).
         let own_curve = model.depth_of_field.curve.is_some();
+        let (units, kernel) = match self.dof_pool.back().filter(|_| !own_curve) {
+            Some(p) => (p.units, p.kernel),
+            None => (model.depth_of_field.units, model.depth_of_field.kernel),
+        };
         if let Some(edges) = edges.filter(|_| own_curve) {
             self.dof_pool.push_back(PooledEdges { t_s, units, kernel, edges });
         }
