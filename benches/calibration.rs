@@ -171,6 +171,8 @@ fn main() {
         // `cargo test --benches` lists benchmarks; nothing to list here.
         return;
     }
+    // As the app's binaries run (`blind_augment::alloc`): freed planes stay mapped.
+    blind_augment::alloc::keep_freed_blocks();
     let scene = motorcycle().expect("bundled scene");
     let small = SequenceSpec::motorcycle(&scene, 320, 240, 150, Some(CHANGE_S));
     eprintln!("rendering 150 frames of 320×240 …");

@@ -77,6 +77,8 @@ fn only(noise: bool, mb: bool, dof: bool, tier: Tier) -> FitOptions {
 }
 
 fn bench(cr: &mut Criterion) {
+    // As the app's binaries run (`blind_augment::alloc`): freed planes stay mapped.
+    blind_augment::alloc::keep_freed_blocks();
     let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");
     let all = rayon::ThreadPoolBuilder::new().build().expect("default pool");
     let threads = all.current_num_threads();
@@ -112,6 +114,7 @@ fn bench(cr: &mut Criterion) {
 /// fits and each effect's stage timers (`diagnostics.stages_s`, medians), as a
 /// markdown table for BENCHMARKS.md (issue 10, item 5: ≤ 30 ms).
 fn fast_stages(_: &mut Criterion) {
+    blind_augment::alloc::keep_freed_blocks();
     let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");
     let c = case(1280, 960);
     let inp = inputs(&c, &c.all);

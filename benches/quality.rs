@@ -31,6 +31,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
+    // As the app's binaries run (`blind_augment::alloc`): freed planes stay mapped.
+    blind_augment::alloc::keep_freed_blocks();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
     let img = common::photo("astronaut.png");
     let (w, h) = (img.width, img.height);

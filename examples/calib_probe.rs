@@ -10,6 +10,7 @@ use blind_augment::worker::*;
 type Errors = (f64, f32, Option<f32>, Option<f32>, Option<f32>);
 
 fn main() {
+    blind_augment::alloc::keep_freed_blocks();
     let args: Vec<String> = std::env::args().collect();
     let tier = CalibrationTier::parse(args.get(1).map(|s| s.as_str()).unwrap_or("fast")).unwrap();
     let frames: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(60);

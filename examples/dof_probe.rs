@@ -5,6 +5,7 @@ use blind_augment::model::DepthUnits;
 use blind_augment::synth::sequence::*;
 
 fn main() {
+    blind_augment::alloc::keep_freed_blocks();
     let args: Vec<String> = std::env::args().collect();
     let w: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(320);
     let mut scene = motorcycle().unwrap();

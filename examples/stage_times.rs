@@ -8,6 +8,10 @@ use blind_augment::image::{Flow, Plane};
 use blind_augment::model::DepthUnits;
 
 fn main() {
+    // `NO_ALLOC_TUNING=1`: the C allocator's defaults (for the before/after figure).
+    if !std::env::var("NO_ALLOC_TUNING").is_ok_and(|v| v == "1") {
+        println!("allocator: {:?}", blind_augment::alloc::keep_freed_blocks());
+    }
     let (w, h) = (1280usize, 960usize);
     let img = common::mirror_tile(&common::photo("astronaut.png"), w, h);
     let depth = Plane::new(w, h, 2.0);

@@ -20,6 +20,9 @@ pub mod synth;
 pub mod worker;
 pub mod xr;
 
+/// Process-wide allocator setup (binaries and benchmarks call it first).
+#[path = "platform/alloc.rs"]
+pub mod alloc;
 /// The Quest app's entry point (the cdylib `cargo xtask apk` packages).
 #[cfg(target_os = "android")]
 #[path = "platform/android.rs"]

@@ -348,6 +348,10 @@ fn synth(args: SynthArgs) -> Result<()> {
 }
 
 pub fn main() -> std::process::ExitCode {
+    // Before any frame-sized allocation (see `blind_augment::alloc`).
+    if let blind_augment::alloc::AllocTuning::Refused(param) = blind_augment::alloc::keep_freed_blocks() {
+        eprintln!("warning: the C allocator refused {param}: fits will page-fault their planes afresh each call");
+    }
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
         if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global() {
