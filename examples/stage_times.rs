@@ -28,7 +28,9 @@ fn main() {
         ..FitInputs::new(&img)
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
-    for _ in 0..3 {
+    // `ITERS=n` fits (3 by default; more for `perf record`).
+    let iters: usize = std::env::var("ITERS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
+    for _ in 0..iters {
         let t = std::time::Instant::now();
         let out = pool
             .install(|| fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: effects(), ..Default::default() }))

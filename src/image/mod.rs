@@ -55,6 +55,21 @@ impl Plane {
     /// clamp-to-edge outside the image.
     #[inline]
     pub fn sample_bilinear(&self, x: f32, y: f32) -> f32 {
+        // Interior fast path (all four taps inside): truncation is the floor of a
+        // non-negative value and needs no libm call (`floorf` is one on baseline
+        // x86-64: 2% of the fast tier by perf), and no tap needs a clamp. Same
+        // arithmetic as below, so the same bits. NaN fails the test and takes the
+        // clamped path.
+        if x >= 0.0 && y >= 0.0 && x < self.width.saturating_sub(1) as f32 && y < self.height.saturating_sub(1) as f32 {
+            let (x0, y0) = (x as usize, y as usize);
+            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+            let i = y0 * self.width + x0;
+            let (a, b) = (self.data[i], self.data[i + 1]);
+            let (c, d) = (self.data[i + self.width], self.data[i + self.width + 1]);
+            let top = a + (b - a) * fx;
+            let bottom = c + (d - c) * fx;
+            return top + (bottom - top) * fy;
+        }
         let xf = x.floor();
         let yf = y.floor();
         let fx = x - xf;
@@ -269,6 +284,31 @@ pub fn first_non_finite(v: &[f32]) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The interior fast path of `sample_bilinear` is the clamped formula, bit for
+    /// bit (it only skips the floor call and the clamps): checked at points all
+    /// over a 7×5 plane, on and near its last row and column, and outside it.
+    #[test]
+    fn bilinear_interior_path_is_the_clamped_formula() {
+        let p = Plane::from_vec(7, 5, (0..35).map(|i| ((i * 37) % 11) as f32 * 0.173 - 0.4).collect());
+        let clamped = |x: f32, y: f32| {
+            let (xf, yf) = (x.floor(), y.floor());
+            let (fx, fy, x0, y0) = (x - xf, y - yf, xf as isize, yf as isize);
+            let (a, b) = (p.get_clamped(x0, y0), p.get_clamped(x0 + 1, y0));
+            let (c, d) = (p.get_clamped(x0, y0 + 1), p.get_clamped(x0 + 1, y0 + 1));
+            let top = a + (b - a) * fx;
+            top + (c + (d - c) * fx - top) * fy
+        };
+        for j in -8..=48 {
+            for i in -8..=68 {
+                let (x, y) = (i as f32 * 0.1013, j as f32 * 0.1007);
+                assert_eq!(p.sample_bilinear(x, y).to_bits(), clamped(x, y).to_bits(), "at ({x}, {y})");
+            }
+        }
+        for (x, y) in [(5.999_999, 3.999_999), (6.0, 4.0), (0.0, 0.0), (-0.0, 2.5)] {
+            assert_eq!(p.sample_bilinear(x, y).to_bits(), clamped(x, y).to_bits(), "at ({x}, {y})");
+        }
+    }
 
     /// A crop holds the rectangle's pixels in order; one that does not fit is None.
     #[test]

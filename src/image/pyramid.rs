@@ -40,14 +40,20 @@ pub fn reduce_slice(data: &[f32], w: usize, h: usize) -> Plane {
             *o = K5[0] * t[0] + K5[1] * t[1] + K5[2] * t[2] + K5[3] * t[3] + K5[4] * t[4];
         }
     }
-    let mut out = vec![0.0f32; w2 * h2];
+    // Each output row starts as its first tap's product (not zeros plus it: the
+    // same sums, without a memset of the plane — 5% of the blind noise fit by perf).
+    let mut out = Vec::with_capacity(w2 * h2);
     for y2 in 0..h2 {
         let cy = 2 * y2 as isize;
-        let o = &mut out[y2 * w2..(y2 + 1) * w2];
-        for (k, wk) in K5.iter().enumerate() {
+        let row = |k: usize| {
             let yi = (cy + k as isize - 2).clamp(0, h as isize - 1) as usize;
-            let src = &tmp[yi * w2..(yi + 1) * w2];
-            for (ov, sv) in o.iter_mut().zip(src) {
+            &tmp[yi * w2..(yi + 1) * w2]
+        };
+        let start = out.len();
+        out.extend(row(0).iter().map(|sv| K5[0] * sv));
+        let o = &mut out[start..];
+        for (k, wk) in K5.iter().enumerate().skip(1) {
+            for (ov, sv) in o.iter_mut().zip(row(k)) {
                 *ov += wk * sv;
             }
         }
@@ -98,15 +104,19 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
             }
         }
     }
-    let mut out = vec![0.0f32; width * height];
+    // Rows start as their first tap's product (see `reduce_slice`).
+    let mut out = Vec::with_capacity(width * height);
     for y in 0..height {
-        let o = &mut out[y * width..(y + 1) * width];
-        for (j, wt) in expand_taps(y, h) {
-            if wt == 0.0 {
-                continue;
-            }
-            let src = &tmp[j * width..(j + 1) * width];
-            for (ov, sv) in o.iter_mut().zip(src) {
+        let start = out.len();
+        let mut taps = expand_taps(y, h).into_iter().filter(|&(_, wt)| wt != 0.0);
+        let src = |j: usize| &tmp[j * width..(j + 1) * width];
+        match taps.next() {
+            Some((j, wt)) => out.extend(src(j).iter().map(|sv| wt * sv)),
+            None => out.resize(start + width, 0.0),
+        }
+        let o = &mut out[start..];
+        for (j, wt) in taps {
+            for (ov, sv) in o.iter_mut().zip(src(j)) {
                 *ov += wt * sv;
             }
         }

@@ -98,8 +98,20 @@ fn reblur_half(half: &Plane) -> Plane {
 fn reblur_grad(half: &Plane, x: usize, y: usize) -> (f32, f32) {
     // Bilinear weights at (x/2, y/2) over the half-resolution central differences.
     let (hx, hy) = (0.5 * x as f32, 0.5 * y as f32);
-    let (x0, y0) = (hx.floor() as isize, hy.floor() as isize);
+    // x/2 ≥ 0: its integer part is the truncation (`floorf` is a libm call on
+    // baseline x86-64), bit for bit.
+    let (x0, y0) = ((x / 2) as isize, (y / 2) as isize);
     let (fx, fy) = (hx - x0 as f32, hy - y0 as f32);
+    let lerp = |a: f32, b: f32, c: f32, d: f32| (1.0 - fy) * ((1.0 - fx) * a + fx * b) + fy * ((1.0 - fx) * c + fx * d);
+    // Interior: every tap (x0 − 1 … x0 + 2, y0 − 1 … y0 + 2) inside, no clamps.
+    let (hw, hh) = (half.width as isize, half.height as isize);
+    if x0 >= 1 && y0 >= 1 && x0 + 2 < hw && y0 + 2 < hh {
+        let (w, d) = (half.width, &half.data);
+        let i = y0 as usize * w + x0 as usize;
+        let g = |k: usize| (0.25 * (d[k + 1] - d[k - 1]), 0.25 * (d[k + w] - d[k - w]));
+        let (a, b, c, e) = (g(i), g(i + 1), g(i + w), g(i + w + 1));
+        return (lerp(a.0, b.0, c.0, e.0), lerp(a.1, b.1, c.1, e.1));
+    }
     let g = |i: isize, j: isize| {
         (
             0.25 * (half.get_clamped(i + 1, j) - half.get_clamped(i - 1, j)),
@@ -107,7 +119,6 @@ fn reblur_grad(half: &Plane, x: usize, y: usize) -> (f32, f32) {
         )
     };
     let (a, b, c, d) = (g(x0, y0), g(x0 + 1, y0), g(x0, y0 + 1), g(x0 + 1, y0 + 1));
-    let lerp = |a: f32, b: f32, c: f32, d: f32| (1.0 - fy) * ((1.0 - fx) * a + fx * b) + fy * ((1.0 - fx) * c + fx * d);
     (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1))
 }
 
@@ -195,6 +206,19 @@ fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32),
     true
 }
 
+/// `v.round()` for v in [−1, 1] (a direction cosine) without the libm call
+/// (`roundf` on baseline x86-64): ties away from zero, as `round`.
+#[inline]
+fn round_unit(v: f32) -> isize {
+    if v >= 0.5 {
+        1
+    } else if v <= -0.5 {
+        -1
+    } else {
+        0
+    }
+}
+
 /// Central-difference gradient of `p` at interior pixel (x, y), per px.
 #[inline]
 fn grad(p: &Plane, x: usize, y: usize) -> (f32, f32) {
@@ -258,7 +282,7 @@ pub fn fit_fast(
                 continue;
             }
             // Non-maximum suppression along the (rounded) gradient direction.
-            let (sx, sy) = ((gx / m).round() as isize, (gy / m).round() as isize);
+            let (sx, sy) = (round_unit(gx / m), round_unit(gy / m));
             let mag = |x: isize, yy: isize| {
                 let (a, b) = grad(y, x as usize, yy as usize);
                 (a * a + b * b).sqrt()
