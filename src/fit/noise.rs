@@ -113,13 +113,16 @@ fn window(level: usize) -> [[f32; 9]; 9] {
 /// clamp-to-edge reads only where the 9×9 window leaves the plane.
 #[inline]
 fn window_sum(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9], f: impl Fn(f32) -> f32) -> f32 {
-    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
-        return rows_sum(|j| {
-            let start = (y + j - 4) * p.width + x - 4;
-            row_dot(&w[j], &p.data[start..start + 9], |v, _| f(v), &[0.0; 9])
-        });
-    }
     let mut acc = 0.0;
+    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
+        for (j, row) in w.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (wt, &v) in row.iter().zip(&p.data[start..start + 9]) {
+                acc += wt * f(v);
+            }
+        }
+        return acc;
+    }
     for (j, row) in w.iter().enumerate() {
         let yy = y as isize + j as isize - 4;
         for (i, wt) in row.iter().enumerate() {
@@ -127,24 +130,6 @@ fn window_sum(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9], f: impl Fn(f32) 
         }
     }
     acc
-}
-
-/// Σ_i w[i]·f(a[i], b[i]) over 9 taps, in three independent partial sums: one
-/// serial chain of 81 float adds per 9×9 window was latency-bound (perf: the window
-/// sums were ~20% of the blind noise fit); independent rows and partial sums let
-/// the adds overlap. Only the summation order differs from the serial loop
-/// (relative differences ~1e-7).
-#[inline(always)]
-fn row_dot(w: &[f32; 9], a: &[f32], f: impl Fn(f32, f32) -> f32, b: &[f32]) -> f32 {
-    let (a, b) = (&a[..9], &b[..9]);
-    let t = |i: usize| w[i] * f(a[i], b[i]);
-    (t(0) + t(3) + t(6)) + (t(1) + t(4) + t(7)) + (t(2) + t(5) + t(8))
-}
-
-/// Σ_j row(j) over a window's 9 rows, rows summed pairwise (independent chains).
-#[inline(always)]
-fn rows_sum(row: impl Fn(usize) -> f32) -> f32 {
-    ((row(0) + row(1)) + (row(2) + row(3))) + ((row(4) + row(5)) + (row(6) + row(7))) + row(8)
 }
 
 #[inline]
@@ -160,13 +145,16 @@ fn local_mean_sq(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
 /// Window mean of the product of two planes of one size.
 #[inline]
 fn local_mean_prod(p: &Plane, q: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
-    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
-        return rows_sum(|j| {
-            let start = (y + j - 4) * p.width + x - 4;
-            row_dot(&w[j], &p.data[start..start + 9], |a, b| a * b, &q.data[start..start + 9])
-        });
-    }
     let mut acc = 0.0;
+    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
+        for (j, row) in w.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for ((wt, &a), &b) in row.iter().zip(&p.data[start..start + 9]).zip(&q.data[start..start + 9]) {
+                acc += wt * a * b;
+            }
+        }
+        return acc;
+    }
     for (j, row) in w.iter().enumerate() {
         let yy = y as isize + j as isize - 4;
         for (i, wt) in row.iter().enumerate() {
@@ -188,10 +176,15 @@ fn mean_se(v: &[f32]) -> (f32, f32) {
 /// (window mean, window mean of squares) in one pass over the window.
 #[inline]
 fn local_moments(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> (f32, f32) {
+    let (mut m1, mut m2) = (0.0f32, 0.0f32);
     if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
-        let row = |j: usize| &p.data[(y + j - 4) * p.width + x - 4..][..9];
-        let m1 = rows_sum(|j| row_dot(&w[j], row(j), |v, _| v, row(j)));
-        let m2 = rows_sum(|j| row_dot(&w[j], row(j), |v, _| v * v, row(j)));
+        for (j, row) in w.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (wt, &v) in row.iter().zip(&p.data[start..start + 9]) {
+                m1 += wt * v;
+                m2 += wt * (v * v);
+            }
+        }
         return (m1, m2);
     }
     (local_mean(p, x, y, w), local_mean_sq(p, x, y, w))
