@@ -26,28 +26,11 @@ struct Case {
 
 fn case(w: usize, h: usize) -> Case {
     let clean = common::mirror_tile(&common::photo("astronaut.png"), w, h);
-    let mut depth = Plane::new(w, h, 0.0);
-    for y in 0..h {
-        for x in 0..w {
-            depth.data[y * w + x] = 0.5 + 3.5 * (0.7 * y as f32 / h as f32 + 0.3 * x as f32 / w as f32);
-        }
-    }
-    let mut flow = Flow::uniform(w, h, 0.0, 0.0);
-    for y in 0..h {
-        for x in 0..w {
-            flow.dx[y * w + x] = 8.0 * (0.8 - 0.9 * (y as f32 / h as f32 - 0.5));
-            flow.dy[y * w + x] = 8.0 * (0.3 + 0.9 * (x as f32 / w as f32 - 0.5));
-        }
-    }
+    // The thin-lens ramp (σ up to 3.8 px near) and head-motion flow (~8 px/frame).
+    let (depth, dof) = common::thin_lens_ramp(w, h);
+    let flow = common::flow_field(w, h, 8.0);
     let mut truth = CameraModel::empty(w as u32, h as u32);
-    truth.depth_of_field = DepthOfField {
-        present: true,
-        units: DepthUnits::MetricM,
-        curve: Some(DofCurve::ThinLens { k: 3.0, focus_depth: 1.2, c0: 0.3 }),
-        depth_range: [0.5, 4.0],
-        kernel: blind_augment::model::DofKernel::Gaussian,
-        diagnostics: Diagnostics::not_fitted("truth"),
-    };
+    truth.depth_of_field = dof;
     truth.noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
     truth.motion_blur =
         MotionBlur { present: true, exposure: Some(0.5), diagnostics: Diagnostics::not_fitted("truth") };

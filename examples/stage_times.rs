@@ -13,9 +13,23 @@ fn main() {
         println!("allocator: {:?}", blind_augment::alloc::keep_freed_blocks());
     }
     let (w, h) = (1280usize, 960usize);
-    let img = common::mirror_tile(&common::photo("astronaut.png"), w, h);
-    let depth = Plane::new(w, h, 2.0);
-    let flow = Flow::uniform(w, h, 6.0, 2.0);
+    let clean = common::mirror_tile(&common::photo("astronaut.png"), w, h);
+    // `BENCH=1`: `benches/fit.rs`'s fast_all_effects frame (thin-lens ramp, head
+    // flow ~8 px/frame at λ 0.5, white sensor noise, 8-bit); otherwise the clean
+    // photograph at one depth under uniform flow.
+    let (img, depth, flow) = if std::env::var("BENCH").is_ok_and(|v| v == "1") {
+        let (depth, dof) = common::thin_lens_ramp(w, h);
+        let flow = common::flow_field(w, h, 8.0);
+        let mut truth = blind_augment::model::CameraModel::empty(w as u32, h as u32);
+        truth.depth_of_field = dof;
+        truth.noise = blind_augment::synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
+        truth.motion_blur.present = true;
+        truth.motion_blur.exposure = Some(0.5);
+        let all = blind_augment::synth::apply_camera_model(&clean, &truth, Some(&depth), Some(&flow), 1);
+        (common::quantize8(&all), depth, flow)
+    } else {
+        (clean, Plane::new(w, h, 2.0), Flow::uniform(w, h, 6.0, 2.0))
+    };
     // `NEIGHBOUR=1`: the noise fit with an aligned neighbour (the frame itself,
     // all valid: the cost is the same as with another exposure).
     let valid = Plane::new(w, h, 1.0);

@@ -92,13 +92,14 @@ impl Profiles {
         // Cumulative integral at t (from −½) of the piecewise-linear profile.
         let cum = |t: f32| -> f32 {
             let s = ((t + 0.5) * m).clamp(0.0, m);
-            let j = (s.floor() as usize).min(f.len() - 2);
+            // s ≥ 0: truncation is its floor, without the libm call.
+            let j = (s as usize).min(f.len() - 2);
             let tau = (s - j as f32) * h;
             c[j] + f[j] * tau + (f[j + 1] - f[j]) * tau * tau / (2.0 * h)
         };
         if lambda < 1e-6 {
             let s = 0.5 * m;
-            let j = (s.floor() as usize).min(f.len() - 2);
+            let j = (s as usize).min(f.len() - 2);
             let a = s - j as f32;
             return f[j] + (f[j + 1] - f[j]) * a;
         }
@@ -354,14 +355,23 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
 /// their cumulative trapezoid integrals C_j to `f` and `c`; returns C_m (the mean
 /// over the whole streak).
 fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32, dir: (f32, f32), m: usize) -> f32 {
-    let start = f.len();
+    // Node j at (x, y) + (j/m − ½)·dir, stepped from the first node; the running
+    // sum stays in a register (the per-node division and the sum's round trip
+    // through memory were most of the isotropy stage's profile building, by perf).
+    let inv_m = 1.0 / m as f32;
+    let half_step = 0.5 * inv_m;
+    let (x0, y0) = (x - 0.5 * dir.0, y - 0.5 * dir.1);
+    let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
+    f.reserve(m + 1);
+    c.reserve(m + 1);
+    let mut prev = p.sample_bilinear(x0, y0);
+    f.push(prev);
+    c.push(0.0);
     let mut cum = 0.0f32;
-    for j in 0..=m {
-        let t = j as f32 / m as f32 - 0.5;
-        let v = p.sample_bilinear(x + t * dir.0, y + t * dir.1);
-        if j > 0 {
-            cum += 0.5 * (f[start + j - 1] + v) / m as f32;
-        }
+    for j in 1..=m {
+        let v = p.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy);
+        cum += half_step * (prev + v);
+        prev = v;
         f.push(v);
         c.push(cum);
     }
@@ -416,7 +426,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<Mb
         mb.diagnostics.stages_s = st.done();
         return (mb, None);
     }
-    let fine = isotropy_root(y, flow, 1);
+    let fine = isotropy_root(y, flow, 1, true);
     st.lap("search.isotropy");
     let IsotropyRoot { lambda, spread, n, along_excess, along_excess_se, band } = match fine {
         Ok(root) => root,
@@ -480,7 +490,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<Mb
         return (MotionBlur::absent(d), None);
     }
     // The second scale only where its answer is used (the bias risk of a root).
-    let coarse = isotropy_root(luma.half(), flow, 2);
+    let coarse = isotropy_root(luma.half(), flow, 2, false);
     st.lap("search.isotropy");
     let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     // The two-scale disagreement and the prior band (a 90% band: half-width / 1.645
@@ -502,7 +512,10 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<Mb
 /// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`. Samples are frame pixels with flow ≥ 3 px/frame and a
 /// gradient, picked by gradient *magnitude* only, so the selection prefers no
 /// direction.
-fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, usize> {
+/// `stats`: also the subsets' spread, the along-flow excess and the prior's band
+/// (the frame's scale); without, the root alone (the coarse scale's root is only
+/// compared with the fine one — its subsets were half of its cost, unread).
+fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<IsotropyRoot, usize> {
     let (w, h) = (flow.width, flow.height);
     let s = scale as f32;
     let mut cand = vec![];
@@ -607,22 +620,24 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize) -> Result<IsotropyRoot, u
     // λ to 6e-5 (2^-14), far below the estimator's spread.
     let root = |subset: usize, of: usize| root_at(subset, of, 1.0, 1.0 / 16384.0);
     let lambda = root(0, 1);
+    if !stats {
+        return Ok(IsotropyRoot { lambda, spread: 0.0, n, along_excess: 0.0, along_excess_se: 0.0, band: None });
+    }
     // The texture prior's band: where the root would sit if the sharp scene's
     // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1 — on
     // the frame's scale only (the coarse root only checks the fine one), to 1/256
     // (a bound on a bias, not a measurement).
-    let band = (scale == 1).then(|| {
-        [
-            root_at(0, 1, 1.0 - TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
-            root_at(0, 1, 1.0 + TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
-        ]
-    });
+    let band = Some([
+        root_at(0, 1, 1.0 - TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
+        root_at(0, 1, 1.0 + TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
+    ]);
     let k = FAST_SUBSETS as f64;
     let mean_se = |parts: &[f64]| -> (f64, f64) {
         let mean = parts.iter().sum::<f64>() / k;
         (mean, (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt())
     };
-    let parts: Vec<f64> = (0..FAST_SUBSETS).map(|j| root(j, FAST_SUBSETS) as f64).collect();
+    // The subsets' roots to 1/1024: their spread (~0.01 and up) is what is read.
+    let parts: Vec<f64> = (0..FAST_SUBSETS).map(|j| root_at(j, FAST_SUBSETS, 1.0, 1.0 / 1024.0) as f64).collect();
     // C(0)/D(0) − 1 per subset: D(0) = Σ(∂_v I)², C(0) − D(0) = imbalance(0).
     let excess: Vec<f64> = (0..FAST_SUBSETS)
         .map(|j| {
@@ -654,6 +669,6 @@ struct IsotropyRoot {
     along_excess: f64,
     along_excess_se: f64,
     /// The roots at C/D = 1 ∓ `TEXTURE_ANISOTROPY_90`: the λ range a natural
-    /// texture anisotropy leaves open (~90%); frame scale only (`None` at scale 2).
+    /// texture anisotropy leaves open (~90%); with `stats` only (`None` at the coarse scale).
     band: Option<[f32; 2]>,
 }

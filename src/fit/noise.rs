@@ -190,6 +190,88 @@ fn local_moments(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> (f32, f32)
     (local_mean(p, x, y, w), local_mean_sq(p, x, y, w))
 }
 
+/// The blind tier's window sums in separable form: per window column, a weighted
+/// sum down its 9 rows (9 independent accumulators, which the compiler keeps in
+/// vector lanes), then the columns' weighted sum — Σ_i w_i Σ_j w_j f(v_ji), the
+/// window of `window(l)` (its outer product) up to float rounding. Why: the 2-D
+/// serial sums are 81 dependent additions per sample, bound by the adder's latency
+/// (by perf ~60% of the blind noise fit's sample search at 1280×960). The accurate
+/// tier keeps the serial sums: on a flat frame its regression relies on their exact
+/// cancellation (tests/extremes.rs::flat_textureless_frame; a reordered sum there
+/// lost the noise, see BENCHMARKS.md). Border samples take the clamped 2-D sums.
+struct SepWindow {
+    w1: [f32; 9],
+    w2: [[f32; 9]; 9],
+}
+
+impl SepWindow {
+    fn new(level: usize) -> Self {
+        Self { w1: window_1d(level), w2: window(level) }
+    }
+
+    #[inline]
+    fn interior(p: &Plane, x: usize, y: usize) -> bool {
+        x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height
+    }
+
+    /// Σ_i w_i c_i: the column sums' weighted sum, as a pairwise tree (four
+    /// dependent additions instead of nine in a chain).
+    #[inline]
+    fn across(&self, c: &[f32; 9]) -> f32 {
+        let p: [f32; 9] = std::array::from_fn(|i| c[i] * self.w1[i]);
+        ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7])) + p[8]
+    }
+
+    /// (window mean, window mean of squares) of `p` at (x, y).
+    #[inline]
+    fn moments(&self, p: &Plane, x: usize, y: usize) -> (f32, f32) {
+        if !Self::interior(p, x, y) {
+            return (local_mean(p, x, y, &self.w2), local_mean_sq(p, x, y, &self.w2));
+        }
+        let (mut c1, mut c2) = ([0.0f32; 9], [0.0f32; 9]);
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for ((a, b), &v) in c1.iter_mut().zip(c2.iter_mut()).zip(&p.data[start..start + 9]) {
+                *a += wj * v;
+                *b += wj * (v * v);
+            }
+        }
+        (self.across(&c1), self.across(&c2))
+    }
+
+    /// Window mean of the squares of `p` at (x, y).
+    #[inline]
+    fn mean_sq(&self, p: &Plane, x: usize, y: usize) -> f32 {
+        if !Self::interior(p, x, y) {
+            return local_mean_sq(p, x, y, &self.w2);
+        }
+        let mut c = [0.0f32; 9];
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (a, &v) in c.iter_mut().zip(&p.data[start..start + 9]) {
+                *a += wj * (v * v);
+            }
+        }
+        self.across(&c)
+    }
+
+    /// Window mean of the product of `p` and `q` (one size) at (x, y).
+    #[inline]
+    fn mean_prod(&self, p: &Plane, q: &Plane, x: usize, y: usize) -> f32 {
+        if !Self::interior(p, x, y) {
+            return local_mean_prod(p, q, x, y, &self.w2);
+        }
+        let mut c = [0.0f32; 9];
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for ((a, &u), &v) in c.iter_mut().zip(&p.data[start..start + 9]).zip(&q.data[start..start + 9]) {
+                *a += wj * (u * v);
+            }
+        }
+        self.across(&c)
+    }
+}
+
 /// The normalised 1-D Gaussian (σ = 4/2^level px, 9 taps) whose outer product is
 /// `window(level)`.
 fn window_1d(level: usize) -> [f32; 9] {
@@ -991,8 +1073,21 @@ fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Option<crate::
     luma_row(0, &mut cur);
     let (mut col, mut ncol, mut row, mut nrow) =
         ([0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD]);
+    // Above 400k pixels every other band of `PERIOD` rows: each band still holds
+    // every row phase and the column sums half the frame's flat pixels (~150 000 at
+    // 1280×960), far more than the boundary/interior contrast needs (unblocked
+    // frames < 1.05, the vtest clip's ~1.3); the scan was 3 ms of the blind tier.
+    let band_stride = if w * h > 400_000 { 2 } else { 1 };
+    let mut have = 0usize; // the row whose luma `cur` holds
     for y in 0..h - 1 {
+        if (y / PERIOD) % band_stride != 0 {
+            continue;
+        }
+        if have != y {
+            luma_row(y, &mut cur);
+        }
         luma_row(y + 1, &mut next);
+        have = y + 1;
         let sy = (y / scale).min(structure.height - 1);
         for (x, f) in flat.iter_mut().enumerate() {
             let v = structure.data[sy * structure.width + (x / scale).min(structure.width - 1)];
@@ -1329,7 +1424,7 @@ fn measure_level(
 ) -> Vec<BinMeasure> {
     let scale = 1usize << l;
     let stride = level_stride(stride0, l);
-    let win = window(l);
+    let win = SepWindow::new(l);
     // The structure energy (window mean of the squared structure band) of every
     // structure pixel, by one separable blur: at the coarse levels many samples
     // share a structure pixel, and 18 taps per pixel beat 81 per sample.
@@ -1350,7 +1445,7 @@ fn measure_level(
                 continue;
             }
             let s = energy.get((x / 4).min(energy.width - 1), (y / 4).min(energy.height - 1));
-            let (m1, m2) = local_moments(luma, x, y, &win);
+            let (m1, m2) = win.moments(luma, x, y);
             pts.push((x, y, m1, m2, s, ok));
         }
     }
@@ -1389,7 +1484,7 @@ fn measure_level(
             // differs, and texture dwarfs the noise there).
             if let Some((cross, _)) = cross.filter(|_| l == 0) {
                 let v: Vec<f32> =
-                    flats[c].iter().map(|p| local_mean_prod(&bands[c][l], &cross[c][l], p.0, p.1, &win)).collect();
+                    flats[c].iter().map(|p| win.mean_prod(&bands[c][l], &cross[c][l], p.0, p.1)).collect();
                 let (mean, se) = mean_se(&v);
                 var[c] = mean;
                 rel_se += if mean > 0.0 { se / (2.0 * mean) / 3.0 } else { 1.0 / 3.0 };
@@ -1399,7 +1494,7 @@ fn measure_level(
                 Some((d, _)) => (&d[c][l], 1.0 + bicubic_noise_transmission(l)),
                 None => (&bands[c][l], 1.0),
             };
-            let mut v: Vec<f32> = flats[c].iter().map(|p| local_mean_sq(plane, p.0, p.1, &win)).collect();
+            let mut v: Vec<f32> = flats[c].iter().map(|p| win.mean_sq(plane, p.0, p.1)).collect();
             let med = percentile(&mut v, 0.5);
             let iqr = percentile(&mut v, 0.75) - percentile(&mut v, 0.25);
             var[c] = med / m2m / gain;

@@ -270,25 +270,42 @@ pub fn fit_fast(
     // Every other row and column above 400k pixels: edges are lines, so a quarter of
     // their pixels still gives thousands of samples, at a quarter of the scan.
     let step = if w * h > 400_000 { 2 } else { 1 };
+    // Squared central-difference gradient magnitudes of rows py − 1, py, py + 1,
+    // each computed over the whole row at once (contiguous, so it vectorises):
+    // ~70% of the scanned pixels fail the edge threshold on them and the
+    // non-maximum suppression reads its neighbours from them (the per-pixel scalar
+    // path took 7.8 ms of 22 at 1280×960).
+    let grad_sq_row = |yy: usize, out: &mut [f32]| {
+        let (up, row, down) =
+            (&y.data[(yy - 1) * w..yy * w], &y.data[yy * w..(yy + 1) * w], &y.data[(yy + 1) * w..(yy + 2) * w]);
+        for x in 1..w - 1 {
+            let (gx, gy) = (0.5 * (row[x + 1] - row[x - 1]), 0.5 * (down[x] - up[x]));
+            out[x] = gx * gx + gy * gy;
+        }
+    };
+    let mut m2 = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
+    let min_sq = EDGE_MIN_GRAD * EDGE_MIN_GRAD;
     for py in (2..h.saturating_sub(2)).step_by(step) {
+        for (k, row) in m2.iter_mut().enumerate() {
+            grad_sq_row(py + k - 1, row);
+        }
         for px in (2..w.saturating_sub(2)).step_by(step) {
+            let m_sq = m2[1][px];
+            if m_sq < min_sq {
+                continue;
+            }
             let z = depth.get(px, py);
             if !valid_depth(z, units) {
                 continue;
             }
             let (gx, gy) = grad(y, px, py);
-            let m = (gx * gx + gy * gy).sqrt();
-            if m < EDGE_MIN_GRAD {
-                continue;
-            }
-            // Non-maximum suppression along the (rounded) gradient direction.
+            let m = m_sq.sqrt();
+            // Non-maximum suppression along the (rounded) gradient direction, on
+            // squared magnitudes (the square root is monotone).
             let (sx, sy) = (round_unit(gx / m), round_unit(gy / m));
-            let mag = |x: isize, yy: isize| {
-                let (a, b) = grad(y, x as usize, yy as usize);
-                (a * a + b * b).sqrt()
-            };
             let (xi, yi) = (px as isize, py as isize);
-            if m < mag(xi + sx, yi + sy) || m < mag(xi - sx, yi - sy) {
+            let (ahead, behind) = (&m2[(1 + sy) as usize], &m2[(1 - sy) as usize]);
+            if m_sq < ahead[(xi + sx) as usize] || m_sq < behind[(xi - sx) as usize] {
                 continue;
             }
             // The gradients averaged along the edge (its rounded tangent, ±
@@ -303,18 +320,21 @@ pub fn fit_fast(
             if !inside(-k) || !inside(k) {
                 continue;
             }
+            // The frame's mean first: the re-blurred one (bilinear, 16 reads per
+            // tap) only for edges that pass the frame's threshold.
             let (mut g, mut gr) = ((0.0f32, 0.0f32), (0.0f32, 0.0f32));
             for t in -k..=k {
-                let (qx, qy) = ((xi + t * tx) as usize, (yi + t * ty) as usize);
-                let (a, b) = grad(y, qx, qy);
-                let (c, d) = reblur_grad(&re, qx, qy);
+                let (a, b) = grad(y, (xi + t * tx) as usize, (yi + t * ty) as usize);
                 g = (g.0 + a, g.1 + b);
-                gr = (gr.0 + c, gr.1 + d);
             }
             let taps = (2 * k + 1) as f32;
             let m = (g.0 * g.0 + g.1 * g.1).sqrt() / taps;
             if m < EDGE_MIN_GRAD {
                 continue;
+            }
+            for t in -k..=k {
+                let (c, d) = reblur_grad(&re, (xi + t * tx) as usize, (yi + t * ty) as usize);
+                gr = (gr.0 + c, gr.1 + d);
             }
             let mr = (gr.0 * gr.0 + gr.1 * gr.1).sqrt() / taps;
             if mr < EDGE_MIN_REBLUR_GRAD {
@@ -361,7 +381,9 @@ pub fn fit_fast(
     };
     // One depth across the frame: the spectrum's disc is the answer (edge ratios are
     // biased by thin strokes and texture; the ring measures the aperture itself).
-    if let (Some(s), Some(range)) = (spectrum.as_ref().filter(|s| s.is_disc), constant_depth(depth, units)) {
+    // (`constant_depth` reads 77 000 depths at 1280×960: only where a disc was seen.)
+    let disc = spectrum.as_ref().filter(|s| s.is_disc);
+    if let Some((s, range)) = disc.and_then(|s| Some((s, constant_depth(depth, units)?))) {
         let c = s.sigma_px.min(opts.dof_max_sigma_px);
         let present = c >= 0.1 && c > 3.0 * s.stderr_px;
         let dof = DepthOfField {
@@ -456,11 +478,12 @@ fn constant_depth(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
     if z.len() < MIN_SAMPLES {
         return None;
     }
-    z.sort_by(f32::total_cmp);
     let n = z.len();
-    let (lo, mid, hi) = (z[n / 20], z[n / 2], z[n - 1 - n / 20]);
+    let mut at = |k: usize| *z.select_nth_unstable_by(k, f32::total_cmp).1;
+    let (lo, mid, hi) = (at(n / 20), at(n / 2), at(n - 1 - n / 20));
+    let (first, last) = (at(0), at(n - 1));
     let (ul, um, uh) = (units.inverse_depth(lo), units.inverse_depth(mid), units.inverse_depth(hi));
-    ((uh - ul).abs() <= 0.02 * um.abs().max(1e-6)).then_some([z[0], z[n - 1]])
+    ((uh - ul).abs() <= 0.02 * um.abs().max(1e-6)).then_some([first, last])
 }
 
 #[cfg(test)]

@@ -87,9 +87,12 @@ fn valid_depths(depth: &Plane, units: DepthUnits, step: usize) -> Vec<f32> {
 }
 
 /// The depths the frame holds: 0.5th–99.5th percentile of its valid depths (every
-/// other pixel in x and y), or `None` without valid depth.
+/// other pixel in x and y, every k-th above ~260 000 pixels so that about 65 000
+/// are read — two selections over the 307 000 of a 1280×960 frame were 3 ms of the
+/// blind DoF fit), or `None` without valid depth.
 fn frame_depth_span(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
-    let mut z = valid_depths(depth, units, 2);
+    let step = (((depth.width * depth.height) as f64 / 65_536.0).sqrt() as usize).max(2);
+    let mut z = valid_depths(depth, units, step);
     if z.is_empty() {
         return None;
     }
