@@ -629,20 +629,21 @@ fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
 /// Per channel, the clipped low and high values (see `clip_mask`), if any.
 type ClipLimits = [(Option<f32>, Option<f32>); 3];
 
-/// The clipped extremes of every channel: per channel one pass for the extremes and
-/// one counting them, each over 8 independent lanes so that the compiler vectorises
-/// it (a single branchy pass that counts as it goes was 3× slower at 1280×960, and
-/// one lane-wise pass with selects 2×, measured).
+/// The clipped extremes of every channel (`channel_clip_limits`).
 fn clip_limits(img: &Rgb) -> ClipLimits {
     let min_count = (img.len() / 2000).max(2);
     std::array::from_fn(|c| channel_clip_limits(&img.channels[c], min_count))
 }
 
-/// One channel's `clip_limits`, in one pass: per lane the extremes and how often
-/// each was seen (a new extreme restarts its count), then the lanes merged (the
-/// channel's extreme counts in every lane that reached it). The pass is bound by
-/// memory (three 4.9 MB planes at 1280×960 do not stay in cache): a pass for the
-/// extremes and another counting them took 3.2 ms of the blind noise fit.
+/// One channel's `clip_limits`, in one pass over 8 independent lanes: per lane the
+/// extremes and how often each was seen (a new extreme restarts its count), then
+/// the lanes merged (the channel's extreme counts in every lane that reached it).
+/// Measured both ways, in different surroundings: while the blocking scan before it
+/// read every row (the frame cached), a lane-wise single pass was 2× slower than a
+/// pass for the extremes and another counting them; with blocking on half the rows
+/// the passes are bound by memory (three 4.9 MB planes at 1280×960), and one pass
+/// read 3.7 ms against 4.4 ms for two (`search.clipping`, `BENCH=1 stage_times`).
+/// The lanes compare with `<`/`>`: the fit's input is checked finite first.
 fn channel_clip_limits(ch: &[f32], min_count: usize) -> (Option<f32>, Option<f32>) {
     const LANES: usize = 8;
     let (mut lo, mut hi) = ([f32::INFINITY; LANES], [f32::NEG_INFINITY; LANES]);
