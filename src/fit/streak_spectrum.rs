@@ -220,7 +220,9 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
                 if g < 0.0 {
                     continue;
                 }
-                let g0 = g.floor() as usize;
+                // g ≥ 0: truncation is its floor, bit for bit (`floorf` is a libm
+                // call on baseline x86-64).
+                let g0 = g as usize;
                 let a = (g - g0 as f32) as f64;
                 if g0 < bins {
                     power[g0] += (1.0 - a) * v as f64;
