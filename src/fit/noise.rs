@@ -1513,7 +1513,8 @@ fn measure_level(
     let radius = 5 * scale + 8;
     let (w, h) = (luma.width, luma.height);
     // (x, y, B(Y), B(Y²), structure, unclipped-channel bits)
-    let mut pts: Vec<(usize, usize, f32, f32, f32, u8)> = vec![];
+    type Sample = (usize, usize, f32, f32, f32, u8);
+    let mut pts: Vec<Sample> = vec![];
     for y in grid(h, stride) {
         for x in grid(w, stride) {
             let ok = (0..3).fold(0u8, |m, c| m | ((!clip[c].touches(x * scale, y * scale, radius, l >= 2) as u8) << c));
@@ -1527,9 +1528,21 @@ fn measure_level(
     }
     let m2m = white_noise_median_to_mean(l);
     let mut out = vec![];
-    for b in 0..BLIND_BINS {
-        let (lo, hi) = (b as f32 / BLIND_BINS as f32, (b + 1) as f32 / BLIND_BINS as f32);
-        let mut bin: Vec<&(usize, usize, f32, f32, f32, u8)> = pts.iter().filter(|p| p.2 >= lo && p.2 < hi).collect();
+    // The samples of luma bin b, [b/16, (b + 1)/16), in grid order: one pass over
+    // them all (a filter per bin read every sample 16 times). BLIND_BINS is a power
+    // of two, so ⌊16·y⌋ is exact and the bins are the comparisons' bins.
+    const _: () = assert!(BLIND_BINS.is_power_of_two());
+    let mut bins: Vec<Vec<&Sample>> = vec![vec![]; BLIND_BINS];
+    for p in &pts {
+        // y ≥ 0 (NaN fails): truncation is the floor, without a libm call.
+        if p.2 >= 0.0 {
+            let b = (p.2 * BLIND_BINS as f32) as usize;
+            if b < BLIND_BINS {
+                bins[b].push(p);
+            }
+        }
+    }
+    for mut bin in bins {
         bin.sort_by(|a, b| a.4.total_cmp(&b.4));
         // Each channel's flat set: the flattest fraction of the bin's samples where
         // that channel is unclipped; the bin counts when every channel has one.
