@@ -629,10 +629,24 @@ fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
 /// Per channel, the clipped low and high values (see `clip_mask`), if any.
 type ClipLimits = [(Option<f32>, Option<f32>); 3];
 
-/// The clipped extremes of every channel (`channel_clip_limits`).
+/// The clipped extremes of every channel (`channel_clip_limits`; the accurate
+/// tier's — the blind tier reads them from tile extremes, `blind_clip_masks`).
 fn clip_limits(img: &Rgb) -> ClipLimits {
-    let min_count = (img.len() / 2000).max(2);
+    let min_count = clip_min_count(img.len());
     std::array::from_fn(|c| channel_clip_limits(&img.channels[c], min_count))
+}
+
+/// How often a channel's extreme must repeat to be a clip level (`clip_mask`):
+/// 0.05% of the pixels, and at least 2.
+fn clip_min_count(pixels: usize) -> usize {
+    (pixels / 2000).max(2)
+}
+
+/// A channel's clip levels from its extremes and their counts (`clip_mask`): the
+/// minimum when dark (≤ 0.1), the maximum when bright (≥ 0.6), each repeated at
+/// least `min_count` times.
+fn clip_levels(lo: (f32, usize), hi: (f32, usize), min_count: usize) -> (Option<f32>, Option<f32>) {
+    ((lo.0 <= 0.1 && lo.1 >= min_count).then_some(lo.0), (hi.0 >= 0.6 && hi.1 >= min_count).then_some(hi.0))
 }
 
 /// One channel's `clip_limits`, in one pass over 8 independent lanes: per lane the
@@ -669,8 +683,7 @@ fn channel_clip_limits(ch: &[f32], min_count: usize) -> (Option<f32>, Option<f32
         let count: usize = ext.iter().zip(n).filter(|(x, _)| **x == e).map(|(_, &c)| c as usize).sum();
         (e, count)
     };
-    let ((lo, nlo), (hi, nhi)) = (merge(&lo, &nlo, f32::min), merge(&hi, &nhi, f32::max));
-    ((lo <= 0.1 && nlo >= min_count).then_some(lo), (hi >= 0.6 && nhi >= min_count).then_some(hi))
+    clip_levels(merge(&lo, &nlo, f32::min), merge(&hi, &nhi, f32::max), min_count)
 }
 
 /// `clip_mask` counting clipped values in `channels` only (the blind tier measures
@@ -726,7 +739,7 @@ fn clip_mask_of(img: &Rgb, limits: &ClipLimits, block: usize, valid: Option<&Pla
 /// once, as element-wise minima and maxima down each band of `block` rows.
 fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
     let (w, h) = (img.width, img.height);
-    let min_count = (img.len() / 2000).max(2);
+    let min_count = clip_min_count(img.len());
     let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
     let per_channel = |c: usize| -> ((Option<f32>, Option<f32>), ClipMask) {
         let ch = &img.channels[c];
@@ -749,7 +762,8 @@ fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
                 thi.push(b.iter().copied().fold(f32::NEG_INFINITY, |m, v| if v > m { v } else { m }));
             }
         }
-        // How often `e` occurs in the tiles whose extreme it is (stops at `min_count`).
+        // How often `e` occurs in the tiles whose extreme it is, up to `min_count`
+        // (so at most `min_count` tiles are read again, whatever the frame).
         let count = |tiles: &[f32], e: f32| {
             let mut n = 0usize;
             for (t, _) in tiles.iter().enumerate().filter(|(_, &v)| v == e) {
@@ -765,8 +779,7 @@ fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
         };
         let lo = tlo.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = thi.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let lo = (lo <= 0.1 && count(&tlo, lo) >= min_count).then_some(lo);
-        let hi = (hi >= 0.6 && count(&thi, hi) >= min_count).then_some(hi);
+        let (lo, hi) = clip_levels((lo, count(&tlo, lo)), (hi, count(&thi, hi)), min_count);
         if lo.is_none() && hi.is_none() {
             return ((lo, hi), ClipMask { clipped: None, invalid: None });
         }
@@ -1282,8 +1295,8 @@ pub fn fit_fast(image: &Rgb, neighbour: Option<&super::Neighbour>) -> (Noise, No
     };
     let band = |l: usize| -> [&Plane; 3] { std::array::from_fn(|c| &pyr[c].1[l]) };
     // expand(G_Y[l+1]) from the coarse luma (reduce is linear): one plane expanded
-    // instead of six level-l planes read (2.3 → ~1 ms at 1280×960, the same values
-    // to rounding).
+    // instead of six level-l planes read (`blur.luma` 2.3 → 1.6 ms at 1280×960, the
+    // same values to rounding).
     let smooth: Vec<Plane> = (0..NOISE_LEVELS)
         .into_par_iter()
         .map(|l| {
