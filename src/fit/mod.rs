@@ -13,6 +13,7 @@ mod aggregate;
 mod curve;
 pub mod defocus_spectrum;
 mod dof;
+mod isotropy_pool;
 mod motion_blur;
 mod noise;
 pub mod streak_spectrum;
@@ -20,6 +21,9 @@ pub mod streak_spectrum;
 pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
+pub use isotropy_pool::{
+    fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure, HARMONIC_SCATTER as MB_HARMONIC_SCATTER,
+};
 pub use motion_blur::MbPlotData;
 pub use noise::{effective_stride as effective_noise_stride, NoisePlotData, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO};
 
