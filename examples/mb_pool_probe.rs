@@ -11,6 +11,9 @@ use blind_augment::image::{Flow, Rgb};
 use blind_augment::synth;
 
 fn photos() -> Vec<(&'static str, Rgb)> {
+    if std::env::var_os("ANISO").is_some() {
+        return vec![("aniso 3/1.2", synth::sequence::anisotropic_texture(800, 700, 3.0, 1.2, 17))];
+    }
     vec![
         ("astronaut", common::photo("astronaut.png")),
         ("chelsea", common::photo("chelsea.png")),
@@ -47,7 +50,12 @@ fn evidence(img: &Rgb, flow: &Flow, lambda: f32) -> (String, Option<IsotropyEvid
     }
     let noise = env("NOISE");
     if noise > 0.0 {
-        blurred = common::add_sensor_noise(&blurred, [2e-5 * noise, 1.2e-5 * noise, 4e-5 * noise], [8e-4 * noise, 5e-4 * noise, 1.2e-3 * noise], 7);
+        blurred = common::add_sensor_noise(
+            &blurred,
+            [2e-5 * noise, 1.2e-5 * noise, 4e-5 * noise],
+            [8e-4 * noise, 5e-4 * noise, 1.2e-3 * noise],
+            7,
+        );
     }
     let blurred = common::quantize8(&blurred);
     let opts = FitOptions {
@@ -57,7 +65,12 @@ fn evidence(img: &Rgb, flow: &Flow, lambda: f32) -> (String, Option<IsotropyEvid
     };
     let out = fit(&FitInputs { flow: Some(flow), ..FitInputs::new(&blurred) }, &opts).expect("valid");
     let mb = out.model.motion_blur;
-    let own = format!("{:?} ± {:.3} {:?}", mb.exposure.map(|l| (l * 1000.0).round() / 1000.0), mb.diagnostics.stderr.unwrap_or(f64::NAN), mb.diagnostics.status);
+    let own = format!(
+        "{:?} ± {:.3} {:?}",
+        mb.exposure.map(|l| (l * 1000.0).round() / 1000.0),
+        mb.diagnostics.stderr.unwrap_or(f64::NAN),
+        mb.diagnostics.status
+    );
     (own, out.plots.motion_blur.and_then(|p| p.isotropy))
 }
 
@@ -115,7 +128,11 @@ fn main() {
         let sd = (all.iter().map(|x| x * x).sum::<f64>() / all.len() as f64).sqrt();
         let mut abs: Vec<f64> = all.iter().map(|x| x.abs()).collect();
         abs.sort_by(|a, b| a.total_cmp(b));
-        println!("walking crops, all photos: rms {sd:.4}, p68 {:.4}, p90 {:.4}", abs[abs.len() * 68 / 100], abs[abs.len() * 9 / 10]);
+        println!(
+            "walking crops, all photos: rms {sd:.4}, p68 {:.4}, p90 {:.4}",
+            abs[abs.len() * 68 / 100],
+            abs[abs.len() * 9 / 10]
+        );
         return;
     }
     let dir_sets: Vec<(&str, Vec<f32>)> = vec![
@@ -123,6 +140,7 @@ fn main() {
         ("0,60,120", vec![0.0, 60.0, 120.0]),
         ("6 dirs", (0..6).map(|i| i as f32 * 30.0).collect()),
         ("yaw-ish 0,10,20", vec![0.0, 10.0, 20.0]),
+        ("30,90,150", vec![30.0, 90.0, 150.0]),
     ];
     for (name, img) in photos() {
         for lambda in [0.0f32, 0.2, 0.5] {

@@ -22,7 +22,8 @@ pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
 pub use isotropy_pool::{
-    fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure, HARMONIC_SCATTER as MB_HARMONIC_SCATTER,
+    fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure,
+    HARMONIC_SCATTER as MB_HARMONIC_SCATTER,
 };
 pub use motion_blur::MbPlotData;
 pub use noise::{effective_stride as effective_noise_stride, NoisePlotData, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO};
@@ -144,6 +145,12 @@ pub struct FitOptions {
     /// is kept — the shipped denoiser's always leak at the coarse levels (its 11-px
     /// receptive field), and a refusal there would leave nothing.
     pub noise_min_leak_ratio: Option<f32>,
+    /// Blind exposure: also measure the isotropy evidence (`MbPlotData::isotropy`)
+    /// on frames whose streak zeros answered. The worker's pooled fit needs every
+    /// flow direction the head turned in, and the zeros answer in some directions
+    /// only (on a text-like texture, across its lines but not along them); costs
+    /// the isotropy stage (~9 ms at 1280×960) on such frames.
+    pub mb_isotropy_evidence: bool,
 }
 
 impl Default for FitOptions {
@@ -159,6 +166,7 @@ impl Default for FitOptions {
             mb_prefilter_var_px2: 0.0,
             mb_min_flow_px: motion_blur::MIN_FLOW_PX,
             noise_min_leak_ratio: None,
+            mb_isotropy_evidence: false,
         }
     }
 }
@@ -433,7 +441,7 @@ fn fit_motion_blur(
         (Some(flow), Tier::Accurate, Some(sharp)) => {
             motion_blur::fit_accurate(inp.image, sharp, inp.motion_deblurred_second, flow, inp.reference_valid, opts)
         }
-        (Some(flow), _, _) => motion_blur::fit_fast(luma, flow),
+        (Some(flow), _, _) => motion_blur::fit_fast(luma, flow, opts.mb_isotropy_evidence),
     }
 }
 

@@ -18,8 +18,8 @@
 //! identified, else gradient-energy isotropy with its bias risk in the standard
 //! error — see its documentation.
 
-use crate::image::{Flow, Plane, Rgb};
 use super::isotropy_pool::{interp, IsotropyEvidence, GRID};
+use crate::image::{Flow, Plane, Rgb};
 use crate::model::{Diagnostics, MotionBlur, Status};
 use std::time::Instant;
 
@@ -431,7 +431,7 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    defocus, noise) — wider than half of [0, 1] is *not identifiable*. The bias
 ///    term is added in quadrature to the spread of the root over `FAST_SUBSETS`
 ///    interleaved subsets / √subsets.
-pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<MbPlotData>) {
+pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let y = luma.full();
     let mut st = super::Stages::start();
@@ -449,8 +449,14 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow) -> (MotionBlur, Option<Mb
             sig.runner_up,
             if mb.present { "present" } else { "absent" }
         );
+        // The pooled fit's evidence where asked (`FitOptions::mb_isotropy_evidence`).
+        let plot = evidence_always.then(|| {
+            let isotropy = isotropy_root(y, flow, 1, true).ok().and_then(|r| r.evidence);
+            st.lap("search.isotropy");
+            MbPlotData { isotropy, ..Default::default() }
+        });
         mb.diagnostics.stages_s = st.done();
-        return (mb, None);
+        return (mb, plot);
     }
     let fine = isotropy_root(y, flow, 1, true);
     st.lap("search.isotropy");

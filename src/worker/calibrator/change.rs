@@ -50,6 +50,7 @@ impl Calibrator {
         self.window.retain(|a| a.frame.t_s >= since_s);
         self.sharp.retain(|a| a.frame.t_s >= since_s);
         self.forget_dof_before(since_s);
+        self.forget_mb_before(since_s);
     }
 
     /// Change detection on the noise probes (every `PROBE_INTERVAL_S`), each

@@ -28,6 +28,7 @@
 mod aggregate;
 mod change;
 mod dof_pool;
+mod mb_pool;
 
 use crate::analysis::onnx::{OnnxDeblur, OnnxDenoiser, OnnxDepth, OnnxError, OnnxFlow, OnnxModel};
 use crate::analysis::timing::{PoseTrack, TimedPose};
@@ -40,6 +41,7 @@ use crate::model::{CameraModel, NoiseForm, Status};
 use aggregate::Presence;
 use change::{luma_histogram, Probe, PROBE_INTERVAL_S};
 use dof_pool::{dof_still, PooledEdges};
+use mb_pool::PooledIsotropy;
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Instant;
@@ -398,6 +400,8 @@ pub struct Calibrator {
     noise_strips_fitted: usize,
     /// The blind DoF fits' edge samples of the last `DOF_POOL_S` (`pool_dof`).
     dof_pool: VecDeque<PooledEdges>,
+    /// The blind motion-blur fits' isotropy evidence of the last `MB_POOL_S` (`pool_mb`).
+    mb_pool: VecDeque<PooledIsotropy>,
     /// This frame's stage times.
     stages: Stages,
 }
@@ -444,6 +448,7 @@ impl Calibrator {
             aligned_previous: None,
             noise_strips_fitted: 0,
             dof_pool: VecDeque::new(),
+            mb_pool: VecDeque::new(),
             stages: Stages::default(),
         })
     }
@@ -833,12 +838,17 @@ impl Calibrator {
         };
         // Blind noise on this update's strip (`noise_strip`), with the previous frame
         // aligned there; the other blind effects on the whole frame.
-        let mut model = match fit::fit(&base, &fast_opts(Effects { noise: false, ..blind })) {
+        // Every frame's isotropy evidence for the pooled exposure (`pool_mb`).
+        let blind_opts = FitOptions { mb_isotropy_evidence: true, ..fast_opts(Effects { noise: false, ..blind }) };
+        let mut model = match fit::fit(&base, &blind_opts) {
             Ok(o) => {
                 let mut model = o.model;
                 if blind.depth_of_field {
                     let edges = o.plots.depth_of_field.filter(|_| dof_still(current));
                     self.pool_dof(t_s, edges, &mut model);
+                }
+                if blind.motion_blur {
+                    self.pool_mb(t_s, o.plots.motion_blur.and_then(|p| p.isotropy), &mut model);
                 }
                 model
             }
