@@ -418,7 +418,8 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    length L along the perpendicular v, and compare the directional gradient
 ///    energies C(L) = E[(∂_u B_v(L) I)²] and D(L) = E[(∂_v B_v(L) I)²]. By isotropy
 ///    they are equal exactly when both axes carry the same box, i.e. at L = L*, at
-///    every scale. λ is the root of C − D on [0, 1] (regula falsi), with L = λ|F| per
+///    every scale. λ is the root of C − D on [0, 1] (bracketed on a λ grid, refined by
+///    regula falsi), with L = λ|F| per
 ///    pixel. Anisotropic texture biases it (measured: a text page −48%, and an
 ///    isotropic defocus that weakens the streak's signal lets a 14% texture
 ///    anisotropy drive λ to 0 — BENCHMARKS.md). The **bias risk** enters the
@@ -431,6 +432,11 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    defocus, noise) — wider than half of [0, 1] is *not identifiable*. The bias
 ///    term is added in quadrature to the spread of the root over `FAST_SUBSETS`
 ///    interleaved subsets / √subsets.
+///
+/// Every isotropy answer (and with `evidence_always` a zeros answer too) returns
+/// the frame's along/across balance per flow direction (`MbPlotData::isotropy`):
+/// the worker pools it over the directions a head turns in, where the texture's
+/// anisotropy and the streak separate (`fit::pooled_exposure`).
 pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let y = luma.full();
