@@ -39,10 +39,7 @@ fn evidence(img: &Rgb, flow: &Flow, lambda: f32) -> (String, Option<IsotropyEvid
     let mut blurred = synth::add_motion_blur(img, flow, lambda);
     let sigma = env("SIGMA");
     if sigma > 0.0 {
-        let r = (3.0 * sigma).ceil() as i32;
-        let k: Vec<f32> = (-r..=r).map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp()).collect();
-        let sum: f32 = k.iter().sum();
-        let k: Vec<f32> = k.iter().map(|v| v / sum).collect();
+        let k = blind_augment::image::discrete_gaussian_kernel(sigma * sigma);
         for c in 0..3 {
             let p = blind_augment::image::Plane::from_vec(blurred.width, blurred.height, blurred.channels[c].clone());
             blurred.channels[c] = blind_augment::image::blur_separable(&p, &k).data;

@@ -461,13 +461,13 @@ fn calibrate_command_on_a_recorded_sequence() {
 /// along x, 1.2 along y: ~6× the gradient energy along y) at 12 px/frame, λ 0.5,
 /// under σ 1.2 px defocus and noise, 320×240, flow given; the pan turns between
 /// 90°, 30° and 150° every 4 frames. Along 90° the frame alone cannot answer
-/// (58% more gradient energy along the flow than across, before any streak: *not
-/// identifiable*); along 30° and 150° the streak's zeros answer (0.534 ± 0.019).
+/// (57% more gradient energy along the flow than across, before any streak: *not
+/// identifiable*); along 30° and 150° the streak's zeros answer (0.525 ± 0.018).
 /// Checked: (a) once the pool holds those directions, every 90° frame's estimate
 /// counts in the window (the pooled λ replaces its *not identifiable*): the
 /// published "median over p of n" has p ≥ n − 4 (the first four 90° frames, before
 /// a second direction, stay out); (b) every published λ is within 0.05 of 0.5, the
-/// fast tier's target (measured 0.528–0.535).
+/// fast tier's target (measured 0.520–0.526).
 #[test]
 fn fast_tier_pools_motion_blur_over_flow_directions() {
     use blind_augment::fit::Effects;

@@ -89,25 +89,28 @@ impl Profiles {
         Self::mean_over(&self.f2[o0..o1], &self.c2[o0..o1], lambda)
     }
 
+    /// Cumulative integral at t (from −½) of the piecewise-linear profile with
+    /// m = len − 1 intervals of width h = 1/m.
+    #[inline]
+    fn cum(f: &[f32], c: &[f32], m: f32, h: f32, t: f32) -> f32 {
+        let s = ((t + 0.5) * m).clamp(0.0, m);
+        // s ≥ 0: truncation is its floor, without the libm call.
+        let j = (s as usize).min(f.len() - 2);
+        let tau = (s - j as f32) * h;
+        c[j] + f[j] * tau + (f[j + 1] - f[j]) * tau * tau / (2.0 * h)
+    }
+
     #[inline]
     fn mean_over(f: &[f32], c: &[f32], lambda: f32) -> f32 {
         let m = (f.len() - 1) as f32;
-        let h = 1.0 / m;
-        // Cumulative integral at t (from −½) of the piecewise-linear profile.
-        let cum = |t: f32| -> f32 {
-            let s = ((t + 0.5) * m).clamp(0.0, m);
-            // s ≥ 0: truncation is its floor, without the libm call.
-            let j = (s as usize).min(f.len() - 2);
-            let tau = (s - j as f32) * h;
-            c[j] + f[j] * tau + (f[j + 1] - f[j]) * tau * tau / (2.0 * h)
-        };
         if lambda < 1e-6 {
             let s = 0.5 * m;
             let j = (s as usize).min(f.len() - 2);
             let a = s - j as f32;
             return f[j] + (f[j + 1] - f[j]) * a;
         }
-        (cum(0.5 * lambda) - cum(-0.5 * lambda)) / lambda
+        let h = 1.0 / m;
+        (Self::cum(f, c, m, h, 0.5 * lambda) - Self::cum(f, c, m, h, -0.5 * lambda)) / lambda
     }
 
     /// B(λ_j) for pixel i at every node of the pooled fit's grid, λ_j = j/(GRID − 1):
@@ -119,16 +122,9 @@ impl Profiles {
         out[0] = Self::mean_over(f, c, 0.0);
         let m = (f.len() - 1) as f32;
         let h = 1.0 / m;
-        let last = f.len() - 2;
-        let cum = |t: f32| -> f32 {
-            let s = ((t + 0.5) * m).clamp(0.0, m);
-            let j = (s as usize).min(last);
-            let tau = (s - j as f32) * h;
-            c[j] + f[j] * tau + (f[j + 1] - f[j]) * tau * tau / (2.0 * h)
-        };
         for (j, o) in out.iter_mut().enumerate().skip(1) {
             let lambda = j as f32 / (GRID - 1) as f32;
-            *o = (cum(0.5 * lambda) - cum(-0.5 * lambda)) / lambda;
+            *o = (Self::cum(f, c, m, h, 0.5 * lambda) - Self::cum(f, c, m, h, -0.5 * lambda)) / lambda;
         }
     }
 
@@ -683,8 +679,8 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<Is
     // which exact evaluations then refine; the prior's band is read off the grid
     // (cubic interpolation: within 0.006 of exact roots, mean 0.0003, over the 194
     // frames of `examples/mb_pool_probe.rs` — inside a bound of 1/256 on a bias).
-    // The stage costs what the root searches from [0, 1] alone did (8.6 ms at
-    // 1280×960, same-moment A/B): the evidence comes free.
+    // The stage costs ~0.7 ms more than the root searches from [0, 1] alone did
+    // (8.0–8.4 → 8.7–9.7 ms at 1280×960, same-moment A/B, BENCHMARKS.md).
     let mut sub = vec![[[0.0f64; GRID]; 2]; FAST_SUBSETS];
     let mut evidence = IsotropyEvidence::default();
     let (mut c, mut d) = ([0.0f64; GRID], [0.0f64; GRID]);

@@ -41,20 +41,7 @@ pub fn blur_separable_rows(p: &Plane, kernel: &[f32], row: &dyn Fn(usize) -> boo
             reach[(y as isize + k as isize - r as isize).clamp(0, h as isize - 1) as usize] = true;
         }
     }
-    let mut tmp = vec![0.0f32; w * h];
-    let mut padded = vec![0.0f32; w + 2 * r];
-    for y in (0..h).filter(|&y| reach[y]) {
-        let row = &p.data[y * w..(y + 1) * w];
-        for (i, v) in padded.iter_mut().enumerate() {
-            *v = row[(i as isize - r as isize).clamp(0, w as isize - 1) as usize];
-        }
-        let out = &mut tmp[y * w..(y + 1) * w];
-        for (k, &wk) in kernel.iter().enumerate() {
-            for (o, &v) in out.iter_mut().zip(&padded[k..k + w]) {
-                *o += wk * v;
-            }
-        }
-    }
+    let tmp = blur_x_rows(p, kernel, &reach);
     let mut out = vec![0.0f32; w * h];
     for y in (0..h).filter(|&y| wanted[y]) {
         let o = &mut out[y * w..(y + 1) * w];
@@ -66,6 +53,34 @@ pub fn blur_separable_rows(p: &Plane, kernel: &[f32], row: &dyn Fn(usize) -> boo
         }
     }
     Plane::from_vec(w, h, out)
+}
+
+/// The horizontal pass alone (clamp-to-edge): an anisotropic blur is this with one
+/// kernel after `blur_separable` with another.
+pub fn blur_x(p: &Plane, kernel: &[f32]) -> Plane {
+    Plane::from_vec(p.width, p.height, blur_x_rows(p, kernel, &vec![true; p.height]))
+}
+
+/// The horizontal pass on the rows where `rows[y]` (the others 0), one tap at a time
+/// over a padded row.
+fn blur_x_rows(p: &Plane, kernel: &[f32], rows: &[bool]) -> Vec<f32> {
+    let (w, h) = (p.width, p.height);
+    let r = kernel.len() / 2;
+    let mut tmp = vec![0.0f32; w * h];
+    let mut padded = vec![0.0f32; w + 2 * r];
+    for y in (0..h).filter(|&y| rows[y]) {
+        let row = &p.data[y * w..(y + 1) * w];
+        for (i, v) in padded.iter_mut().enumerate() {
+            *v = row[(i as isize - r as isize).clamp(0, w as isize - 1) as usize];
+        }
+        let out = &mut tmp[y * w..(y + 1) * w];
+        for (k, &wk) in kernel.iter().enumerate() {
+            for (o, &v) in out.iter_mut().zip(&padded[k..k + w]) {
+                *o += wk * v;
+            }
+        }
+    }
+    tmp
 }
 
 #[cfg(test)]

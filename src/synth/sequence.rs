@@ -157,40 +157,16 @@ pub fn procedural(base: &Scene, scale: usize, seed: u64) -> Scene {
 /// 1.2 px its gradient energy along y is ~6× that along x, an orientation as strong
 /// as text lines or shelves. Why: the blind motion-blur estimator's isotropy
 /// assumption fails on such texture by the flow's direction (the pooled fit's
-/// tests). Deterministic in `seed`.
+/// tests). Oriented along x: `sigma_x_px` below `sigma_y_px` is taken as equal.
+/// Deterministic in `seed`.
 pub fn anisotropic_texture(width: usize, height: usize, sigma_x_px: f32, sigma_y_px: f32, seed: u64) -> Rgb {
+    use crate::image::{blur_separable, blur_x, discrete_gaussian_kernel};
     let noise: Vec<f32> =
         (0..width * height).map(|i| super::gaussian((i % width) as u32, (i / width) as u32, 0, seed)).collect();
-    let kernel = |sigma: f32| -> Vec<f32> {
-        let r = (3.0 * sigma).ceil() as i32;
-        let k: Vec<f32> = (-r..=r).map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp()).collect();
-        let s: f32 = k.iter().sum();
-        k.iter().map(|v| v / s).collect()
-    };
-    // One axis at a time (`image::blur_separable` takes one kernel for both), edges
-    // clamped.
-    let blur_axis = |p: &Plane, k: &[f32], along_x: bool| -> Plane {
-        let r = (k.len() / 2) as isize;
-        let mut out = Plane::new(p.width, p.height, 0.0);
-        for y in 0..p.height {
-            for x in 0..p.width {
-                let mut acc = 0.0;
-                for (i, kv) in k.iter().enumerate() {
-                    let o = i as isize - r;
-                    let (sx, sy) = if along_x { (x as isize + o, y as isize) } else { (x as isize, y as isize + o) };
-                    acc += kv
-                        * p.get(
-                            sx.clamp(0, p.width as isize - 1) as usize,
-                            sy.clamp(0, p.height as isize - 1) as usize,
-                        );
-                }
-                out.data[y * p.width + x] = acc;
-            }
-        }
-        out
-    };
-    let p = blur_axis(&Plane::from_vec(width, height, noise), &kernel(sigma_x_px.max(0.3)), true);
-    let p = blur_axis(&p, &kernel(sigma_y_px.max(0.3)), false);
+    // σ_y on both axes, then the rest of σ_x² along x alone (variances add).
+    let (vx, vy) = (sigma_x_px * sigma_x_px, sigma_y_px * sigma_y_px);
+    let p = blur_separable(&Plane::from_vec(width, height, noise), &discrete_gaussian_kernel(vx.min(vy)));
+    let p = if vx > vy { blur_x(&p, &discrete_gaussian_kernel(vx - vy)) } else { p };
     let mut out = Rgb::new(width, height, [0.0; 3]);
     for c in 0..3 {
         out.channels[c] = p.data.iter().map(|v| (0.5 + 1.5 * v).clamp(0.0, 1.0)).collect();
