@@ -1,7 +1,7 @@
 //! Probe: the blind exposure pooled over flow directions (`fit::pooled_exposure`).
 //! `MODE=scatter`: how far sharp crops' along/across contrast r strays from one
 //! second harmonic over 12 directions, each a different crop (the constant
-//! `fit::MB_HARMONIC_SCATTER`). Default: λ read per frame vs pooled, on photographs
+//! `HARMONIC_SCATTER` in `src/fit/isotropy_pool.rs`). Default: λ read per frame vs pooled, on photographs
 //! blurred along several directions, each frame a different crop.
 //! `cargo run --release --example mb_pool_probe`
 #[path = "../tests/common/mod.rs"]

@@ -46,7 +46,7 @@ const MIN_BIN_SAMPLES: usize = 64;
 /// examples/mb_pool_probe.rs`: astronaut, chelsea, Motorcycle, 300×260 crops at 12
 /// directions: rms 0.048, p90 0.079; one crop at every direction: 0.003–0.009, the
 /// structure tensor's exact harmonic up to sampling). Rounded up to 0.05.
-pub const HARMONIC_SCATTER: f64 = 0.05;
+const HARMONIC_SCATTER: f64 = 0.05;
 /// Above this standard error the pooled λ is reported not identifiable (the single
 /// frame's rule: a 90% band wider than half of [0, 1], 0.25 / 1.645).
 const MAX_STDERR: f64 = 0.25 / 1.645;
@@ -119,7 +119,7 @@ impl IsotropyEvidence {
     }
 
     /// Samples in bins the pooled fit reads.
-    pub fn usable_samples(&self) -> usize {
+    fn usable_samples(&self) -> usize {
         self.bins.iter().filter(|b| b.samples >= MIN_BIN_SAMPLES).map(|b| b.samples).sum()
     }
 }

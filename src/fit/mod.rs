@@ -21,10 +21,7 @@ pub mod streak_spectrum;
 pub use aggregate::aggregate_models;
 pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
-pub use isotropy_pool::{
-    fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure,
-    HARMONIC_SCATTER as MB_HARMONIC_SCATTER,
-};
+pub use isotropy_pool::{fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure};
 pub use motion_blur::MbPlotData;
 pub use noise::{effective_stride as effective_noise_stride, NoisePlotData, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO};
 
@@ -148,8 +145,9 @@ pub struct FitOptions {
     /// Blind exposure: also measure the isotropy evidence (`MbPlotData::isotropy`)
     /// on frames whose streak zeros answered. The worker's pooled fit needs every
     /// flow direction the head turned in, and the zeros answer in some directions
-    /// only (on a text-like texture, across its lines but not along them); costs
-    /// the isotropy stage (~9 ms at 1280×960) on such frames.
+    /// only (on an oriented texture at 30° and 150° but not 90°,
+    /// `tests/calibrate.rs`); costs the isotropy stage (~9 ms at 1280×960) on such
+    /// frames.
     pub mb_isotropy_evidence: bool,
 }
 

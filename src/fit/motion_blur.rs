@@ -586,11 +586,14 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<Is
     let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
     // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
+    // Each sample's flow, for the direction bins of the evidence (`stats` only).
     let mut flows = vec![];
     for &(px, py) in cand.iter().step_by(keep) {
         let i = py * w + px;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
-        flows.push((fx, fy));
+        if stats {
+            flows.push((fx, fy));
+        }
         let speed = (fx * fx + fy * fy).sqrt() / s;
         let (ux, uy) = (fx / (speed * s), fy / (speed * s));
         let (vx, vy) = (-uy, ux);

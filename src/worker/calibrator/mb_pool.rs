@@ -21,11 +21,13 @@ const MB_POOL_S: f64 = 4.0;
 const MB_POOL_FRAMES: usize = 64;
 
 impl Calibrator {
-    /// The pooled blind λ replaces this frame's own where this frame's answer came
-    /// from isotropy (it carries `evidence`; a frame whose streak zeros answered
-    /// carries none and keeps its λ) and the pool pins λ down better than the frame
-    /// does (a smaller standard error, or the frame alone not identifiable). The
-    /// pooled fit's time counts with the motion-blur fit's.
+    /// This frame's isotropy evidence joins the pool (every blind fit carries it:
+    /// the worker asks for it on frames the streak zeros answered too,
+    /// `FitOptions::mb_isotropy_evidence`), and the pooled blind λ replaces the
+    /// frame's own where it pins λ down better (a smaller standard error, or the
+    /// frame alone not identifiable) — the zeros' answers (± 0.005–0.03) mostly
+    /// stand, isotropy's (± 0.05–0.3, or none) give way. The pooled fit's time
+    /// counts with the motion-blur fit's.
     pub(super) fn pool_mb(&mut self, t_s: f64, evidence: Option<fit::IsotropyEvidence>, model: &mut CameraModel) {
         let Some(evidence) = evidence else { return };
         self.mb_pool.push_back(PooledIsotropy { t_s, evidence });
