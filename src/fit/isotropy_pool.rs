@@ -47,9 +47,9 @@ const MIN_BIN_SAMPLES: usize = 64;
 /// directions: rms 0.048, p90 0.079; one crop at every direction: 0.003–0.009, the
 /// structure tensor's exact harmonic up to sampling). Rounded up to 0.05.
 const HARMONIC_SCATTER: f64 = 0.05;
-/// Above this standard error the pooled λ is reported not identifiable (the single
-/// frame's rule: a 90% band wider than half of [0, 1], 0.25 / 1.645).
-const MAX_STDERR: f64 = 0.25 / 1.645;
+/// Above this standard error the pooled λ is reported not identifiable: the single
+/// frame's rule (a 90% band wider than half of [0, 1]) as a standard error.
+const MAX_STDERR: f64 = super::motion_blur::MAX_ISOTROPY_HALF_BAND / 1.645;
 
 /// One direction bin's sums over its samples at each grid λ: Δ = C − D and
 /// S = C + D per sample (the sample's squared central differences along and across

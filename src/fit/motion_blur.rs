@@ -41,7 +41,7 @@ const FAST_SUBSETS: usize = 4;
 const TEXTURE_ANISOTROPY_90: f64 = 0.21;
 /// Above this half-width of the 90% band the isotropy λ is reported not
 /// identifiable: the band then spans more than half of [0, 1].
-const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
+pub(super) const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
 /// Default pixel budget of the accurate fit. Measured at 512² (BENCHMARKS.md):
 /// 2048 to 32768 samples all give a median |λ error| below 0.001; 4096 keeps a 2×
 /// margin over the smallest for frames with less texture, at 6 ms instead of 19.
