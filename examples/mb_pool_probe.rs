@@ -68,6 +68,9 @@ fn evidence(img: &Rgb, flow: &Flow, lambda: f32) -> (String, Option<IsotropyEvid
         mb.diagnostics.stderr.unwrap_or(f64::NAN),
         mb.diagnostics.status
     );
+    if std::env::var_os("REASON").is_some() {
+        println!("  {}", mb.diagnostics.reason);
+    }
     (own, out.plots.motion_blur.and_then(|p| p.isotropy))
 }
 

@@ -444,11 +444,12 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         let mut mb = decide("fast", lambda, sig.stderr as f64, None, sig.lines, started);
         mb.diagnostics.reason = format!(
             "λ = {lambda:.4} ± {:.4} from the streak's spectral zeros along the flow ({} lines, correlation {:.2}, \
-             next best {:.2}); {}",
+             next best {:.2}, first side lobe e^{:.2} × the noise floor); {}",
             sig.stderr,
             sig.lines,
             sig.score,
             sig.runner_up,
+            sig.side_lobe,
             if mb.present { "present" } else { "absent" }
         );
         // The pooled fit's evidence where asked (`FitOptions::mb_isotropy_evidence`).
@@ -462,19 +463,20 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
     }
     let fine = isotropy_root(y, flow, 1, true);
     st.lap("search.isotropy");
-    let IsotropyRoot { lambda, spread, n, along_excess, along_excess_se, band, evidence } = match fine {
-        Ok(root) => root,
-        Err(n) => {
-            let reason = format!(
+    let IsotropyRoot { lambda, spread, n, along_excess, along_excess_se, top_excess, top_excess_se, band, evidence } =
+        match fine {
+            Ok(root) => root,
+            Err(n) => {
+                let reason = format!(
                 "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}), and no streak zeros along the \
              flow: exposure not identifiable blindly"
             );
-            let mut d = super::not_identifiable("fast", reason, started);
-            d.samples_used = n as u64;
-            d.stages_s = st.done();
-            return (MotionBlur::absent(d), None);
-        }
-    };
+                let mut d = super::not_identifiable("fast", reason, started);
+                d.samples_used = n as u64;
+                d.stages_s = st.done();
+                return (MotionBlur::absent(d), None);
+            }
+        };
     // Every answer of the isotropy path carries the frame's evidence for pooling:
     // the frames this path cannot answer alone are the ones pooling is for.
     let plot = Some(MbPlotData { isotropy: evidence, ..Default::default() });
@@ -500,6 +502,26 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
              {streak_note}: exposure not identifiable blindly",
             100.0 * along_excess,
             100.0 * along_excess_se
+        );
+        let mut d = super::not_identifiable("fast", reason, started);
+        d.samples_used = n as u64;
+        d.stages_s = st.done();
+        return (MotionBlur::absent(d), plot);
+    }
+    // The other end: the root is not bracketed below a full-frame exposure and the
+    // frame still holds clearly less gradient energy along the flow than across
+    // after a full-frame streak is undone — its texture is smoother along the flow
+    // than any exposure explains, and λ = 1 is the search's end, not a balance (the
+    // prior's band, cut at 1, then looked narrow). Measured: texture smoothed σ 3 px
+    // along the flow and 1.2 px across read λ 1.000 ± 0.036 *present* for truths 0,
+    // 0.2 and 0.5 (8 px/frame, σ 1.5 px defocus, noise).
+    if lambda >= 1.0 && top_excess < -0.02 && top_excess < -3.0 * top_excess_se {
+        let reason = format!(
+            "even a full-frame streak leaves the frame {:.1}% (± {:.1}%) short of gradient energy along the flow — \
+             texture smoother along the flow than across, so gradient-energy isotropy cannot separate it from \
+             motion blur; streak zeros {streak_note}: exposure not identifiable blindly",
+            -100.0 * top_excess,
+            100.0 * top_excess_se
         );
         let mut d = super::not_identifiable("fast", reason, started);
         d.samples_used = n as u64;
@@ -672,6 +694,8 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<Is
             n,
             along_excess: 0.0,
             along_excess_se: 0.0,
+            top_excess: 0.0,
+            top_excess_se: 0.0,
             band: None,
             evidence: None,
         });
@@ -770,12 +794,20 @@ fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<Is
     let excess: Vec<f64> =
         sub.iter().map(|cd| if cd[1][0] > 0.0 { (cd[0][0] - cd[1][0]) / cd[1][0] } else { 0.0 }).collect();
     let (along_excess, along_excess_se) = mean_se(&excess);
+    // The same at the grid's last node, λ = 1.
+    let top: Vec<f64> = sub
+        .iter()
+        .map(|cd| if cd[1][GRID - 1] > 0.0 { (cd[0][GRID - 1] - cd[1][GRID - 1]) / cd[1][GRID - 1] } else { 0.0 })
+        .collect();
+    let (top_excess, top_excess_se) = mean_se(&top);
     Ok(IsotropyRoot {
         lambda,
         spread: mean_se(&parts).1,
         n,
         along_excess,
         along_excess_se,
+        top_excess,
+        top_excess_se,
         band,
         evidence: Some(evidence),
     })
@@ -800,6 +832,11 @@ struct IsotropyRoot {
     /// energy along the flow than across: isotropy is violated.
     along_excess: f64,
     along_excess_se: f64,
+    /// C(1)/D(1) − 1 (mean over subsets) and its standard error: what is left of the
+    /// along-flow deficit after a full-frame streak is undone. Clearly negative: the
+    /// texture is smoother along the flow than any exposure explains.
+    top_excess: f64,
+    top_excess_se: f64,
     /// The roots at C/D = 1 ∓ `TEXTURE_ANISOTROPY_90`: the λ range a natural
     /// texture anisotropy leaves open (~90%); with `stats` only (`None` at the coarse scale).
     band: Option<[f32; 2]>,
