@@ -462,12 +462,15 @@ fn calibrate_command_on_a_recorded_sequence() {
 /// under σ 1.2 px defocus and noise, 320×240, flow given; the pan turns between
 /// 90°, 30° and 150° every 4 frames. Along 90° the frame alone cannot answer
 /// (57% more gradient energy along the flow than across, before any streak: *not
-/// identifiable*); along 30° and 150° the streak's zeros answer (0.525 ± 0.018).
-/// Checked: (a) once the pool holds those directions, every 90° frame's estimate
-/// counts in the window (the pooled λ replaces its *not identifiable*): the
-/// published "median over p of n" has p ≥ n − 4 (the first four 90° frames, before
-/// a second direction, stay out); (b) every published λ is within 0.05 of 0.5, the
-/// fast tier's target (measured 0.520–0.526).
+/// identifiable*); along 30° the streak's zeros read 0.525 ± 0.018 but their first
+/// side lobe lies under the noise floor — what an oriented texture 10° off the flow
+/// shows too — so they are not taken (`streak_spectrum::MIN_SIDE_LOBE`), and no
+/// single frame answers. Checked: (a) once the pool holds three directions (from
+/// the first 150° frame), every frame's estimate counts in the window (the pooled
+/// λ replaces its *not identifiable*): the published "median over p of n" has
+/// p ≥ n − 8 at every later 90° frame (the first eight frames, before a third
+/// direction, stay out); (b) every λ published from then on is within 0.05 of 0.5,
+/// the fast tier's target (measured 0.478–0.483).
 #[test]
 fn fast_tier_pools_motion_blur_over_flow_directions() {
     use blind_augment::fit::Effects;
@@ -516,7 +519,7 @@ fn fast_tier_pools_motion_blur_over_flow_directions() {
             let Event::Published(u) = e else { continue };
             let mb = &u.model.motion_blur;
             eprintln!("t {:.2} s ({deg}°): λ {:?} — {}", u.t_s, mb.exposure, mb.diagnostics.reason);
-            if i < 4 {
+            if i < 8 {
                 continue;
             }
             let got = mb.exposure.expect("λ published");
@@ -534,7 +537,7 @@ fn fast_tier_pools_motion_blur_over_flow_directions() {
                     .filter_map(|v| v.parse().ok())
                     .collect();
                 assert_eq!(counts.len(), 2, "reason: {}", mb.diagnostics.reason);
-                assert!(counts[0] + 4 >= counts[1], "t {:.2}: 90° frames left out: {}", u.t_s, mb.diagnostics.reason);
+                assert!(counts[0] + 8 >= counts[1], "t {:.2}: frames left out: {}", u.t_s, mb.diagnostics.reason);
                 pooled_checked += 1;
             }
             checked += 1;

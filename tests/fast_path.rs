@@ -222,9 +222,12 @@ fn fast_dof_reads_a_noisy_frame_like_a_clean_one() {
 /// below Nyquist) all read λ ≈ 0.35 *identified* (correlation 0.53–0.89), and MB +
 /// noise read 0.67 for 0.5 (identified, +35%). Now none of the three is identified;
 /// a noisy streak is either not identified or within 15% (the streak
-/// tolerance; measured: not identified, 0.479 ± 0.160), and at 24 px/frame on 640×480
-/// the noisy streak is identified within 5% (measured 0.504 ± 0.023; 5% is the
-/// spread of the noise-free reads, 0.48–0.50).
+/// tolerance; measured: not identified, 0.479 ± 0.160). At 24 px/frame on 640×480
+/// a streak under defocus is identified within 5% (measured 0.482 ± 0.003, its first
+/// side lobe e^3.0 over the noise floor; 5% is the spread of the noise-free reads,
+/// 0.48–0.50); with noise instead its zeros read 0.504 ± 0.023 but its side lobe
+/// lies at the floor (e^0.07; `MIN_SIDE_LOBE`), as an oriented texture's does — not
+/// identified, or if it were, within 5%.
 #[test]
 fn streak_zeros_claim_only_zeros_they_see() {
     use blind_augment::fit::streak_spectrum::streak_signature;
@@ -251,9 +254,13 @@ fn streak_zeros_claim_only_zeros_they_see() {
     let (w, h) = (640usize, 480usize);
     let clean = mirror_tile(&photo("astronaut.png"), w, h);
     let flow = flow_field(w, h, 24.0);
+    let (depth, dof) = thin_lens_ramp(w, h);
+    let s = read(&add_dof(&add_motion_blur(&clean, &flow, 0.5), &depth, &dof), &flow);
+    println!("24 px/frame, MB + defocus: {s:?}");
+    assert!(s.identified && (s.lambda / 0.5 - 1.0).abs() <= 0.05, "24 px/frame MB + defocus: {s:?}");
     let s = read(&add_sensor_noise(&add_motion_blur(&clean, &flow, 0.5), [2e-5; 3], [8e-4; 3], 1), &flow);
     println!("24 px/frame, MB + noise: {s:?}");
-    assert!(s.identified && (s.lambda / 0.5 - 1.0).abs() <= 0.05, "24 px/frame MB + noise: {s:?}");
+    assert!(!s.identified || (s.lambda / 0.5 - 1.0).abs() <= 0.05, "24 px/frame MB + noise: {s:?}");
 }
 
 /// A texture smoother along the flow than across it (Gaussian-smoothed noise, σ 3 px

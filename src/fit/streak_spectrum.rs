@@ -149,7 +149,55 @@ struct Spectrum {
     phi: Vec<f32>,
     power: Vec<f64>,
     across: Vec<f64>,
+    /// White pixel noise's power per bin through the lines' bilinear sampling (up
+    /// to one factor: the noise variance), on the same scale as `power`.
+    noise: Vec<f64>,
     weight: Vec<f64>,
+}
+
+/// One line pair: its flow speed, the normalised power spectra along and across
+/// the flow (bins 1 … n/2), and white pixel noise's autocorrelation at lags 0–2
+/// after the along line's bilinear sampling, over the line's total power.
+struct Line {
+    speed: f32,
+    along: Vec<f32>,
+    across: Vec<f32>,
+    noise_r: [f64; 3],
+}
+
+/// Autocorrelation at lags 0, 1, 2 of unit white pixel noise read by bilinear
+/// interpolation at x₀ + j·(dx, dy), j < n. Sample j weighs pixels by tents in x
+/// and y; two samples share noise only through pixels both touch, so R(m) = mean
+/// over j of ov_x·ov_y, the overlaps of their 1-D weights. Lines at whole pixels
+/// (axis-aligned from an integer centre) have R = (1, 0, 0): white. An oblique
+/// line's samples share pixels with their neighbours (at 10° R₁/R₀ ≈ 0.25) and
+/// the noise it reads falls toward Nyquist — ~3× at 10° — which a flat floor took
+/// for the tail of a texture or a streak's side lobe.
+fn interpolated_noise_correlation(x0: f32, y0: f32, dx: f32, dy: f32, n: usize) -> [f64; 3] {
+    // Overlap of the 1-D bilinear weights at positions a and b (both ≥ 0: the
+    // lines lie inside the frame, so truncation is their floor — `floor` is a libm
+    // call on baseline x86-64).
+    let ov = |a: f64, b: f64| -> f64 {
+        let (ia, ib) = (a as i64, b as i64);
+        let (ta, tb) = (a - ia as f64, b - ib as f64);
+        match ib - ia {
+            0 => (1.0 - ta) * (1.0 - tb) + ta * tb,
+            1 => ta * (1.0 - tb),
+            -1 => (1.0 - ta) * tb,
+            _ => 0.0,
+        }
+    };
+    let pos = |j: usize| (x0 as f64 + j as f64 * dx as f64, y0 as f64 + j as f64 * dy as f64);
+    let mut r = [0.0f64; 3];
+    for (m, rm) in r.iter_mut().enumerate() {
+        let mut sum = 0.0;
+        for j in 0..n - m {
+            let ((xa, ya), (xb, yb)) = (pos(j), pos(j + m));
+            sum += ov(xa, xb) * ov(ya, yb);
+        }
+        *rm = sum / (n - m) as f64;
+    }
+    r
 }
 
 /// Estimate λ from the streak's spectral zeros on luma `y` with `flow` (px/frame);
@@ -163,7 +211,7 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     let mut buf = vec![Complex32::new(0.0, 0.0); n];
     let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     // Per line: speed and normalised power at bins k = 1 … n/2.
-    let mut lines: Vec<(f32, Vec<f32>, Vec<f32>)> = vec![];
+    let mut lines: Vec<Line> = vec![];
     let inside = |x: f32, yy: f32| x >= 0.0 && yy >= 0.0 && x <= (w - 1) as f32 && yy <= (h - 1) as f32;
     let grid = (((w * h) as f32 / TARGET_CENTRES as f32).sqrt().ceil() as usize).max(GRID_PX);
     for cy in (grid / 2..h).step_by(grid) {
@@ -190,7 +238,7 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
             let (Some((x0, y0)), Some((a0, b0))) = (start(ux, uy), start(vx, vy)) else {
                 continue;
             };
-            let mut spectrum = |sx: f32, sy: f32, dx: f32, dy: f32| -> Option<Vec<f32>> {
+            let mut spectrum = |sx: f32, sy: f32, dx: f32, dy: f32| -> Option<(Vec<f32>, f32)> {
                 let mut mean = 0.0f32;
                 for (j, b) in buf.iter_mut().enumerate() {
                     let v = y.sample_bilinear(sx + j as f32 * dx, sy + j as f32 * dy);
@@ -204,30 +252,43 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
                 fft.process_with_scratch(&mut buf, &mut scratch);
                 let p: Vec<f32> = buf[1..=n / 2].iter().map(|c| c.norm_sqr()).collect();
                 let total: f32 = p.iter().sum();
-                (total > 1e-12).then(|| p.into_iter().map(|v| v / total).collect())
+                (total > 1e-12).then(|| (p.into_iter().map(|v| v / total).collect(), total))
             };
-            let (Some(pu), Some(pv)) = (spectrum(x0, y0, ux, uy), spectrum(a0, b0, vx, vy)) else {
+            let (Some((pu, total)), Some((pv, _))) = (spectrum(x0, y0, ux, uy), spectrum(a0, b0, vx, vy)) else {
                 continue;
             };
-            lines.push((speed, pu, pv));
+            let r = interpolated_noise_correlation(x0, y0, ux, uy, n);
+            lines.push(Line { speed, along: pu, across: pv, noise_r: r.map(|v| v / total as f64) });
         }
     }
     if lines.len() < 16 {
         return None;
     }
-    let mut speeds: Vec<f32> = lines.iter().map(|l| l.0).collect();
+    let mut speeds: Vec<f32> = lines.iter().map(|l| l.speed).collect();
     speeds.sort_by(f32::total_cmp);
     let speed_med = speeds[speeds.len() / 2];
     // Exposure-axis grid: one bin per native bin at the median speed, up to the
     // Nyquist of the median line.
     let dphi = speed_med / n as f32;
     let bins = n / 2;
+    let cosines: Vec<[f64; 2]> = (1..=bins)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            [a.cos(), (2.0 * a).cos()]
+        })
+        .collect();
     let accumulate = |subset: usize, of: usize| -> Spectrum {
         let mut power = vec![0.0f64; bins];
         let mut across = vec![0.0f64; bins];
+        let mut noise = vec![0.0f64; bins];
         let mut weight = vec![0.0f64; bins];
-        for (speed, p, q) in lines.iter().skip(subset).step_by(of) {
+        for Line { speed, along: p, across: q, noise_r } in lines.iter().skip(subset).step_by(of) {
+            let speed = *speed;
             for (k, (&v, &vq)) in p.iter().zip(q).enumerate() {
+                // The line's white-noise power at native bin k+1, in its normalised
+                // units: R₀ + 2R₁cos 2πf + 2R₂cos 4πf over its total power.
+                let [c1, c2] = cosines[k];
+                let vn = noise_r[0] + 2.0 * noise_r[1] * c1 + 2.0 * noise_r[2] * c2;
                 // Native bin k+1 sits at φ = (k+1)/n · speed; splat linearly.
                 let g = (k + 1) as f32 * speed / n as f32 / dphi - 1.0;
                 if g < 0.0 {
@@ -240,17 +301,19 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
                 if g0 < bins {
                     power[g0] += (1.0 - a) * v as f64;
                     across[g0] += (1.0 - a) * vq as f64;
+                    noise[g0] += (1.0 - a) * vn;
                     weight[g0] += 1.0 - a;
                 }
                 if g0 + 1 < bins {
                     power[g0 + 1] += a * v as f64;
                     across[g0 + 1] += a * vq as f64;
+                    noise[g0 + 1] += a * vn;
                     weight[g0 + 1] += a;
                 }
             }
         }
         let phi = (0..bins).map(|b| (b + 1) as f32 * dphi).collect();
-        Spectrum { phi, power, across, weight }
+        Spectrum { phi, power, across, noise, weight }
     };
     // Least λ: the first zero φ = 1/λ at or below 80% of the band's top.
     let phi_top = bins as f32 * dphi;
@@ -499,13 +562,28 @@ fn match_template(
     // The first side lobe (sinc² ≥ 0.03 over φλ ∈ [1.25, 1.65], peak 0.047 at 1.43):
     // its mean along-flow power over the noise floor, ln. See `MIN_SIDE_LOBE`.
     let side_lobe = {
+        // The floor here has the shape of white pixel noise read through the lines'
+        // bilinear sampling (`Spectrum::noise`), at the least smoothed ratio of the
+        // along-flow power to that shape over the upper 3/4 of the band: a flat
+        // floor at the band's top sits below an oblique line's noise at mid-band.
+        let shape: Vec<f64> = idx.iter().map(|&b| s.noise[b] / s.weight[b]).collect();
+        let level = (idx.len() / 4..idx.len())
+            .map(|i| smooth(&along, i) / smooth(&shape, i))
+            .filter(|v| v.is_finite())
+            .fold(f64::INFINITY, f64::min);
         let (a, b) = (1.25 / lambda as f64, 1.65 / lambda as f64);
-        let lobe: Vec<f64> =
-            idx.iter().zip(&along).filter(|&(&k, _)| (a..=b).contains(&(s.phi[k] as f64))).map(|(_, &p)| p).collect();
-        if lobe.is_empty() || floor <= 0.0 {
+        let (mut power, mut noise, mut count) = (0.0f64, 0.0f64, 0usize);
+        for (i, &k) in idx.iter().enumerate() {
+            if (a..=b).contains(&(s.phi[k] as f64)) {
+                power += along[i];
+                noise += level * shape[i];
+                count += 1;
+            }
+        }
+        if count == 0 || noise <= 0.0 {
             f64::NAN
         } else {
-            (lobe.iter().sum::<f64>() / lobe.len() as f64 / floor).ln()
+            (power / noise).ln()
         }
     };
     Some(TemplateMatch {
@@ -515,4 +593,48 @@ fn match_template(
         inside: lbest >= lambda_min && lbest <= 1.0,
         side_lobe: side_lobe as f32,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The noise correlation against white noise actually read along the lines:
+    /// lags 0–2 of 64 lines at 10° (and an axis-aligned one, which reads whole
+    /// pixels) over a 400×300 plane of unit Gaussian noise. Tolerance 0.03 on the
+    /// correlation coefficient: ~10 000 products per lag, each of variance ≤ 1,
+    /// give a standard error ~0.01.
+    #[test]
+    fn interpolated_noise_correlation_matches_sampled_noise() {
+        let (w, h) = (400usize, 300usize);
+        let noise: Vec<f32> =
+            (0..w * h).map(|i| crate::synth::gaussian((i % w) as u32, (i / w) as u32, 0, 3)).collect();
+        let plane = Plane::from_vec(w, h, noise);
+        let n = LINE_PX;
+        for deg in [0.0f32, 10.0] {
+            let (dx, dy) = (deg.to_radians().cos(), deg.to_radians().sin());
+            let (mut measured, mut predicted) = ([0.0f64; 3], [0.0f64; 3]);
+            for k in 0..64 {
+                let (x0, y0) = (20.0 + (k % 8) as f32 * 30.0, 20.0 + (k / 8) as f32 * 30.0);
+                let v: Vec<f64> =
+                    (0..n).map(|j| plane.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy) as f64).collect();
+                let r = interpolated_noise_correlation(x0, y0, dx, dy, n);
+                for m in 0..3 {
+                    measured[m] += (0..n - m).map(|j| v[j] * v[j + m]).sum::<f64>() / (n - m) as f64 / 64.0;
+                    predicted[m] += r[m] / 64.0;
+                }
+            }
+            for m in 0..3 {
+                let (a, b) = (measured[m] / measured[0], predicted[m] / predicted[0]);
+                assert!((a - b).abs() <= 0.03, "{deg}°, lag {m}: sampled {a:.3}, predicted {b:.3}");
+            }
+            if deg == 0.0 {
+                assert_eq!(predicted, [1.0, 0.0, 0.0], "whole pixels read white noise");
+            } else {
+                // The phase-averaged value: B₃(cos 10°)·B₃(sin 10°) / (2/3)² ≈ 0.25.
+                let rho = predicted[1] / predicted[0];
+                assert!((0.2..=0.3).contains(&rho), "10°: lag-1 correlation {rho:.3}");
+            }
+        }
+    }
 }
