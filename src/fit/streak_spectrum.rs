@@ -228,7 +228,7 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
     let mut buf = vec![Complex32::new(0.0, 0.0); n];
     let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
-    // Per line: speed and normalised power at bins k = 1 … n/2.
+    // Per line pair: speed, normalised power at bins k = 1 … n/2, noise correlation.
     let mut lines: Vec<Line> = vec![];
     // (start's pixel phase x, y; direction x, y) → noise correlation.
     type NoiseKey = (f32, f32, f32, f32);
