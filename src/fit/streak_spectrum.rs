@@ -162,8 +162,9 @@ struct Spectrum {
     power: Vec<f64>,
     across: Vec<f64>,
     /// White pixel noise's power per bin through the lines' bilinear sampling (up
-    /// to one factor: the noise variance), on the same scale as `power`.
-    noise: Vec<f64>,
+    /// to one factor: the noise variance), on the same scale as `power`: only for
+    /// the spectrum of every line (its search alone reads the side lobe).
+    noise: Option<Vec<f64>>,
     weight: Vec<f64>,
 }
 
@@ -309,17 +310,22 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
         })
         .collect();
     let accumulate = |subset: usize, of: usize| -> Spectrum {
+        let with_noise = of == 1;
         let mut power = vec![0.0f64; bins];
         let mut across = vec![0.0f64; bins];
-        let mut noise = vec![0.0f64; bins];
+        let mut noise = vec![0.0f64; if with_noise { bins } else { 0 }];
         let mut weight = vec![0.0f64; bins];
         for Line { speed, along: p, across: q, noise_r } in lines.iter().skip(subset).step_by(of) {
             let speed = *speed;
             for (k, (&v, &vq)) in p.iter().zip(q).enumerate() {
                 // The line's white-noise power at native bin k+1, in its normalised
                 // units: R₀ + 2R₁cos 2πf + 2R₂cos 4πf over its total power.
-                let [c1, c2] = cosines[k];
-                let vn = noise_r[0] + 2.0 * noise_r[1] * c1 + 2.0 * noise_r[2] * c2;
+                let vn = if with_noise {
+                    let [c1, c2] = cosines[k];
+                    noise_r[0] + 2.0 * noise_r[1] * c1 + 2.0 * noise_r[2] * c2
+                } else {
+                    0.0
+                };
                 // Native bin k+1 sits at φ = (k+1)/n · speed; splat linearly.
                 let g = (k + 1) as f32 * speed / n as f32 / dphi - 1.0;
                 if g < 0.0 {
@@ -332,19 +338,23 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
                 if g0 < bins {
                     power[g0] += (1.0 - a) * v as f64;
                     across[g0] += (1.0 - a) * vq as f64;
-                    noise[g0] += (1.0 - a) * vn;
+                    if with_noise {
+                        noise[g0] += (1.0 - a) * vn;
+                    }
                     weight[g0] += 1.0 - a;
                 }
                 if g0 + 1 < bins {
                     power[g0 + 1] += a * v as f64;
                     across[g0 + 1] += a * vq as f64;
-                    noise[g0 + 1] += a * vn;
+                    if with_noise {
+                        noise[g0 + 1] += a * vn;
+                    }
                     weight[g0 + 1] += a;
                 }
             }
         }
         let phi = (0..bins).map(|b| (b + 1) as f32 * dphi).collect();
-        Spectrum { phi, power, across, noise, weight }
+        Spectrum { phi, power, across, noise: with_noise.then_some(noise), weight }
     };
     // Least λ: the first zero φ = 1/λ at or below 80% of the band's top.
     let phi_top = bins as f32 * dphi;
@@ -592,12 +602,12 @@ fn match_template(
     }
     // The first side lobe (sinc² ≥ 0.03 over φλ ∈ [1.25, 1.65], peak 0.047 at 1.43):
     // its mean along-flow power over the noise floor, ln. See `MIN_SIDE_LOBE`.
-    let side_lobe = {
+    let side_lobe = s.noise.as_ref().map_or(f64::NAN, |noise_power| {
         // The floor here has the shape of white pixel noise read through the lines'
         // bilinear sampling (`Spectrum::noise`), at the least smoothed ratio of the
         // along-flow power to that shape over the upper 3/4 of the band: a flat
         // floor at the band's top sits below an oblique line's noise at mid-band.
-        let shape: Vec<f64> = idx.iter().map(|&b| s.noise[b] / s.weight[b]).collect();
+        let shape: Vec<f64> = idx.iter().map(|&b| noise_power[b] / s.weight[b]).collect();
         let level = (idx.len() / 4..idx.len())
             .map(|i| smooth(&along, i) / smooth(&shape, i))
             .filter(|v| v.is_finite())
@@ -616,7 +626,7 @@ fn match_template(
         } else {
             (power / noise).ln()
         }
-    };
+    });
     Some(TemplateMatch {
         lambda,
         score: sbest as f32,

@@ -1,0 +1,286 @@
+//! The blind exposure's isotropy estimator: the root of the along/across gradient
+//! energy balance over sampled profiles, its subsets' spread, the texture prior's
+//! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
+//! where the streak zeros are not identified; its method is documented there).
+
+use super::{push_profile, Profiles, FAST_SAMPLES, FAST_SUBSETS, MIN_SAMPLES, TEXTURE_ANISOTROPY_90};
+use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
+use crate::image::{Flow, Plane};
+
+/// The isotropy root on plane `p` at `scale` (1: the frame; 2: its reduction, whose
+/// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`. Samples are frame pixels with flow ≥ 3 px/frame and a
+/// gradient, picked by gradient *magnitude* only, so the selection prefers no
+/// direction.
+/// `stats`: also the subsets' spread, the along-flow excess and the prior's band
+/// (the frame's scale); without, the root alone (the coarse scale's root is only
+/// compared with the fine one: its subsets' roots and excess were computed and never
+/// read) and the other fields 0 / `None`.
+pub(super) fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<IsotropyRoot, usize> {
+    let (w, h) = (flow.width, flow.height);
+    let s = scale as f32;
+    let mut cand = vec![];
+    // Every other pixel of the scale, coarser on large frames: only `FAST_SAMPLES`
+    // are kept, so scanning ~8× that many positions (not 300 000 at 1280×960) leaves
+    // the selection as even and as magnitude-only as before, at a ninth of the scan.
+    let positions = (w / (2 * scale)).max(1) * (h / (2 * scale)).max(1);
+    let thin = ((positions as f64 / (8 * FAST_SAMPLES) as f64).sqrt().floor() as usize).max(1);
+    let step = 2 * scale * thin;
+    for py in (2 * scale..h.saturating_sub(2 * scale)).step_by(step) {
+        for px in (2 * scale..w.saturating_sub(2 * scale)).step_by(step) {
+            let (qx, qy) = (px / scale, py / scale);
+            if qx + 1 >= p.width || qy + 1 >= p.height || qx == 0 || qy == 0 {
+                continue;
+            }
+            let i = py * w + px;
+            let (fx, fy) = (flow.dx[i], flow.dy[i]);
+            // Flow below 3 px/frame: the ±1 px derivative cannot resolve the box.
+            let speed_sq = fx * fx + fy * fy;
+            if speed_sq.is_nan() || speed_sq < 9.0 {
+                continue;
+            }
+            let gx = 0.5 * (p.get(qx + 1, qy) - p.get(qx - 1, qy));
+            let gy = 0.5 * (p.get(qx, qy + 1) - p.get(qx, qy - 1));
+            if gx * gx + gy * gy >= 1e-4 {
+                cand.push((px, py));
+            }
+        }
+    }
+    let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
+    // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
+    let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
+    // Each sample's flow, for the direction bins of the evidence (`stats` only).
+    let mut flows = vec![];
+    for &(px, py) in cand.iter().step_by(keep) {
+        let i = py * w + px;
+        let (fx, fy) = (flow.dx[i], flow.dy[i]);
+        if stats {
+            flows.push((fx, fy));
+        }
+        let speed = (fx * fx + fy * fy).sqrt() / s;
+        let (ux, uy) = (fx / (speed * s), fy / (speed * s));
+        let (vx, vy) = (-uy, ux);
+        let (x, yy) = ((px / scale) as f32, (py / scale) as f32);
+        for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
+            push_profile(&mut prof, p, x + ox, yy + oy, (vx * speed, vy * speed));
+        }
+        prof.target.push(0.0);
+    }
+    let n = prof.len();
+    if n < MIN_SAMPLES {
+        return Err(n);
+    }
+    // C − D at λ over the samples of one interleaved subset (`subset` of `of`; 0 of
+    // 1: every sample). C/D rises with λ: the extra box along v lowers D.
+    let imbalance = |lambda: f32, subset: usize, of: usize| -> f64 {
+        let (mut c, mut d) = (0.0f64, 0.0f64);
+        for s in (subset..n).step_by(of) {
+            let b = |k: usize| prof.blurred(4 * s + k, lambda);
+            c += (0.5 * (b(0) - b(1)) as f64).powi(2);
+            d += (0.5 * (b(2) - b(3)) as f64).powi(2);
+        }
+        c - d
+    };
+    let g = |lambda: f32| imbalance(lambda, 0, 1);
+    // Illinois regula falsi on [lo, hi] with g(lo) < 0 ≤ g(hi) given: C − kD is
+    // smooth and monotone in λ, so it closes the bracket in a few evaluations where
+    // bisection needs one per halving; each evaluation is a pass over every
+    // sample's four profiles, the isotropy stage's cost.
+    let refine = |g: &dyn Fn(f32) -> f64, (mut lo, mut f_lo): (f32, f64), (mut hi, mut f_hi): (f32, f64), tol: f32| {
+        let mut side = 0i8;
+        // Bisection would need log2(1/tol) steps; the cap only guards the arithmetic.
+        for _ in 0..64 {
+            if hi - lo < tol {
+                break;
+            }
+            let mut mid = ((lo as f64 * f_hi - hi as f64 * f_lo) / (f_hi - f_lo)) as f32;
+            if !(mid > lo && mid < hi) {
+                mid = 0.5 * (lo + hi);
+            }
+            let f_mid = g(mid);
+            if f_mid < 0.0 {
+                (lo, f_lo) = (mid, f_mid);
+                if side == -1 {
+                    f_hi *= 0.5;
+                }
+                side = -1;
+            } else {
+                (hi, f_hi) = (mid, f_mid);
+                if side == 1 {
+                    f_lo *= 0.5;
+                }
+                side = 1;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    // λ to 6e-5 (2^-14), far below the estimator's spread.
+    const ROOT_TOL: f32 = 1.0 / 16384.0;
+    if !stats {
+        // The coarse scale's root alone: from the ends of [0, 1].
+        let f0 = g(0.0);
+        let lambda = if f0 >= 0.0 {
+            0.0
+        } else {
+            let f1 = g(1.0);
+            if f1 < 0.0 {
+                1.0
+            } else {
+                refine(&g, (0.0, f0), (1.0, f1), ROOT_TOL)
+            }
+        };
+        return Ok(IsotropyRoot {
+            lambda,
+            spread: 0.0,
+            n,
+            along_excess: 0.0,
+            along_excess_se: 0.0,
+            top_excess: 0.0,
+            top_excess_se: 0.0,
+            band: None,
+            evidence: None,
+        });
+    }
+    // One pass: every sample's C and D at the grid's λs (`isotropy_pool::GRID`),
+    // summed per interleaved subset (the root's spread) and per flow direction (the
+    // pooled fit's evidence). The grid brackets the frame's and the subsets' roots,
+    // which exact evaluations then refine; the prior's band is read off the grid
+    // (cubic interpolation: within 0.006 of exact roots, mean 0.0003, over the 194
+    // frames of `examples/mb_pool_probe.rs` — inside a bound of 1/256 on a bias).
+    // The stage costs ~0.7 ms more than the root searches from [0, 1] alone did
+    // (8.0–8.4 → 8.7–9.7 ms at 1280×960, same-moment A/B, BENCHMARKS.md).
+    let mut sub = vec![[[0.0f64; GRID]; 2]; FAST_SUBSETS];
+    let mut evidence = IsotropyEvidence::default();
+    let (mut c, mut d) = ([0.0f64; GRID], [0.0f64; GRID]);
+    let mut b = [[0.0f32; GRID]; 4];
+    for (s, &(fx, fy)) in flows.iter().enumerate() {
+        for (k, bk) in b.iter_mut().enumerate() {
+            prof.blurred_grid(4 * s + k, bk);
+        }
+        for j in 0..GRID {
+            c[j] = (0.5 * (b[0][j] - b[1][j]) as f64).powi(2);
+            d[j] = (0.5 * (b[2][j] - b[3][j]) as f64).powi(2);
+        }
+        let acc = &mut sub[s % FAST_SUBSETS];
+        for j in 0..GRID {
+            acc[0][j] += c[j];
+            acc[1][j] += d[j];
+        }
+        evidence.add(fx, fy, &c, &d);
+    }
+    let mut total = [[0.0f64; GRID]; 2];
+    for acc in &sub {
+        for j in 0..GRID {
+            total[0][j] += acc[0][j];
+            total[1][j] += acc[1][j];
+        }
+    }
+    let node = |j: usize| j as f32 / (GRID - 1) as f32;
+    // The first node where C − kD ≥ 0: `Err(0)` at λ 0, `Err(1)` past λ 1, else the
+    // bracket's upper node.
+    let bracket = |cd: &[[f64; GRID]; 2], k: f64| -> Result<usize, f32> {
+        match (0..GRID).find(|&j| cd[0][j] - k * cd[1][j] >= 0.0) {
+            Some(0) => Err(0.0),
+            Some(j) => Ok(j),
+            None => Err(1.0),
+        }
+    };
+    // The root of the interpolated C − kD, by bisection in its bracket.
+    let grid_root = |cd: &[[f64; GRID]; 2], k: f64, tol: f32| -> f32 {
+        let j = match bracket(cd, k) {
+            Ok(j) => j,
+            Err(end) => return end,
+        };
+        let gi = |l: f32| interp(&cd[0], l as f64) - k * interp(&cd[1], l as f64);
+        let (mut lo, mut hi) = (node(j - 1), node(j));
+        while hi - lo >= tol {
+            let mid = 0.5 * (lo + hi);
+            if gi(mid) < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    // A root of C − D refined by exact evaluations inside its grid bracket.
+    let exact_root = |cd: &[[f64; GRID]; 2], g: &dyn Fn(f32) -> f64, tol: f32| match bracket(cd, 1.0) {
+        Err(end) => end,
+        Ok(j) => {
+            let at = |j: usize| (node(j), cd[0][j] - cd[1][j]);
+            refine(g, at(j - 1), at(j), tol)
+        }
+    };
+    let lambda = exact_root(&total, &g, ROOT_TOL);
+    // The texture prior's band: where the root would sit if the sharp scene's
+    // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1 — on
+    // the frame's scale only (the coarse root only checks the fine one), to 1/256
+    // (a bound on a bias, not a measurement).
+    let band = Some([
+        grid_root(&total, 1.0 - TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
+        grid_root(&total, 1.0 + TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
+    ]);
+    let k = FAST_SUBSETS as f64;
+    let mean_se = |parts: &[f64]| -> (f64, f64) {
+        let mean = parts.iter().sum::<f64>() / k;
+        (mean, (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt())
+    };
+    // The subsets' roots to 1/1024, exact: their spread (~0.005 and up) is what is
+    // read, and interpolation errors differ between subsets (they doubled the text
+    // photograph's spread, 0.0045 → 0.0076).
+    let parts: Vec<f64> = (0..FAST_SUBSETS)
+        .map(|j| exact_root(&sub[j], &|l| imbalance(l, j, FAST_SUBSETS), 1.0 / 1024.0) as f64)
+        .collect();
+    // C(0)/D(0) − 1 per subset (the grid's first node is λ = 0).
+    let excess: Vec<f64> =
+        sub.iter().map(|cd| if cd[1][0] > 0.0 { (cd[0][0] - cd[1][0]) / cd[1][0] } else { 0.0 }).collect();
+    let (along_excess, along_excess_se) = mean_se(&excess);
+    // The same at the grid's last node, λ = 1.
+    let top: Vec<f64> = sub
+        .iter()
+        .map(|cd| if cd[1][GRID - 1] > 0.0 { (cd[0][GRID - 1] - cd[1][GRID - 1]) / cd[1][GRID - 1] } else { 0.0 })
+        .collect();
+    let (top_excess, top_excess_se) = mean_se(&top);
+    Ok(IsotropyRoot {
+        lambda,
+        spread: mean_se(&parts).1,
+        n,
+        along_excess,
+        along_excess_se,
+        top_excess,
+        top_excess_se,
+        band,
+        evidence: Some(evidence),
+    })
+}
+
+/// The isotropy root and its direction evidence on plane `p` (the frame's scale),
+/// for the pooled fit's tests.
+#[cfg(test)]
+pub(in crate::fit) fn isotropy_evidence(p: &Plane, flow: &Flow) -> Option<(f32, IsotropyEvidence)> {
+    isotropy_root(p, flow, 1, true).ok().and_then(|r| Some((r.lambda, r.evidence?)))
+}
+
+/// What `isotropy_root` measured.
+#[derive(Clone, Debug)]
+pub(super) struct IsotropyRoot {
+    pub(super) lambda: f32,
+    /// Spread of the root over interleaved subsets / √subsets.
+    pub(super) spread: f64,
+    pub(super) n: usize,
+    /// C(0)/D(0) − 1 (mean over subsets) and its standard error. A streak only
+    /// lowers C, so a clearly positive excess proves texture with more gradient
+    /// energy along the flow than across: isotropy is violated.
+    pub(super) along_excess: f64,
+    pub(super) along_excess_se: f64,
+    /// C(1)/D(1) − 1 (mean over subsets) and its standard error: what is left of the
+    /// along-flow deficit after a full-frame streak is undone. Clearly negative: the
+    /// texture is smoother along the flow than any exposure explains.
+    pub(super) top_excess: f64,
+    pub(super) top_excess_se: f64,
+    /// The roots at C/D = 1 ∓ `TEXTURE_ANISOTROPY_90`: the λ range a natural
+    /// texture anisotropy leaves open (~90%); with `stats` only (`None` at the coarse scale).
+    pub(super) band: Option<[f32; 2]>,
+    /// The samples' C and D on the pooled fit's λ grid by flow direction (with
+    /// `stats` only).
+    pub(super) evidence: Option<IsotropyEvidence>,
+}
