@@ -280,19 +280,23 @@ fn streak_zeros_do_not_take_a_smooth_axis_for_a_streak() {
     use blind_augment::fit::streak_spectrum::streak_signature;
     use blind_augment::image::{blur_separable, discrete_gaussian_kernel, Flow};
     use blind_augment::synth::{add_noise, sequence::anisotropic_texture, white_sensor_noise};
-    let tex = anisotropic_texture(800, 700, 3.0, 1.2, 17);
     let noise = white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
+    // The streak, a uniform Gaussian defocus of σ px, sensor noise, 8 bits: the zeros' read.
+    let read = |tex: &blind_augment::image::Rgb, flow: &Flow, lambda: f32, sigma: f32, seed: u64| {
+        let mut img = add_motion_blur(tex, flow, lambda);
+        let k = discrete_gaussian_kernel(sigma * sigma);
+        for c in 0..3 {
+            let p = Plane::from_vec(img.width, img.height, img.channels[c].clone());
+            img.channels[c] = blur_separable(&p, &k).data;
+        }
+        let img = quantize8(&add_noise(&img, &noise, seed));
+        streak_signature(&img.luma(), flow, |_, _| true).expect("lines fit the frame")
+    };
+    let tex = anisotropic_texture(800, 700, 3.0, 1.2, 17);
     for (speed, sigma, ax, ay) in [(8.0f32, 1.5f32, 1.0f32, 0.0f32), (12.0, 1.2, 1.0, 0.0), (12.0, 1.2, 0.0, 1.0)] {
         let flow = Flow::uniform(tex.width, tex.height, speed * ax, speed * ay);
         for lambda in [0.0f32, 0.5] {
-            let mut img = add_motion_blur(&tex, &flow, lambda);
-            let k = discrete_gaussian_kernel(sigma * sigma);
-            for c in 0..3 {
-                let p = Plane::from_vec(img.width, img.height, img.channels[c].clone());
-                img.channels[c] = blur_separable(&p, &k).data;
-            }
-            let img = quantize8(&add_noise(&img, &noise, 1));
-            let s = streak_signature(&img.luma(), &flow, |_, _| true).expect("lines fit the frame");
+            let s = read(&tex, &flow, lambda, sigma, 1);
             println!("{speed} px/frame along ({ax}, {ay}), σ {sigma}, λ {lambda}: {s:?}");
             assert!(!s.identified, "{speed} px/frame along ({ax}, {ay}), λ {lambda}: {s:?}");
         }
@@ -300,14 +304,7 @@ fn streak_zeros_do_not_take_a_smooth_axis_for_a_streak() {
     let tex = anisotropic_texture(800, 700, 3.0, 1.2, 3);
     let a = 20f32.to_radians();
     let flow = Flow::uniform(tex.width, tex.height, 12.0 * a.cos(), 12.0 * a.sin());
-    let mut img = add_motion_blur(&tex, &flow, 0.0);
-    let k = discrete_gaussian_kernel(1.2 * 1.2);
-    for c in 0..3 {
-        let p = Plane::from_vec(img.width, img.height, img.channels[c].clone());
-        img.channels[c] = blur_separable(&p, &k).data;
-    }
-    let img = quantize8(&add_noise(&img, &noise, 3));
-    let s = streak_signature(&img.luma(), &flow, |_, _| true).expect("lines fit the frame");
+    let s = read(&tex, &flow, 0.0, 1.2, 3);
     println!("12 px/frame, 20° off, λ 0: {s:?}");
     assert!(!s.identified, "20° off the smooth axis, λ 0: {s:?}");
 }
