@@ -198,6 +198,23 @@ fn mismatched_sizes_and_missing_references_are_named() {
     assert!(matches!(fit(&FitInputs::new(&empty), &FitOptions::default()), Err(FitError::Empty { .. })));
 }
 
+/// A speed/accuracy setting out of its range is refused by name, never clamped in
+/// silence: the blind noise grid below 16 bins × 24 samples per level, and at that
+/// minimum the fit still returns a valid model (present or not, never a panic).
+#[test]
+fn out_of_range_settings_are_named() {
+    let img = quantize8(&add_sensor_noise(&photo("chelsea.png"), [2e-5; 3], [8e-4; 3], 5));
+    let tiny = FitOptions { noise_fast_samples_per_level: 383, ..FitOptions::default() };
+    let err = fit(&FitInputs::new(&img), &tiny).unwrap_err();
+    assert!(matches!(err, FitError::Option { option: "noise_fast_samples_per_level", .. }), "{err}");
+    assert!(err.to_string().contains("≥ 384") && err.to_string().contains("383"), "{err}");
+    let least = FitOptions { noise_fast_samples_per_level: 384, ..FitOptions::default() };
+    let model = fit(&FitInputs::new(&img), &least).expect("the least budget is valid").model;
+    assert!(model.validate().is_ok(), "{:?}", model.validate());
+    let err = fit(&FitInputs::new(&img), &FitOptions { mb_max_samples: 63, ..FitOptions::default() }).unwrap_err();
+    assert!(matches!(err, FitError::Option { option: "mb_max_samples", .. }), "{err}");
+}
+
 /// Forcing the accurate tier only requires the references of the effects asked for.
 #[test]
 fn accurate_tier_needs_only_the_requested_references() {

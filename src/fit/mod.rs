@@ -149,6 +149,11 @@ pub struct FitOptions {
     /// `tests/calibrate.rs`); costs the isotropy stage (~9 ms at 1280×960) on such
     /// frames.
     pub mb_isotropy_evidence: bool,
+    /// Blind noise: grid points per pyramid level (the level-0 stride is
+    /// √(pixels / this), at least 4 px; coarser levels keep about as many). The
+    /// sample search's cost is linear in it; what fewer cost in accuracy is measured
+    /// in BENCHMARKS.md ("noise samples per level").
+    pub noise_fast_samples_per_level: usize,
 }
 
 impl Default for FitOptions {
@@ -165,6 +170,7 @@ impl Default for FitOptions {
             mb_min_flow_px: motion_blur::MIN_FLOW_PX,
             noise_min_leak_ratio: None,
             mb_isotropy_evidence: false,
+            noise_fast_samples_per_level: noise::DEFAULT_FAST_SAMPLES_PER_LEVEL,
         }
     }
 }
@@ -296,6 +302,17 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     if opts.noise_stride_px == 0 {
         return Err(FitError::Option { option: "noise_stride_px", problem: "must be ≥ 1".into() });
     }
+    if opts.noise_fast_samples_per_level < noise::MIN_FAST_SAMPLES_PER_LEVEL {
+        return Err(FitError::Option {
+            option: "noise_fast_samples_per_level",
+            problem: format!(
+                "must be ≥ {} (16 luma bins of at least {} samples each), got {}",
+                noise::MIN_FAST_SAMPLES_PER_LEVEL,
+                noise::MIN_FAST_SAMPLES_PER_LEVEL / 16,
+                opts.noise_fast_samples_per_level
+            ),
+        });
+    }
     Ok(())
 }
 
@@ -388,7 +405,7 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     }
     let (noise, data) = match (tier, inp.denoised) {
         (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, inp.reference_valid, opts),
-        _ => noise::fit_fast(inp.image, inp.neighbour.as_ref()),
+        _ => noise::fit_fast(inp.image, inp.neighbour.as_ref(), opts.noise_fast_samples_per_level),
     };
     (noise, Some(data))
 }

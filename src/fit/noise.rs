@@ -47,6 +47,18 @@ pub fn effective_stride(pixels: usize, max_stride: usize) -> usize {
     (((pixels as f64 / 1000.0).sqrt()) as usize).clamp(4.min(max_stride), max_stride.max(1))
 }
 const BLIND_FLAT_FRACTION: f64 = 0.2;
+/// Default of `FitOptions::noise_fast_samples_per_level`. Measured over 27 frames of
+/// known noise and the real DivX clip (`examples/noise_budget_probe.rs`,
+/// BENCHMARKS.md "noise samples per level"): level 0's error is the same from 40 000
+/// down to 5 000 (median 10–11%: texture in the flattest samples, not sampling),
+/// the clip's level 0 inside its range 18.4% at 20 000 and 16.8% here; the noise
+/// fit at 1280×960 takes 15.4 ms instead of 18.5. 10 000, not 5 000: at 5 000
+/// level 2 was measured on none of the 27 frames (6 here, 4 at 20 000) and derived
+/// instead, which on real correlated noise is what costs most.
+pub const DEFAULT_FAST_SAMPLES_PER_LEVEL: usize = 10_000;
+/// Fewest grid points per level `FitOptions::noise_fast_samples_per_level` takes:
+/// every luma bin could then still hold `BLIND_MIN_PER_BIN` samples.
+pub const MIN_FAST_SAMPLES_PER_LEVEL: usize = BLIND_BINS * BLIND_MIN_PER_BIN;
 /// The blind tier's finest level-0 grid: only 20% of its samples are kept (the
 /// flattest), so it samples denser than the accurate tier.
 const BLIND_STRIDE_PX: usize = 4;
@@ -1245,7 +1257,7 @@ const BLOCKING_RATIO: f32 = 1.15;
 /// judged flat or textured by the bright parts' standard. Bins more than 30% above
 /// their level's fitted line are texture and dropped (one-sided). The low-pass is
 /// not identifiable from one frame (it is the image itself) and is left out.
-pub fn fit_fast(image: &Rgb, neighbour: Option<&super::Neighbour>) -> (Noise, NoisePlotData) {
+pub fn fit_fast(image: &Rgb, neighbour: Option<&super::Neighbour>, samples_per_level: usize) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let mut st = super::Stages::start();
     // With an aligned neighbour (another exposure of the same scene): the band-pass
@@ -1310,8 +1322,9 @@ pub fn fit_fast(image: &Rgb, neighbour: Option<&super::Neighbour>) -> (Noise, No
     st.lap("blur.luma");
     let blocking = detect_blocking(image, &structure[0], 4);
     st.lap("search.blocking");
-    // About 20 000 grid points per level whatever the frame size (`level_stride`).
-    let stride0 = ((image.len() as f64 / 20_000.0).sqrt() as f32).max(BLIND_STRIDE_PX as f32);
+    // About `samples_per_level` grid points per level whatever the frame size
+    // (`level_stride`).
+    let stride0 = ((image.len() as f64 / samples_per_level.max(1) as f64).sqrt() as f32).max(BLIND_STRIDE_PX as f32);
     let (limits, clip) = blind_clip_masks(image, 8);
     // Where the neighbour's alignment fails: one table for all channels.
     let misaligned = neighbour.map(|n| clip_mask_of(image, &limits, 8, Some(n.valid), &[]));
@@ -1488,11 +1501,12 @@ fn median_std_ratio(coarse: &[&BinMeasure], fine: &[&BinMeasure]) -> Option<f32>
     (!r.is_empty()).then(|| percentile(&mut r, 0.5))
 }
 
-/// The blind tier's sample stride at level `l`: about 20 000 samples per level
-/// (`stride0` = √(pixels / 20 000), at least `BLIND_STRIDE_PX`), the level-0 stride
-/// rounded down and coarser ones to the nearest (1280×960: 7, 4, 2, 1; 768×576 and
-/// smaller: 4, 2, 1, 1) — halving an integer stride instead gave level 2 of a
-/// 1280×960 frame 77 000 samples at stride 1, 4× the others and 40% of the search.
+/// The blind tier's sample stride at level `l`: about `n` samples per level
+/// (`stride0` = √(pixels / n), at least `BLIND_STRIDE_PX`; n =
+/// `FitOptions::noise_fast_samples_per_level`), the level-0 stride rounded down and
+/// coarser ones to the nearest (n = 10 000 at 1280×960: 11, 6, 3, 1; at 20 000: 7,
+/// 4, 2, 1) — halving an integer stride instead gave level 2 of a 1280×960 frame
+/// 77 000 samples at stride 1, 4× the others and 40% of the search.
 fn level_stride(stride0: f32, l: usize) -> usize {
     if l == 0 {
         stride0 as usize

@@ -64,12 +64,23 @@ impl Plane {
             let (x0, y0) = (x as usize, y as usize);
             let (fx, fy) = (x - x0 as f32, y - y0 as f32);
             let i = y0 * self.width + x0;
-            let (a, b) = (self.data[i], self.data[i + 1]);
-            let (c, d) = (self.data[i + self.width], self.data[i + self.width + 1]);
+            // One bounds check for the four taps (the interior test above keeps
+            // them inside; the slice proves it to the compiler).
+            let q = &self.data[i..i + self.width + 2];
+            let (a, b) = (q[0], q[1]);
+            let (c, d) = (q[self.width], q[self.width + 1]);
             let top = a + (b - a) * fx;
             let bottom = c + (d - c) * fx;
             return top + (bottom - top) * fy;
         }
+        self.sample_bilinear_clamped(x, y)
+    }
+
+    /// `sample_bilinear` where a tap leaves the image (kept out of line so that the
+    /// interior path inlines into the profile and line loops that call it).
+    #[cold]
+    #[inline(never)]
+    fn sample_bilinear_clamped(&self, x: f32, y: f32) -> f32 {
         let xf = x.floor();
         let yf = y.floor();
         let fx = x - xf;

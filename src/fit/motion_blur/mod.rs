@@ -555,7 +555,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
     }
     // The second scale only where its answer is used (the bias risk of a root).
     let coarse = isotropy_root(luma.half(), flow, 2, false);
-    st.lap("search.isotropy");
+    st.lap("search.isotropy_coarse");
     let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     // The two-scale disagreement and the prior band (a 90% band: half-width / 1.645
     // is its σ) both gauge the texture's bias: the larger counts, in quadrature
