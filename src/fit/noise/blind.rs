@@ -1,0 +1,766 @@
+//! Noise, blind (the fast tier, `fit_fast`): every band-pass level measured on the
+//! frame alone at its flattest samples per luma bin, with the clip tiles, codec
+//! blocking and (with an aligned neighbour exposure) the difference bands it reads.
+//! The shared regression, windows and clip masks are in `noise/mod.rs`.
+
+use super::*;
+
+const BLIND_FLAT_FRACTION: f64 = 0.2;
+/// Default of `FitOptions::noise_fast_samples_per_level`. Measured over 27 frames of
+/// known noise and the real DivX clip (`examples/noise_budget_probe.rs`,
+/// BENCHMARKS.md "noise samples per level"): level 0's error is the same from 40 000
+/// down to 5 000 (median 10–11%: texture in the flattest samples, not sampling),
+/// the clip's level 0 inside its range 18.4% at 20 000 and 16.8% here; the noise
+/// fit at 1280×960 takes 15.4 ms instead of 18.5. 10 000, not 5 000: at 5 000
+/// level 2 was measured on none of the 27 frames (6 here, 4 at 20 000) and derived
+/// instead, which on real correlated noise is what costs most.
+pub const DEFAULT_FAST_SAMPLES_PER_LEVEL: usize = 10_000;
+/// Fewest grid points per level `FitOptions::noise_fast_samples_per_level` takes:
+/// every luma bin could then still hold `BLIND_MIN_PER_BIN` samples.
+pub const MIN_FAST_SAMPLES_PER_LEVEL: usize = BLIND_BINS * BLIND_MIN_PER_BIN;
+/// The blind tier's finest level-0 grid: only 20% of its samples are kept (the
+/// flattest), so it samples denser than the accurate tier.
+const BLIND_STRIDE_PX: usize = 4;
+const BLIND_BINS: usize = 16;
+const BLIND_MIN_PER_BIN: usize = 24;
+/// Largest std ratio of a level to the next finer one that still reads as noise.
+/// Measured: white noise 0.25 (level 1/0), 0.45, 0.50; the vtest clip's codec noise
+/// 0.50, 0.65, 0.67 (temporal reference); the flattest samples of textured frames
+/// 1.1–3 (the astronaut's level 2 over level 1, the vtest frame's levels 1–3).
+const MAX_LEVEL_STD_RATIO: f32 = 0.8;
+/// Fewest flat samples a bin is measured on (a median of fewer scatters by > 25% at level 3).
+const BLIND_MIN_FLAT: usize = 12;
+/// The blind tier's window sums in separable form: per window column, a weighted
+/// sum down its 9 rows (9 independent accumulators, which the compiler keeps in
+/// vector lanes), then the columns' weighted sum — Σ_i w_i Σ_j w_j f(v_ji), the
+/// window of `window(l)` (its outer product) up to float rounding. Why: the 2-D
+/// serial sums are 81 dependent additions per sample, bound by the adder's latency
+/// (by perf ~60% of the blind noise fit's sample search at 1280×960). The accurate
+/// tier keeps the serial sums: on a flat frame its regression relies on their exact
+/// cancellation (tests/extremes.rs::flat_textureless_frame; a reordered sum there
+/// lost the noise, see BENCHMARKS.md). Border samples take the clamped 2-D sums.
+struct SepWindow {
+    w1: [f32; 9],
+    w2: [[f32; 9]; 9],
+}
+
+impl SepWindow {
+    fn new(level: usize) -> Self {
+        Self { w1: window_1d(level), w2: window(level) }
+    }
+
+    #[inline]
+    fn interior(p: &Plane, x: usize, y: usize) -> bool {
+        x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height
+    }
+
+    /// Σ_i w_i c_i: the column sums' weighted sum, as a pairwise tree (four
+    /// dependent additions instead of nine in a chain).
+    #[inline]
+    fn across(&self, c: &[f32; 9]) -> f32 {
+        let p: [f32; 9] = std::array::from_fn(|i| c[i] * self.w1[i]);
+        ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7])) + p[8]
+    }
+
+    /// (window mean, window mean of squares) of `p` at (x, y).
+    #[inline]
+    fn moments(&self, p: &Plane, x: usize, y: usize) -> (f32, f32) {
+        if !Self::interior(p, x, y) {
+            return (local_mean(p, x, y, &self.w2), local_mean_sq(p, x, y, &self.w2));
+        }
+        let (mut c1, mut c2) = ([0.0f32; 9], [0.0f32; 9]);
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for ((a, b), &v) in c1.iter_mut().zip(c2.iter_mut()).zip(&p.data[start..start + 9]) {
+                *a += wj * v;
+                *b += wj * (v * v);
+            }
+        }
+        (self.across(&c1), self.across(&c2))
+    }
+
+    /// Window mean of the squares of `p` at (x, y).
+    #[inline]
+    fn mean_sq(&self, p: &Plane, x: usize, y: usize) -> f32 {
+        if !Self::interior(p, x, y) {
+            return local_mean_sq(p, x, y, &self.w2);
+        }
+        let mut c = [0.0f32; 9];
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (a, &v) in c.iter_mut().zip(&p.data[start..start + 9]) {
+                *a += wj * (v * v);
+            }
+        }
+        self.across(&c)
+    }
+
+    /// Window mean of the product of `p` and `q` (one size) at (x, y).
+    #[inline]
+    fn mean_prod(&self, p: &Plane, q: &Plane, x: usize, y: usize) -> f32 {
+        if !Self::interior(p, x, y) {
+            return local_mean_prod(p, q, x, y, &self.w2);
+        }
+        let mut c = [0.0f32; 9];
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for ((a, &u), &v) in c.iter_mut().zip(&p.data[start..start + 9]).zip(&q.data[start..start + 9]) {
+                *a += wj * (u * v);
+            }
+        }
+        self.across(&c)
+    }
+}
+
+/// The blind tier's clip limits and per-channel tile masks (`clip_limits` and
+/// `clip_mask_of(img, limits, block, None, &[c])` for each channel c, exactly) from
+/// one pass per channel: every tile's lowest and highest value. A channel's extreme
+/// is the extreme of its tiles' extremes; only tiles that reach it are read again
+/// to count it (a frame clipped over a fifth of its area reads a fifth again), and
+/// a tile holds a clipped pixel exactly when its extreme is the clip level. Two
+/// full passes per channel (the lane-wise counts, then the tile fold) read 3.6 ms
+/// at 1280×960 (`search.clipping`, `BENCH=1 stage_times`); this reads each value
+/// once, as element-wise minima and maxima down each band of `block` rows.
+pub(super) fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
+    let (w, h) = (img.width, img.height);
+    let min_count = clip_min_count(img.len());
+    let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
+    let per_channel = |c: usize| -> ((Option<f32>, Option<f32>), ClipMask) {
+        let ch = &img.channels[c];
+        let (mut tlo, mut thi) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
+        let (mut col_lo, mut col_hi) = (vec![0.0f32; w], vec![0.0f32; w]);
+        for by in 0..bh {
+            let rows = by * block..((by + 1) * block).min(h);
+            col_lo.copy_from_slice(&ch[rows.start * w..(rows.start + 1) * w]);
+            col_hi.copy_from_slice(&col_lo);
+            for y in rows.skip(1) {
+                // `if` selects, not `f32::min`: the input is finite (checked by `fit`),
+                // and the plain comparison vectorises to one min/max per lane.
+                for ((l, u), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(&ch[y * w..(y + 1) * w]) {
+                    *l = if v < *l { v } else { *l };
+                    *u = if v > *u { v } else { *u };
+                }
+            }
+            for (a, b) in col_lo.chunks(block).zip(col_hi.chunks(block)) {
+                tlo.push(a.iter().copied().fold(f32::INFINITY, |m, v| if v < m { v } else { m }));
+                thi.push(b.iter().copied().fold(f32::NEG_INFINITY, |m, v| if v > m { v } else { m }));
+            }
+        }
+        // How often `e` occurs in the tiles whose extreme it is, up to `min_count`
+        // (so at most `min_count` tiles are read again, whatever the frame).
+        let count = |tiles: &[f32], e: f32| {
+            let mut n = 0usize;
+            for (t, _) in tiles.iter().enumerate().filter(|(_, &v)| v == e) {
+                let (bx, by) = (t % bw, t / bw);
+                for y in by * block..((by + 1) * block).min(h) {
+                    n += ch[y * w + bx * block..y * w + ((bx + 1) * block).min(w)].iter().filter(|&&v| v == e).count();
+                }
+                if n >= min_count {
+                    break;
+                }
+            }
+            n
+        };
+        let lo = tlo.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = thi.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let (lo, hi) = clip_levels((lo, count(&tlo, lo)), (hi, count(&thi, hi)), min_count);
+        if lo.is_none() && hi.is_none() {
+            return ((lo, hi), ClipMask { clipped: None, invalid: None });
+        }
+        let blocks: Vec<f32> =
+            tlo.iter().zip(&thi).map(|(&a, &b)| (Some(a) == lo || Some(b) == hi) as u8 as f32).collect();
+        let ii = IntegralImage::new(&Plane::from_vec(bw, bh, blocks));
+        ((lo, hi), ClipMask { clipped: Some((ii, block)), invalid: None })
+    };
+    let [(l0, m0), (l1, m1), (l2, m2)] = std::array::from_fn(per_channel);
+    ([l0, l1, l2], [m0, m1, m2])
+}
+/// Share of white noise's level-`l` band variance that survives a Catmull–Rom
+/// bicubic resampling at a sub-pixel offset (what `analysis::temporal::align` does
+/// to the neighbour frame), averaged over offsets on a 4×4 grid of phases: the
+/// bicubic kernel low-passes, most at level 0. Measured once on a 256² field.
+fn bicubic_noise_transmission(level: usize) -> f32 {
+    static K: std::sync::OnceLock<[f32; NOISE_LEVELS]> = std::sync::OnceLock::new();
+    K.get_or_init(|| {
+        let n = 256usize;
+        let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, 7, 0x5eed)).collect();
+        let field = Plane::from_vec(n, n, data);
+        let var_of = |p: &Plane| -> [f64; NOISE_LEVELS] {
+            let pyr = laplacian_pyramid(p, NOISE_LEVELS);
+            std::array::from_fn(|l| {
+                // The inner half: away from the clamped borders.
+                let b = &pyr.bands[l];
+                let (x0, y0) = (b.width / 4, b.height / 4);
+                let mut acc = 0.0f64;
+                let mut m = 0usize;
+                for y in y0..b.height - y0 {
+                    for x in x0..b.width - x0 {
+                        acc += (b.get(x, y) as f64).powi(2);
+                        m += 1;
+                    }
+                }
+                acc / m.max(1) as f64
+            })
+        };
+        let base = var_of(&field);
+        let mut sum = [0.0f64; NOISE_LEVELS];
+        let phases = [0.125f32, 0.375, 0.625, 0.875];
+        for &u in &phases {
+            for &v in &phases {
+                let mut shifted = Plane::new(n, n, 0.0);
+                for y in 0..n {
+                    for x in 0..n {
+                        shifted.data[y * n + x] = crate::image::sample_bicubic(&field, x as f32 + u, y as f32 + v);
+                    }
+                }
+                let s = var_of(&shifted);
+                for l in 0..NOISE_LEVELS {
+                    sum[l] += s[l] / base[l] / (phases.len() * phases.len()) as f64;
+                }
+            }
+        }
+        sum.map(|k| k as f32)
+    })[level.min(NOISE_LEVELS - 1)]
+}
+
+/// One luma bin's blind measurement at one level.
+struct BinMeasure {
+    y: f32,
+    y2: f32,
+    var: [f32; 3],
+    n: usize,
+    /// Relative standard error of the bin's std (mean over channels).
+    rel_se: f32,
+}
+
+/// Periodic block-grid discontinuities of a block-transform codec (JPEG, MPEG-4,
+/// H.264 at 8 px): the mean absolute luma step across each column (row) phase mod 8,
+/// over the flatter half of the frame (where blocking shows and texture does not
+/// mask it). Blocking is reported when one phase exceeds the median of the other
+/// seven by `BLOCKING_RATIO` in both directions; unblocked frames measured here stay
+/// below 1.05 (the astronaut, the cat, synthetic noise), the vtest clip's DivX
+/// frames reach ~1.3 (tests/real_noise.rs).
+fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Option<crate::model::Blocking> {
+    const PERIOD: usize = 8;
+    let (w, h) = (img.width, img.height);
+    if w < 4 * PERIOD || h < 4 * PERIOD {
+        return None;
+    }
+    // Flat pixels: structure magnitude below its median (structure is a signed band
+    // at 1/scale resolution).
+    let mut s: Vec<f32> = structure.data.iter().map(|v| v.abs()).collect();
+    let med = percentile(&mut s, 0.5);
+    // Row by row, the luma computed on the fly (two rows live, no full-frame plane),
+    // the flat mask as 0/1 weights and the phase sums over 8-px chunks: branch-free,
+    // so the 8 phases vectorise.
+    let lw = crate::image::LUMA_WEIGHTS;
+    let luma_row = |y: usize, out: &mut [f32]| {
+        let i = y * w;
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = lw[0] * img.channels[0][i + x] + lw[1] * img.channels[1][i + x] + lw[2] * img.channels[2][i + x];
+        }
+    };
+    let (mut cur, mut next, mut flat) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
+    luma_row(0, &mut cur);
+    let (mut col, mut ncol, mut row, mut nrow) =
+        ([0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD]);
+    // Above 400k pixels every other band of `PERIOD` rows: each band still holds
+    // every row phase and the column sums half the frame's flat pixels (~150 000 at
+    // 1280×960), far more than the boundary/interior contrast needs (unblocked
+    // frames < 1.05, the vtest clip's ~1.3); the scan was 3 ms of the blind tier.
+    let band_stride = if w * h > 400_000 { 2 } else { 1 };
+    let mut have = 0usize; // the row whose luma `cur` holds
+    for y in 0..h - 1 {
+        if (y / PERIOD) % band_stride != 0 {
+            continue;
+        }
+        if have != y {
+            luma_row(y, &mut cur);
+        }
+        luma_row(y + 1, &mut next);
+        have = y + 1;
+        let sy = (y / scale).min(structure.height - 1);
+        for (x, f) in flat.iter_mut().enumerate() {
+            let v = structure.data[sy * structure.width + (x / scale).min(structure.width - 1)];
+            *f = (v.abs() <= med) as u8 as f32;
+        }
+        // The last column has no right neighbour: its horizontal step is left out.
+        flat[w - 1] = 0.0;
+        let (mut c, mut nc, mut r) = ([0.0f32; PERIOD], [0.0f32; PERIOD], [0.0f32; PERIOD]);
+        let n = (w - 1) / PERIOD * PERIOD;
+        for x0 in (0..n).step_by(PERIOD) {
+            for k in 0..PERIOD {
+                let x = x0 + k;
+                let m = flat[x];
+                c[k] += m * (cur[x + 1] - cur[x]).abs();
+                r[k] += m * (next[x] - cur[x]).abs();
+                nc[k] += m;
+            }
+        }
+        for x in n..w - 1 {
+            let m = flat[x];
+            c[x % PERIOD] += m * (cur[x + 1] - cur[x]).abs();
+            r[x % PERIOD] += m * (next[x] - cur[x]).abs();
+            nc[x % PERIOD] += m;
+        }
+        let (rs, rn): (f32, f32) = (r.iter().sum(), nc.iter().sum());
+        for k in 0..PERIOD {
+            col[k] += c[k] as f64;
+            ncol[k] += nc[k] as f64;
+        }
+        row[y % PERIOD] += rs as f64;
+        nrow[y % PERIOD] += rn as f64;
+        std::mem::swap(&mut cur, &mut next);
+    }
+    let peak = |sum: &[f64; PERIOD], n: &[f64; PERIOD]| -> Option<(usize, f32)> {
+        let m: Vec<f64> = (0..PERIOD).map(|i| sum[i] / n[i].max(1.0)).collect();
+        let k = (0..PERIOD).max_by(|&a, &b| m[a].total_cmp(&m[b]))?;
+        let mut rest: Vec<f32> = (0..PERIOD).filter(|&i| i != k).map(|i| m[i] as f32).collect();
+        let base = percentile(&mut rest, 0.5) as f64;
+        (base > 0.0).then(|| (k, (m[k] / base) as f32))
+    };
+    let (px, rx) = peak(&col, &ncol)?;
+    let (py, ry) = peak(&row, &nrow)?;
+    let strength = rx.min(ry);
+    (strength >= BLOCKING_RATIO).then_some(crate::model::Blocking {
+        period_px: PERIOD as u32,
+        phase_px: [px as u32, py as u32],
+        strength,
+    })
+}
+
+/// Smallest boundary/interior step ratio reported as blocking (see `detect_blocking`).
+const BLOCKING_RATIO: f32 = 1.15;
+
+/// Fast tier: the frame alone.
+///
+/// Every band-pass level is measured on the frame itself (real noise is shaped by
+/// demosaicing, in-camera denoising, sharpening and compression, so coarse levels do
+/// not follow from level 0 by white-noise ratios — on the vtest clip level 1 holds
+/// 0.45× level 0's std where white noise would hold 0.49×, and level 3 1.6× the white
+/// prediction). At level l, per luma bin (16 bins of the smoothed luma), the flat
+/// samples are the `BLIND_FLAT_FRACTION` with the least luma energy two levels
+/// coarser (band l+2: structure that spans the level-l window, and nearly
+/// uncorrelated with level-l noise, so selecting on it does not bias the level-l
+/// variance the way picking the lowest variances would); their median local
+/// variance, calibrated by `white_noise_median_to_mean(l)`, is the bin's value.
+/// Binning by luma means dark bins are measured on dark samples: shadows are never
+/// judged flat or textured by the bright parts' standard. Bins more than 30% above
+/// their level's fitted line are texture and dropped (one-sided). The low-pass is
+/// not identifiable from one frame (it is the image itself) and is left out.
+pub fn fit_fast(
+    image: &Rgb,
+    neighbour: Option<&crate::fit::Neighbour>,
+    samples_per_level: usize,
+) -> (Noise, NoisePlotData) {
+    let started = Instant::now();
+    let mut st = crate::fit::Stages::start();
+    // With an aligned neighbour (another exposure of the same scene): the band-pass
+    // levels of D = I − I' per channel (0 where the alignment does not hold; samples
+    // whose footprint holds more than `MAX_INVALID_FRACTION` of such pixels are
+    // skipped), so that each flat sample reads B(b·b_D) = B(b²) − B(b·b'): the two
+    // exposures' noise is independent, their texture the same, so the product with
+    // the neighbour's band cancels the texture and keeps the noise (see `fit_fast`).
+    let (fw, fh) = (image.width, image.height);
+    let neighbour = neighbour.filter(|n| (n.image.width, n.image.height) == (fw, fh));
+    let cross: Option<Vec<Vec<Plane>>> = neighbour.map(|n| {
+        (0..3)
+            .into_par_iter()
+            .map(|c| {
+                let d: Vec<f32> = image.channels[c]
+                    .iter()
+                    .zip(&n.image.channels[c])
+                    .zip(&n.valid.data)
+                    .map(|((a, b), v)| if *v > 0.5 { a - b } else { 0.0 })
+                    .collect();
+                channel_pyramids(&d, fw, fh, NOISE_LEVELS).1
+            })
+            .collect()
+    });
+    st.lap("blur.neighbour");
+    // One Gaussian pyramid per channel, levels 0..=L+2, and its band-pass levels
+    // 0..L+2. Everything the fit reads of the luma follows by linearity (luma is a
+    // fixed weighted sum of the channels, and reduce/expand are linear), so no luma
+    // pyramid is built: G_Y[l] = Σ w_c G_c[l]; the smoothed luma used for binning
+    // level l (I's own luma carries the noise) is expand(G_Y[l+1]) = Σ w_c (G_c[l] −
+    // band_c[l]); level l's structure measure is the luma band l+2 = Σ w_c band_c[l+2].
+    // Level 0 is the frame's own channel (borrowed, not copied).
+    let pyr: Vec<(Vec<Plane>, Vec<Plane>)> =
+        (0..3).into_par_iter().map(|c| channel_pyramids(&image.channels[c], fw, fh, NOISE_LEVELS + 2)).collect();
+    st.lap("blur.pyramids");
+    let luma_of = |c: [&[f32]; 3], like: &Plane| -> Plane {
+        let w = crate::image::LUMA_WEIGHTS;
+        let mut out: Vec<f32> = c[0].iter().map(|v| w[0] * v).collect();
+        for k in 1..3 {
+            out.iter_mut().zip(c[k]).for_each(|(o, v)| *o += w[k] * v);
+        }
+        Plane::from_vec(like.width, like.height, out)
+    };
+    // pyr[c].0[l] is G_c[l + 1].
+    let gauss = |l: usize| -> [&[f32]; 3] {
+        std::array::from_fn(|c| if l == 0 { &image.channels[c][..] } else { &pyr[c].0[l - 1].data[..] })
+    };
+    let band = |l: usize| -> [&Plane; 3] { std::array::from_fn(|c| &pyr[c].1[l]) };
+    // expand(G_Y[l+1]) from the coarse luma (reduce is linear): one plane expanded
+    // instead of six level-l planes read (`blur.luma` 2.3 → 1.6 ms at 1280×960, the
+    // same values to rounding).
+    let smooth: Vec<Plane> = (0..NOISE_LEVELS)
+        .into_par_iter()
+        .map(|l| {
+            let like = &pyr[0].1[l];
+            crate::image::expand(&luma_of(gauss(l + 1), &pyr[0].0[l]), like.width, like.height)
+        })
+        .collect();
+    let structure: Vec<Plane> =
+        (2..NOISE_LEVELS + 2).into_par_iter().map(|k| luma_of(band(k).map(|b| &b.data[..]), &pyr[0].1[k])).collect();
+    let bands: Vec<Vec<Plane>> = pyr.into_iter().map(|(_, b)| b.into_iter().take(NOISE_LEVELS).collect()).collect();
+    st.lap("blur.luma");
+    let blocking = detect_blocking(image, &structure[0], 4);
+    st.lap("search.blocking");
+    // About `samples_per_level` grid points per level whatever the frame size
+    // (`level_stride`).
+    let stride0 = ((image.len() as f64 / samples_per_level.max(1) as f64).sqrt() as f32).max(BLIND_STRIDE_PX as f32);
+    let (limits, clip) = blind_clip_masks(image, 8);
+    // Where the neighbour's alignment fails: one table for all channels.
+    let misaligned = neighbour.map(|n| clip_mask_of(image, &limits, 8, Some(n.valid), &[]));
+    st.lap("search.clipping");
+    let measured: Vec<Vec<BinMeasure>> = (0..NOISE_LEVELS)
+        .into_par_iter()
+        .map(|l| {
+            let cross = cross.as_deref().zip(misaligned.as_ref());
+            measure_level(l, &bands, cross, &smooth[l], &structure[l], &clip, stride0)
+        })
+        .collect();
+    st.lap("search.samples");
+    // Levels with fewer than 3 usable bins (tiny or fully textured frames) cannot be
+    // fitted on their own: they follow the finest measured level by white-noise band
+    // ratios, and the reason says so.
+    // Levels are measured finest first. A level stops being identifiable where the
+    // frame's flattest samples are texture rather than noise: with fewer than 3 flat
+    // bins, or when its median std over the bins it shares with the finer level
+    // exceeds `MAX_LEVEL_STD_RATIO` times that level's (camera noise falls toward
+    // coarse levels, texture does not). It and every coarser level then follow the
+    // finest measured level by the measured per-level decay (the two finest measured
+    // levels' excess over white, see below) or, with one level, the white-noise
+    // ratios; the reason names them.
+    let (mut points, mut measured_levels, mut derived): (Vec<LevelPoints>, Vec<usize>, Vec<usize>) =
+        (vec![], vec![], vec![]);
+    let mut prev: Option<Vec<&BinMeasure>> = None;
+    let mut level0_untrimmed = false;
+    for (l, bins) in measured.iter().enumerate() {
+        // A level whose bins no line explains (fewer than 3 agree) is texture, not
+        // noise: measured on the calibration video (Motorcycle, 320×240), keeping
+        // every bin there let levels 1–3 read 5–20× the truth on 1 frame in 5.
+        // Level 0 keeps its bins (its samples are the most numerous, and without
+        // it there is no map at all); the reason says it was not trimmed.
+        let (bins, untrimmed) = match trim_textured(bins) {
+            Some(b) => (b, false),
+            None if l == 0 => (bins.iter().collect(), true),
+            None => (vec![], true),
+        };
+        if untrimmed && l == 0 {
+            level0_untrimmed = true;
+        }
+        let grows = prev.as_ref().is_some_and(|p| median_std_ratio(&bins, p).map_or(true, |r| r > MAX_LEVEL_STD_RATIO));
+        // Level 0 may stand on fewer than 3 bins (a narrow-luma frame); coarser ones not.
+        let too_few = bins.is_empty() || (l > 0 && bins.len() < 3);
+        if !derived.is_empty() || grows || too_few {
+            derived.push(l);
+            continue;
+        }
+        measured_levels.push(l);
+        points.push(LevelPoints {
+            y: bins.iter().map(|b| b.y).collect(),
+            y2: bins.iter().map(|b| b.y2).collect(),
+            own: None,
+            var: std::array::from_fn(|c| bins.iter().map(|b| b.var[c]).collect()),
+            weights: Some(bins.iter().map(|b| b.n as f32).collect()),
+        });
+        prev = Some(bins);
+    }
+    let fitted =
+        if measured_levels.first() == Some(&0) { fit_levels(&points, NoiseIntensity::Luma, true) } else { None };
+    let fitted = fitted.map(|LevelFit { form, intensity, levels: lv, covs, rel_res, nll }| {
+        let unit = crate::synth::unit_band_std();
+        let last = lv.len() - 1;
+        // Beyond the finest measured levels: white noise's per-level ratios, scaled
+        // by how much slower than white the two finest measured levels decayed
+        // (correlated noise decays slower; at most `MAX_LEVEL_STD_RATIO` per level).
+        let excess = if lv.len() >= 2 {
+            let s = |i: usize| {
+                (0..3)
+                    .map(|c| lv[i].std(form, c, luma_span(&points[i].y).map_or(0.5, |[lo, hi]| 0.5 * (lo + hi))))
+                    .sum::<f32>()
+            };
+            let (m1, m0) = (measured_levels[last], measured_levels[last - 1]);
+            (s(last) / s(last - 1).max(1e-12)) / (unit[m1] / unit[m0])
+        } else {
+            1.0
+        };
+        let levels = (0..NOISE_LEVELS)
+            .map(|l| match measured_levels.iter().position(|&m| m == l) {
+                Some(i) => lv[i],
+                None => {
+                    let from = measured_levels[last];
+                    let r: f32 =
+                        (from + 1..=l).map(|k| (excess * unit[k] / unit[k - 1]).min(MAX_LEVEL_STD_RATIO)).product();
+                    let k = if form == NoiseForm::LinearStd { r } else { r * r };
+                    NoiseLevel { slope: lv[last].slope.map(|v| v * k), intercept: lv[last].intercept.map(|v| v * k) }
+                }
+            })
+            .collect();
+        LevelFit { form, intensity, levels, covs, rel_res, nll }
+    });
+    // The luma range is what level 0's used bins cover: no value outside it.
+    let y0 = points.first().map(|p| p.y.clone()).unwrap_or_default();
+    let range = luma_span(&y0).unwrap_or([0.0, 1.0]);
+    let samples: Vec<LevelSamples> = points
+        .iter()
+        .map(|p| LevelSamples { y: p.y.clone(), y2: p.y2.clone(), own: None, var: p.var.clone() })
+        .collect();
+    st.lap("least_squares");
+    let samples_used: usize = points.iter().flat_map(|p| p.weights.iter().flatten()).map(|&w| w as usize).sum();
+    let mut noise = finish("fast", started, fitted, &samples, range, false);
+    noise.diagnostics.samples_used = samples_used as u64;
+    noise.diagnostics.stages_s = st.done();
+    // Confidence per luma bin (level 0): every measured bin, whether the fit used it.
+    let used0: Vec<f32> = points.first().map(|p| p.y.clone()).unwrap_or_default();
+    noise.bins = measured[0]
+        .iter()
+        .map(|b| crate::model::NoiseBin {
+            luma: b.y,
+            samples: b.n as u32,
+            std: b.var.map(|v| v.max(0.0).sqrt()),
+            relative_stderr: b.rel_se,
+            used: used0.contains(&b.y),
+        })
+        .collect();
+    if noise.present && level0_untrimmed {
+        noise.diagnostics.reason +=
+            "; level 0's luma bins agree with no common line (3 or more within 1.2× in variance): \
+             all were used, texture may be counted as noise";
+    }
+    if noise.present && !derived.is_empty() {
+        noise.diagnostics.reason += &format!(
+            "; levels {derived:?} not identifiable from this frame (texture exceeds the noise there, or too few flat luma bins): \
+             they continue the finest measured level by the measured per-level decay"
+        );
+    }
+    if let Some(b) = blocking {
+        noise.diagnostics.reason += &format!(
+            "; compression blocking: {} px grid at phase ({}, {}), boundary steps {:.2}× the interior's — the fine levels hold codec artefacts, not only sensor noise",
+            b.period_px, b.phase_px[0], b.phase_px[1], b.strength
+        );
+    }
+    noise.blocking = blocking;
+    (noise, plot_data(&points))
+}
+
+/// One channel's Gaussian pyramid G[1..=levels] (`.0[l]` is G[l + 1]; G[0] is
+/// `data` itself, not copied) and its band-pass levels 0..levels, by the clamp-free
+/// interior `reduce`/`expand`.
+fn channel_pyramids(data: &[f32], w: usize, h: usize, levels: usize) -> (Vec<Plane>, Vec<Plane>) {
+    let g = gaussian_pyramid(&crate::image::reduce_slice(data, w, h), levels);
+    let bands = (0..levels)
+        .map(|l| {
+            let (fine, fw, fh) =
+                if l == 0 { (data, w, h) } else { (&g[l - 1].data[..], g[l - 1].width, g[l - 1].height) };
+            let mut b = crate::image::expand(&g[l], fw, fh);
+            for (v, gv) in b.data.iter_mut().zip(fine) {
+                *v = gv - *v;
+            }
+            b
+        })
+        .collect();
+    (g, bands)
+}
+
+/// The lowest and highest of the lumas `y` (`None` when empty).
+fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
+    let lo = y.iter().cloned().reduce(f32::min)?;
+    let hi = y.iter().cloned().reduce(f32::max)?;
+    Some([lo, hi])
+}
+
+/// Median over the luma bins two levels share of the coarse level's std over the
+/// fine level's (channel-pooled); `None` when they share no bin.
+fn median_std_ratio(coarse: &[&BinMeasure], fine: &[&BinMeasure]) -> Option<f32> {
+    let std = |b: &BinMeasure| (b.var.iter().sum::<f32>() / 3.0).max(0.0).sqrt();
+    let mut r: Vec<f32> = coarse
+        .iter()
+        .filter_map(|c| {
+            let bin = (c.y * BLIND_BINS as f32) as usize;
+            fine.iter().find(|f| (f.y * BLIND_BINS as f32) as usize == bin).map(|f| std(c) / std(f).max(1e-12))
+        })
+        .collect();
+    (!r.is_empty()).then(|| percentile(&mut r, 0.5))
+}
+
+/// The blind tier's sample stride at level `l`: about `n` samples per level
+/// (`stride0` = √(pixels / n), at least `BLIND_STRIDE_PX`; n =
+/// `FitOptions::noise_fast_samples_per_level`), the level-0 stride rounded down and
+/// coarser ones to the nearest (n = 10 000 at 1280×960: 11, 6, 3, 1; at 20 000: 7,
+/// 4, 2, 1) — halving an integer stride instead gave level 2 of a 1280×960 frame
+/// 77 000 samples at stride 1, 4× the others and 40% of the search.
+fn level_stride(stride0: f32, l: usize) -> usize {
+    if l == 0 {
+        stride0 as usize
+    } else {
+        ((stride0 / (1u32 << l) as f32).round() as usize).max(1)
+    }
+}
+
+/// Per-bin measurements of level `l` (see `fit_fast`).
+fn measure_level(
+    l: usize,
+    bands: &[Vec<Plane>],
+    cross: Option<(&[Vec<Plane>], &ClipMask)>,
+    luma: &Plane,
+    structure: &Plane,
+    clip: &[ClipMask; 3],
+    stride0: f32,
+) -> Vec<BinMeasure> {
+    let scale = 1usize << l;
+    let stride = level_stride(stride0, l);
+    let win = SepWindow::new(l);
+    // The structure energy (window mean of the squared structure band) of every
+    // structure pixel, by one separable blur: at the coarse levels many samples
+    // share a structure pixel, and 18 taps per pixel beat 81 per sample.
+    let energy = {
+        let sq = Plane::from_vec(structure.width, structure.height, structure.data.iter().map(|v| v * v).collect());
+        crate::image::blur_separable(&sq, &window_1d((l + 2).min(3)))
+    };
+    // Footprint of the measured band in level-0 pixels (as in `collect_samples`); clipping
+    // under the structure band only makes a sample look textured, it biases nothing.
+    let radius = 5 * scale + 8;
+    let (w, h) = (luma.width, luma.height);
+    // (x, y, B(Y), B(Y²), structure, unclipped-channel bits)
+    type Sample = (usize, usize, f32, f32, f32, u8);
+    let mut pts: Vec<Sample> = vec![];
+    for y in grid(h, stride) {
+        for x in grid(w, stride) {
+            let ok = (0..3).fold(0u8, |m, c| m | ((!clip[c].touches(x * scale, y * scale, radius, l >= 2) as u8) << c));
+            if ok == 0 || cross.is_some_and(|(_, bad)| bad.touches(x * scale, y * scale, radius, l >= 2)) {
+                continue;
+            }
+            let s = energy.get((x / 4).min(energy.width - 1), (y / 4).min(energy.height - 1));
+            let (m1, m2) = win.moments(luma, x, y);
+            pts.push((x, y, m1, m2, s, ok));
+        }
+    }
+    let m2m = white_noise_median_to_mean(l);
+    let mut out = vec![];
+    // The samples of luma bin b, [b/16, (b + 1)/16), in grid order: one pass over
+    // them all (a filter per bin read every sample 16 times). BLIND_BINS is a power
+    // of two, so ⌊16·y⌋ is exact and the bins are the comparisons' bins.
+    const _: () = assert!(BLIND_BINS.is_power_of_two());
+    let mut bins: Vec<Vec<&Sample>> = vec![vec![]; BLIND_BINS];
+    for p in &pts {
+        // y ≥ 0 (NaN fails): truncation is the floor, without a libm call.
+        if p.2 >= 0.0 {
+            let b = (p.2 * BLIND_BINS as f32) as usize;
+            if b < BLIND_BINS {
+                bins[b].push(p);
+            }
+        }
+    }
+    for mut bin in bins {
+        bin.sort_by(|a, b| a.4.total_cmp(&b.4));
+        // Each channel's flat set: the flattest fraction of the bin's samples where
+        // that channel is unclipped; the bin counts when every channel has one.
+        let flats: [Vec<_>; 3] = std::array::from_fn(|c| {
+            let mine: Vec<_> = bin.iter().filter(|p| p.5 & (1 << c) != 0).copied().collect();
+            let k = (mine.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize;
+            if mine.len() < BLIND_MIN_PER_BIN || k < BLIND_MIN_FLAT {
+                vec![]
+            } else {
+                mine[..k].to_vec()
+            }
+        });
+        if flats.iter().any(|f| f.is_empty()) {
+            continue;
+        }
+        let flat = &flats[1];
+        let n = flat.len() as f32;
+        let mut var = [0.0f32; 3];
+        let mut rel_se = 0.0f32;
+        for c in 0..3 {
+            let n = flats[c].len() as f32;
+            // With a neighbour — level 0: B(b·b_D), first order in a texture mismatch
+            // between the exposures but free of the alignment's low-pass; coarser
+            // levels: B(b_D²) / (1 + κ_l), the texture mismatch entering squared, κ_l
+            // the alignment's noise transmission (≈ 1 there). Measured on the
+            // calibration video (BENCHMARKS.md): the product at every level reads
+            // levels 1–3 2–5× high while the head turns (the exposures' motion blur
+            // differs, and texture dwarfs the noise there).
+            if let Some((cross, _)) = cross.filter(|_| l == 0) {
+                let v: Vec<f32> =
+                    flats[c].iter().map(|p| win.mean_prod(&bands[c][l], &cross[c][l], p.0, p.1)).collect();
+                let (mean, se) = mean_se(&v);
+                var[c] = mean;
+                rel_se += if mean > 0.0 { se / (2.0 * mean) / 3.0 } else { 1.0 / 3.0 };
+                continue;
+            }
+            let (plane, gain) = match cross {
+                Some((d, _)) => (&d[c][l], 1.0 + bicubic_noise_transmission(l)),
+                None => (&bands[c][l], 1.0),
+            };
+            let mut v: Vec<f32> = flats[c].iter().map(|p| win.mean_sq(plane, p.0, p.1)).collect();
+            let med = percentile(&mut v, 0.5);
+            let iqr = percentile(&mut v, 0.75) - percentile(&mut v, 0.25);
+            var[c] = med / m2m / gain;
+            // SE of a median: 1.2533·sd/√n with sd from the IQR; half of it in std terms.
+            rel_se += if med > 0.0 { 1.2533 * iqr / 1.349 / n.sqrt() / (2.0 * med) / 3.0 } else { 1.0 / 3.0 };
+        }
+        out.push(BinMeasure {
+            y: flat.iter().map(|p| p.2).sum::<f32>() / n,
+            y2: flat.iter().map(|p| p.3).sum::<f32>() / n,
+            var,
+            n: flat.len(),
+            rel_se,
+        });
+    }
+    out
+}
+
+/// One-sided robust line: texture leaking into a bin only raises it, so the noise is
+/// the *lower envelope* of the bins. Every line through two bins (channel-pooled
+/// variance) is scored by the bins it explains — within [1/1.2, 1.2]× — and rejected
+/// outright when a bin lies below 0.7× it (noise cannot be lower than itself); the
+/// best line's inliers are kept (ties: the lower line). A plain refit-and-trim loop
+/// fails on real frames whose dark half is all texture (the vtest lawn: its bins
+/// pull the first line up so far that the flat road's bins look like outliers).
+/// Fewer than 4 bins are kept as they are; `None` when no line explains 3 of 4 or
+/// more (the bins scatter: texture, not a noise map).
+fn trim_textured(bins: &[BinMeasure]) -> Option<Vec<&BinMeasure>> {
+    if bins.len() < 4 {
+        return Some(bins.iter().collect());
+    }
+    let v: Vec<f64> = bins.iter().map(|b| b.var.iter().map(|&x| x as f64).sum::<f64>() / 3.0).collect();
+    let y: Vec<f64> = bins.iter().map(|b| b.y as f64).collect();
+    let mut best: Option<(usize, f64, Vec<bool>)> = None;
+    for i in 0..bins.len() {
+        for j in i..bins.len() {
+            // j == i: the flat line through one bin.
+            let slope = if j == i || (y[j] - y[i]).abs() < 1e-6 { 0.0 } else { (v[j] - v[i]) / (y[j] - y[i]) };
+            let line = |k: usize| v[i] + slope * (y[k] - y[i]);
+            if (0..bins.len()).any(|k| line(k) <= 0.0 || v[k] < 0.7 * line(k)) {
+                continue;
+            }
+            let inl: Vec<bool> = (0..bins.len()).map(|k| v[k] <= 1.2 * line(k) && v[k] >= line(k) / 1.2).collect();
+            let count = inl.iter().filter(|&&x| x).count();
+            let level: f64 = (0..bins.len()).map(line).sum();
+            let better = match &best {
+                None => true,
+                Some((c, l, _)) => count > *c || (count == *c && level < *l),
+            };
+            if better {
+                best = Some((count, level, inl));
+            }
+        }
+    }
+    match best {
+        Some((count, _, inl)) if count >= 3 => Some(bins.iter().zip(inl).filter(|(_, k)| *k).map(|(b, _)| b).collect()),
+        _ => None,
+    }
+}
