@@ -12,7 +12,9 @@ mod sample;
 pub mod yuv;
 
 pub use blur::{blur_separable, blur_separable_rows, blur_x, discrete_gaussian_kernel};
-pub use pyramid::{expand, gaussian_pyramid, laplacian_pyramid, reduce, reduce_slice, LaplacianPyramid};
+pub use pyramid::{
+    expand, expand_window9, gaussian_pyramid, laplacian_pyramid, reduce, reduce_slice, LaplacianPyramid,
+};
 pub use sample::{bicubic_interior, cubic_weights, sample_bicubic, sample_bicubic_rgb_interior};
 
 /// One channel of floats.

@@ -144,29 +144,6 @@ fn local_mean_sq(p: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
     window_sum(p, x, y, w, |v| v * v)
 }
 
-/// Window mean of the product of two planes of one size.
-#[inline]
-fn local_mean_prod(p: &Plane, q: &Plane, x: usize, y: usize, w: &[[f32; 9]; 9]) -> f32 {
-    let mut acc = 0.0;
-    if x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height {
-        for (j, row) in w.iter().enumerate() {
-            let start = (y + j - 4) * p.width + x - 4;
-            for ((wt, &a), &b) in row.iter().zip(&p.data[start..start + 9]).zip(&q.data[start..start + 9]) {
-                acc += wt * a * b;
-            }
-        }
-        return acc;
-    }
-    for (j, row) in w.iter().enumerate() {
-        let yy = y as isize + j as isize - 4;
-        for (i, wt) in row.iter().enumerate() {
-            let xx = x as isize + i as isize - 4;
-            acc += wt * p.get_clamped(xx, yy) * q.get_clamped(xx, yy);
-        }
-    }
-    acc
-}
-
 /// Mean and its standard error (0 for fewer than 2 values).
 fn mean_se(v: &[f32]) -> (f32, f32) {
     let n = v.len().max(1) as f64;
