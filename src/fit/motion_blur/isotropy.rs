@@ -15,42 +15,24 @@ use crate::image::{Flow, Plane};
 /// (the frame's scale); without, the root alone (the coarse scale's root is only
 /// compared with the fine one: its subsets' roots and excess were computed and never
 /// read) and the other fields 0 / `None`.
-pub(super) fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -> Result<IsotropyRoot, usize> {
-    let (w, h) = (flow.width, flow.height);
+pub(super) fn isotropy_root(
+    p: &Plane,
+    flow: &Flow,
+    scale: usize,
+    stats: bool,
+    pixels: Option<&[(usize, usize)]>,
+) -> Result<IsotropyRoot, usize> {
+    let w = flow.width;
     let s = scale as f32;
-    let mut cand = vec![];
-    // Every other pixel of the scale, coarser on large frames: only `FAST_SAMPLES`
-    // are kept, so scanning ~8× that many positions (not 300 000 at 1280×960) leaves
-    // the selection as even and as magnitude-only as before, at a ninth of the scan.
-    let positions = (w / (2 * scale)).max(1) * (h / (2 * scale)).max(1);
-    let thin = ((positions as f64 / (8 * FAST_SAMPLES) as f64).sqrt().floor() as usize).max(1);
-    let step = 2 * scale * thin;
-    for py in (2 * scale..h.saturating_sub(2 * scale)).step_by(step) {
-        for px in (2 * scale..w.saturating_sub(2 * scale)).step_by(step) {
-            let (qx, qy) = (px / scale, py / scale);
-            if qx + 1 >= p.width || qy + 1 >= p.height || qx == 0 || qy == 0 {
-                continue;
-            }
-            let i = py * w + px;
-            let (fx, fy) = (flow.dx[i], flow.dy[i]);
-            // Flow below 3 px/frame: the ±1 px derivative cannot resolve the box.
-            let speed_sq = fx * fx + fy * fy;
-            if speed_sq.is_nan() || speed_sq < 9.0 {
-                continue;
-            }
-            let gx = 0.5 * (p.get(qx + 1, qy) - p.get(qx - 1, qy));
-            let gy = 0.5 * (p.get(qx, qy + 1) - p.get(qx, qy - 1));
-            if gx * gx + gy * gy >= 1e-4 {
-                cand.push((px, py));
-            }
-        }
-    }
-    let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
+    let chosen = match pixels {
+        Some(px) => px.to_vec(),
+        None => candidates(p, flow, scale),
+    };
     // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
     // Each sample's flow, for the direction bins of the evidence (`stats` only).
     let mut flows = vec![];
-    for &(px, py) in cand.iter().step_by(keep) {
+    for &(px, py) in &chosen {
         let i = py * w + px;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
         if stats {
@@ -138,6 +120,7 @@ pub(super) fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -
             top_excess_se: 0.0,
             band: None,
             evidence: None,
+            pixels: chosen,
         });
     }
     // One pass: every sample's C and D at the grid's λs (`isotropy_pool::GRID`),
@@ -250,14 +233,50 @@ pub(super) fn isotropy_root(p: &Plane, flow: &Flow, scale: usize, stats: bool) -
         top_excess_se,
         band,
         evidence: Some(evidence),
+        pixels: chosen,
     })
+}
+
+/// The isotropy samples at `scale`: frame pixels with flow ≥ 3 px/frame and a
+/// gradient on `p`, thinned evenly to at most `FAST_SAMPLES` (see `isotropy_root`).
+fn candidates(p: &Plane, flow: &Flow, scale: usize) -> Vec<(usize, usize)> {
+    let (w, h) = (flow.width, flow.height);
+    let mut cand = vec![];
+    // Every other pixel of the scale, coarser on large frames: only `FAST_SAMPLES`
+    // are kept, so scanning ~8× that many positions (not 300 000 at 1280×960) leaves
+    // the selection as even and as magnitude-only as before, at a ninth of the scan.
+    let positions = (w / (2 * scale)).max(1) * (h / (2 * scale)).max(1);
+    let thin = ((positions as f64 / (8 * FAST_SAMPLES) as f64).sqrt().floor() as usize).max(1);
+    let step = 2 * scale * thin;
+    for py in (2 * scale..h.saturating_sub(2 * scale)).step_by(step) {
+        for px in (2 * scale..w.saturating_sub(2 * scale)).step_by(step) {
+            let (qx, qy) = (px / scale, py / scale);
+            if qx + 1 >= p.width || qy + 1 >= p.height || qx == 0 || qy == 0 {
+                continue;
+            }
+            let i = py * w + px;
+            let (fx, fy) = (flow.dx[i], flow.dy[i]);
+            // Flow below 3 px/frame: the ±1 px derivative cannot resolve the box.
+            let speed_sq = fx * fx + fy * fy;
+            if speed_sq.is_nan() || speed_sq < 9.0 {
+                continue;
+            }
+            let gx = 0.5 * (p.get(qx + 1, qy) - p.get(qx - 1, qy));
+            let gy = 0.5 * (p.get(qx, qy + 1) - p.get(qx, qy - 1));
+            if gx * gx + gy * gy >= 1e-4 {
+                cand.push((px, py));
+            }
+        }
+    }
+    let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
+    cand.into_iter().step_by(keep).collect()
 }
 
 /// The isotropy root and its direction evidence on plane `p` (the frame's scale),
 /// for the pooled fit's tests.
 #[cfg(test)]
 pub(in crate::fit) fn isotropy_evidence(p: &Plane, flow: &Flow) -> Option<(f32, IsotropyEvidence)> {
-    isotropy_root(p, flow, 1, true).ok().and_then(|r| Some((r.lambda, r.evidence?)))
+    isotropy_root(p, flow, 1, true, None).ok().and_then(|r| Some((r.lambda, r.evidence?)))
 }
 
 /// What `isotropy_root` measured.
@@ -283,4 +302,7 @@ pub(super) struct IsotropyRoot {
     /// The samples' C and D on the pooled fit's λ grid by flow direction (with
     /// `stats` only).
     pub(super) evidence: Option<IsotropyEvidence>,
+    /// The sample pixels (frame coordinates) the root was taken over: the coarse
+    /// scale's root is taken over the same ones.
+    pub(super) pixels: Vec<(usize, usize)>,
 }

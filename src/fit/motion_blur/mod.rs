@@ -459,29 +459,39 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         );
         // The pooled fit's evidence where asked (`FitOptions::mb_isotropy_evidence`).
         let plot = evidence_always.then(|| {
-            let isotropy = isotropy_root(y, flow, 1, true).ok().and_then(|r| r.evidence);
+            let isotropy = isotropy_root(y, flow, 1, true, None).ok().and_then(|r| r.evidence);
             st.lap("search.isotropy");
             MbPlotData { isotropy, ..Default::default() }
         });
         mb.diagnostics.stages_s = st.done();
         return (mb, plot);
     }
-    let fine = isotropy_root(y, flow, 1, true);
+    let fine = isotropy_root(y, flow, 1, true, None);
     st.lap("search.isotropy");
-    let IsotropyRoot { lambda, spread, n, along_excess, along_excess_se, top_excess, top_excess_se, band, evidence } =
-        match fine {
-            Ok(root) => root,
-            Err(n) => {
-                let reason = format!(
+    let IsotropyRoot {
+        lambda,
+        spread,
+        n,
+        along_excess,
+        along_excess_se,
+        top_excess,
+        top_excess_se,
+        band,
+        evidence,
+        pixels,
+    } = match fine {
+        Ok(root) => root,
+        Err(n) => {
+            let reason = format!(
                 "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}), and no streak zeros along the \
              flow: exposure not identifiable blindly"
             );
-                let mut d = super::not_identifiable("fast", reason, started);
-                d.samples_used = n as u64;
-                d.stages_s = st.done();
-                return (MotionBlur::absent(d), None);
-            }
-        };
+            let mut d = super::not_identifiable("fast", reason, started);
+            d.samples_used = n as u64;
+            d.stages_s = st.done();
+            return (MotionBlur::absent(d), None);
+        }
+    };
     // Every answer of the isotropy path carries the frame's evidence for pooling:
     // the frames this path cannot answer alone are the ones pooling is for.
     let plot = Some(MbPlotData { isotropy: evidence, ..Default::default() });
@@ -554,7 +564,10 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         return (MotionBlur::absent(d), plot);
     }
     // The second scale only where its answer is used (the bias risk of a root).
-    let coarse = isotropy_root(luma.half(), flow, 2, false);
+    // Over the fine root's own pixels: the disagreement then compares one set of
+    // pixels at two scales, without a second sampling's scatter (and without a
+    // second candidate scan).
+    let coarse = isotropy_root(luma.half(), flow, 2, false, Some(&pixels));
     st.lap("search.isotropy_coarse");
     let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     // The two-scale disagreement and the prior band (a 90% band: half-width / 1.645
