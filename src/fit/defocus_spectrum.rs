@@ -115,10 +115,21 @@ fn fft2(
 }
 
 /// Radial bins of a `t`×`t` array in FFT layout (wrapped frequencies), bins of 1:
-/// each element's rounded radius, or `t / 2` (past the last bin). Computed once per
-/// frame for the six radial averages (`sqrt` + `roundf` per element each time was
-/// ~2 ms at 256²).
-fn radial_bins(t: usize) -> Vec<u32> {
+/// each element's rounded radius, or `t / 2` (past the last bin). Computed once (per
+/// process for the tile sizes used) for the radial averages (`sqrt` + `roundf` per
+/// element each time was ~2 ms at 256²; once per frame still 0.2 ms).
+fn radial_bins(t: usize) -> std::borrow::Cow<'static, [u32]> {
+    // The two tile sizes `disc_signature` uses are built once per process.
+    static BINS: std::sync::OnceLock<[Vec<u32>; 2]> = std::sync::OnceLock::new();
+    let [b128, b256] = BINS.get_or_init(|| [radial_bins_of(128), radial_bins_of(256)]);
+    match t {
+        128 => b128.as_slice().into(),
+        256 => b256.as_slice().into(),
+        _ => radial_bins_of(t).into(),
+    }
+}
+
+fn radial_bins_of(t: usize) -> Vec<u32> {
     let half = t / 2;
     let mut bins = Vec::with_capacity(t * t);
     for y in 0..t {
@@ -240,11 +251,13 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     // A(f) = (Z(f) + Z̄(−f))/2 and B(f) = (Z(f) − Z̄(−f))/(2i): half the forward
     // FFTs (8 tiles: 4 transforms), the same spectra to rounding. The even tiles
     // feed the first split half, the odd the second, as before.
+    // Row y of the tile at (x0, y0), as a slice (one bounds check per row).
+    let row = |x0: usize, y0: usize, y: usize| &luma.data[(y0 + y) * w + x0..(y0 + y) * w + x0 + t];
     let mean_of_tile = |x0: usize, y0: usize| -> f32 {
         let mut mean = 0.0f64;
         for y in 0..t {
-            for x in 0..t {
-                mean += luma.get(x0 + x, y0 + y) as f64;
+            for &v in row(x0, y0, y) {
+                mean += v as f64;
             }
         }
         (mean / (t * t) as f64) as f32
@@ -253,12 +266,22 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
         let (x0, y0) = pair[0];
         let m0 = mean_of_tile(x0, y0);
         let second = pair.get(1).map(|&(x1, y1)| (x1, y1, mean_of_tile(x1, y1)));
-        for y in 0..t {
-            for x in 0..t {
-                let wxy = win[x] * win[y];
-                let re = (luma.get(x0 + x, y0 + y) - m0) * wxy;
-                let im = second.map_or(0.0, |(x1, y1, m1)| (luma.get(x1 + x, y1 + y) - m1) * wxy);
-                buf[y * t + x] = Complex32::new(re, im);
+        for (y, out) in buf.chunks_exact_mut(t).enumerate() {
+            let a = row(x0, y0, y);
+            match second {
+                Some((x1, y1, m1)) => {
+                    let b = row(x1, y1, y);
+                    for (x, o) in out.iter_mut().enumerate() {
+                        let wxy = win[x] * win[y];
+                        *o = Complex32::new((a[x] - m0) * wxy, (b[x] - m1) * wxy);
+                    }
+                }
+                None => {
+                    for (x, o) in out.iter_mut().enumerate() {
+                        let wxy = win[x] * win[y];
+                        *o = Complex32::new((a[x] - m0) * wxy, 0.0);
+                    }
+                }
             }
         }
         fft2(&mut buf, &mut tmp, &mut scratch, t, &fwd);
@@ -294,18 +317,21 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     }
     let halves = [tiles.len().div_ceil(2), tiles.len() / 2];
     let bins = radial_bins(t);
-    let mut analyse = |log_spec: &[f32]| -> Option<(f32, f32, Vec<f32>)> {
+    // The cepstral ring's (dip, z) of a mean log spectrum.
+    let mut analyse = |log_spec: &[f32]| -> Option<(f32, f32)> {
         for (b, &v) in buf.iter_mut().zip(log_spec) {
             *b = Complex32::new(v, 0.0);
         }
         // The log spectrum is transposed (see `fft2`); the inverse transposes it back.
         fft2(&mut buf, &mut tmp, &mut scratch, t, &inv);
         let cep: Vec<f32> = buf.iter().map(|c| c.re / (t * t) as f32).collect();
-        let (dip, z) = ring(&radial(&cep, &bins, t))?;
-        Some((dip, z, radial(log_spec, &bins, t)))
+        ring(&radial(&cep, &bins, t))
     };
     let all: Vec<f32> = sums[0].iter().zip(&sums[1]).map(|(a, b)| (a + b) / tiles.len() as f32).collect();
-    let (dip, z, spec) = analyse(&all)?;
+    let (dip, z) = analyse(&all)?;
+    // The radial spectrum for the notch: of all tiles only (the split halves' dips
+    // are all their spread needs).
+    let spec = radial(&all, &bins, t);
     let (radius_px, sigma_px) = sigma_of_dip(dip);
     let notch = notch_contrast(&spec, t, radius_px);
     // Split half: each half's dip (when both halves hold tiles).
@@ -314,7 +340,7 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     let stderr_px = STDERR_FLOOR_PX.max(if halves[1] > 0 {
         let mean_of = |k: usize| -> Vec<f32> { sums[k].iter().map(|v| v / halves[k] as f32).collect() };
         match (analyse(&mean_of(0)), analyse(&mean_of(1))) {
-            (Some((d0, ..)), Some((d1, ..))) => 0.5 * (sigma_of_dip(d0).1 - sigma_of_dip(d1).1).abs(),
+            (Some((d0, _)), Some((d1, _))) => 0.5 * (sigma_of_dip(d0).1 - sigma_of_dip(d1).1).abs(),
             _ => f32::INFINITY,
         }
     } else {
