@@ -131,6 +131,43 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
 /// noise fit reads the level-0 band only at its flat samples' windows (~13% of a
 /// 1280×960 frame), where three full-resolution expands cost 3.6 ms.
 pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize) -> [[f32; 9]; 9] {
+    // Interior: every output coordinate in the window inside the output and every
+    // tap inside the source (x − 4 ≥ 2 so that the even taps' m − 1 ≥ 0; x + 4's
+    // m + 1 ≤ n − 1): the taps in closed form — even 2m: (m−1, m, m+1) weighted
+    // (⅛, ¾, ⅛); odd 2m+1: (m, m+1) weighted (½, ½) — without the tap search
+    // (3× faster per window). The same products in the same order as below.
+    let inside = |v: usize, out: usize, n: usize| v >= 6 && v + 4 < out && (v + 4) / 2 + 1 < n;
+    if inside(x, width, p.width) && inside(y, height, p.height) {
+        let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
+        let lo = (y - 4) / 2 - (y - 4).is_multiple_of(2) as usize;
+        let mut horiz = [[0.0f32; 9]; 7];
+        for (k, src) in horiz.iter_mut().enumerate().take((y + 4) / 2 + 2 - lo) {
+            let row = &p.data[(lo + k) * p.width..(lo + k + 1) * p.width];
+            for (i, h) in src.iter_mut().enumerate() {
+                let xx = x - 4 + i;
+                let m = xx / 2;
+                *h = if xx % 2 == 0 {
+                    e0 * row[m - 1] + e2 * row[m] + e0 * row[m + 1]
+                } else {
+                    o1 * row[m] + o1 * row[m + 1]
+                };
+            }
+        }
+        return std::array::from_fn(|j| {
+            let yy = y - 4 + j;
+            let m = yy / 2 - lo;
+            let mut out = [0.0f32; 9];
+            if yy % 2 == 0 {
+                out.iter_mut().zip(&horiz[m - 1]).for_each(|(o, h)| *o = e0 * h);
+                out.iter_mut().zip(&horiz[m]).for_each(|(o, h)| *o += e2 * h);
+                out.iter_mut().zip(&horiz[m + 1]).for_each(|(o, h)| *o += e0 * h);
+            } else {
+                out.iter_mut().zip(&horiz[m]).for_each(|(o, h)| *o = o1 * h);
+                out.iter_mut().zip(&horiz[m + 1]).for_each(|(o, h)| *o += o1 * h);
+            }
+            out
+        });
+    }
     let clamp = |v: usize, k: usize, n: usize| (v as isize + k as isize - 4).clamp(0, n as isize - 1) as usize;
     let xtaps: [[(usize, f32); 3]; 9] = std::array::from_fn(|i| expand_taps(clamp(x, i, width), p.width));
     let ytaps: [[(usize, f32); 3]; 9] = std::array::from_fn(|j| expand_taps(clamp(y, j, height), p.height));
@@ -278,11 +315,11 @@ mod tests {
 
     /// `expand_window9` reads what `expand` writes, bit for bit (an exact zero may
     /// differ in sign only): every window of sizes 1–13 (odd and even, narrower
-    /// than the window, the clamped border) and of a 41×23 level, whose windows
-    /// include interior ones.
+    /// than the window, the clamped border) and of 41×23 and 42×25 levels (even and
+    /// odd outputs) whose windows include interior ones (the closed-form taps).
     #[test]
     fn expand_windows_are_the_expanded_values() {
-        for (w, h) in (1..14usize).flat_map(|w| (1..14usize).map(move |h| (w, h))).chain([(41, 23)]) {
+        for (w, h) in (1..14usize).flat_map(|w| (1..14usize).map(move |h| (w, h))).chain([(41, 23), (42, 25)]) {
             let p = Plane::from_vec(w, h, (0..w * h).map(|i| ((i * 7919 % 101) as f32 / 101.0).sin() - 0.3).collect());
             let (ww, hh) = (2 * w - (w > 1 && w % 3 == 0) as usize, 2 * h);
             let full = expand(&p, ww, hh);
