@@ -139,7 +139,7 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
     let inside = |v: usize, out: usize, n: usize| v >= 6 && v + 4 < out && (v + 4) / 2 + 1 < n;
     if inside(x, width, p.width) && inside(y, height, p.height) {
         let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
-        let lo = (y - 4) / 2 - (y - 4).is_multiple_of(2) as usize;
+        let lo = (y - 4) / 2 - ((y - 4) % 2 == 0) as usize;
         let mut horiz = [[0.0f32; 9]; 7];
         for (k, src) in horiz.iter_mut().enumerate().take((y + 4) / 2 + 2 - lo) {
             let row = &p.data[(lo + k) * p.width..(lo + k + 1) * p.width];
