@@ -152,7 +152,7 @@ pub struct FitOptions {
     /// Blind noise: grid points per pyramid level (the level-0 stride is
     /// √(pixels / this), at least 4 px; coarser levels keep about as many). The
     /// sample search's cost is linear in it; what fewer cost in accuracy is measured
-    /// in BENCHMARKS.md ("noise samples per level").
+    /// in BENCHMARKS.md ("Fast tier speed", sixth session).
     pub noise_fast_samples_per_level: usize,
 }
 

@@ -7,13 +7,13 @@ use super::*;
 
 const BLIND_FLAT_FRACTION: f64 = 0.2;
 /// Default of `FitOptions::noise_fast_samples_per_level`. Measured over 27 frames of
-/// known noise and the real DivX clip (`examples/noise_budget_probe.rs`,
-/// BENCHMARKS.md "noise samples per level"): level 0's error is the same from 40 000
-/// down to 5 000 (median 10–11%: texture in the flattest samples, not sampling),
-/// the clip's level 0 inside its range 18.4% at 20 000 and 16.8% here; the noise
-/// fit at 1280×960 takes 15.4 ms instead of 18.5. 10 000, not 5 000: at 5 000
-/// level 2 was measured on none of the 27 frames (6 here, 4 at 20 000) and derived
-/// instead, which on real correlated noise is what costs most.
+/// known noise and the real DivX clip (`examples/noise_budget_probe.rs`; the table
+/// is in BENCHMARKS.md, "Fast tier speed", sixth session): level 0's error is the
+/// same from 40 000 down to 5 000 (median 10–11%: texture in the flattest samples,
+/// not sampling), the clip's level 0 inside its range 18.4% at 20 000 and 16.8%
+/// here; the noise fit at 1280×960 takes 15.4 ms instead of 18.5. 10 000, not
+/// 5 000: at 5 000 level 2 was measured on none of the 27 frames (6 here, 4 at
+/// 20 000) and derived instead, which on real correlated noise is what costs most.
 pub const DEFAULT_FAST_SAMPLES_PER_LEVEL: usize = 10_000;
 /// Fewest grid points per level `FitOptions::noise_fast_samples_per_level` takes:
 /// every luma bin could then still hold `BLIND_MIN_PER_BIN` samples.
@@ -30,6 +30,7 @@ const BLIND_MIN_PER_BIN: usize = 24;
 const MAX_LEVEL_STD_RATIO: f32 = 0.8;
 /// Fewest flat samples a bin is measured on (a median of fewer scatters by > 25% at level 3).
 const BLIND_MIN_FLAT: usize = 12;
+
 /// The blind tier's window sums in separable form: per window column, a weighted
 /// sum down its 9 rows (9 independent accumulators, which the compiler keeps in
 /// vector lanes), then the columns' weighted sum — Σ_i w_i Σ_j w_j f(v_ji), the
