@@ -256,6 +256,7 @@ fn bicubic_noise_transmission(level: usize) -> f32 {
 }
 
 /// One luma bin's blind measurement at one level.
+#[derive(Clone)]
 struct BinMeasure {
     y: f32,
     y2: f32,
@@ -463,14 +464,6 @@ pub fn fit_fast(
     // Where the neighbour's alignment fails: one table for all channels.
     let misaligned = neighbour.map(|n| clip_mask_of(image, &limits, 8, Some(n.valid), &[]));
     st.lap("search.clipping");
-    let measured: Vec<Vec<BinMeasure>> = (0..NOISE_LEVELS)
-        .into_par_iter()
-        .map(|l| {
-            let cross = cross.as_deref().zip(misaligned.as_ref());
-            measure_level(l, (&bands, &band0), cross, &smooth[l], &structure[l], &clip, stride0)
-        })
-        .collect();
-    st.lap("search.samples");
     // Levels with fewer than 3 usable bins (tiny or fully textured frames) cannot be
     // fitted on their own: they follow the finest measured level by white-noise band
     // ratios, and the reason says so.
@@ -481,42 +474,60 @@ pub fn fit_fast(
     // coarse levels, texture does not). It and every coarser level then follow the
     // finest measured level by the measured per-level decay (the two finest measured
     // levels' excess over white, see below) or, with one level, the white-noise
-    // ratios; the reason names them.
+    // ratios; the reason names them. Coarser levels are then not sampled at all:
+    // nothing would read them (levels 2–3 hold ~60% of the grid points at 1280×960,
+    // and over `examples/noise_budget_probe.rs`' 27 frames level 2 was measured on 6,
+    // level 3 on none).
     let (mut points, mut measured_levels, mut derived): (Vec<LevelPoints>, Vec<usize>, Vec<usize>) =
         (vec![], vec![], vec![]);
-    let mut prev: Option<Vec<&BinMeasure>> = None;
+    let mut prev: Option<Vec<BinMeasure>> = None;
     let mut level0_untrimmed = false;
-    for (l, bins) in measured.iter().enumerate() {
+    // Level 0's bins, every one measured (the per-bin confidence reports them all).
+    let mut measured0: Vec<BinMeasure> = vec![];
+    for l in 0..NOISE_LEVELS {
+        if !derived.is_empty() {
+            derived.push(l);
+            continue;
+        }
+        let cross = cross.as_deref().zip(misaligned.as_ref());
+        let all = measure_level(l, (&bands, &band0), cross, &smooth[l], &structure[l], &clip, stride0);
         // A level whose bins no line explains (fewer than 3 agree) is texture, not
         // noise: measured on the calibration video (Motorcycle, 320×240), keeping
         // every bin there let levels 1–3 read 5–20× the truth on 1 frame in 5.
         // Level 0 keeps its bins (its samples are the most numerous, and without
         // it there is no map at all); the reason says it was not trimmed.
-        let (bins, untrimmed) = match trim_textured(bins) {
+        let (bins, untrimmed) = match trim_textured(&all) {
             Some(b) => (b, false),
-            None if l == 0 => (bins.iter().collect(), true),
+            None if l == 0 => (all.iter().collect(), true),
             None => (vec![], true),
         };
         if untrimmed && l == 0 {
             level0_untrimmed = true;
         }
-        let grows = prev.as_ref().is_some_and(|p| median_std_ratio(&bins, p).map_or(true, |r| r > MAX_LEVEL_STD_RATIO));
+        let grows = prev.as_ref().is_some_and(|p| {
+            let p: Vec<&BinMeasure> = p.iter().collect();
+            median_std_ratio(&bins, &p).map_or(true, |r| r > MAX_LEVEL_STD_RATIO)
+        });
         // Level 0 may stand on fewer than 3 bins (a narrow-luma frame); coarser ones not.
         let too_few = bins.is_empty() || (l > 0 && bins.len() < 3);
-        if !derived.is_empty() || grows || too_few {
+        if grows || too_few {
             derived.push(l);
-            continue;
+        } else {
+            measured_levels.push(l);
+            points.push(LevelPoints {
+                y: bins.iter().map(|b| b.y).collect(),
+                y2: bins.iter().map(|b| b.y2).collect(),
+                own: None,
+                var: std::array::from_fn(|c| bins.iter().map(|b| b.var[c]).collect()),
+                weights: Some(bins.iter().map(|b| b.n as f32).collect()),
+            });
+            prev = Some(bins.into_iter().cloned().collect());
         }
-        measured_levels.push(l);
-        points.push(LevelPoints {
-            y: bins.iter().map(|b| b.y).collect(),
-            y2: bins.iter().map(|b| b.y2).collect(),
-            own: None,
-            var: std::array::from_fn(|c| bins.iter().map(|b| b.var[c]).collect()),
-            weights: Some(bins.iter().map(|b| b.n as f32).collect()),
-        });
-        prev = Some(bins);
+        if l == 0 {
+            measured0 = all;
+        }
     }
+    st.lap("search.samples");
     let fitted =
         if measured_levels.first() == Some(&0) { fit_levels(&points, NoiseIntensity::Luma, true) } else { None };
     let fitted = fitted.map(|LevelFit { form, intensity, levels: lv, covs, rel_res, nll }| {
@@ -564,7 +575,7 @@ pub fn fit_fast(
     noise.diagnostics.stages_s = st.done();
     // Confidence per luma bin (level 0): every measured bin, whether the fit used it.
     let used0: Vec<f32> = points.first().map(|p| p.y.clone()).unwrap_or_default();
-    noise.bins = measured[0]
+    noise.bins = measured0
         .iter()
         .map(|b| crate::model::NoiseBin {
             luma: b.y,
