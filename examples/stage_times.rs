@@ -27,6 +27,23 @@ fn main() {
         truth.motion_blur.exposure = Some(0.5);
         let all = blind_augment::synth::apply_camera_model(&clean, &truth, Some(&depth), Some(&flow), 1);
         (common::quantize8(&all), depth, flow)
+    } else if std::env::var("DISC").is_ok_and(|v| v == "1") {
+        // `DISC=1`: the photograph at one depth under a uniform disc defocus (σ 2 px,
+        // second moment), noise, 8-bit — the frame whose δ the spectrum answers alone.
+        use blind_augment::model::*;
+        let depth = Plane::new(w, h, 2.0);
+        let mut truth = CameraModel::empty(w as u32, h as u32);
+        truth.depth_of_field = DepthOfField {
+            present: true,
+            units: DepthUnits::MetricM,
+            curve: Some(DofCurve::Constant { c: 2.0 }),
+            depth_range: [2.0, 2.0],
+            kernel: DofKernel::Disc,
+            diagnostics: Diagnostics::not_fitted("truth"),
+        };
+        truth.noise = blind_augment::synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
+        let all = blind_augment::synth::apply_camera_model(&clean, &truth, Some(&depth), None, 1);
+        (common::quantize8(&all), depth, Flow::uniform(w, h, 6.0, 2.0))
     } else {
         (clean, Plane::new(w, h, 2.0), Flow::uniform(w, h, 6.0, 2.0))
     };

@@ -263,7 +263,70 @@ pub fn fit_fast(
 ) -> (DepthOfField, Option<DofPlotData>) {
     let started = Instant::now();
     let mut st = crate::fit::Stages::start();
-    let (y, re) = (luma.full(), reblur_half(luma.half()));
+    // The frame's luma (shared with the motion-blur fit: whichever runs first pays).
+    let y = luma.full();
+    st.lap("luma");
+    // Kernel shape (and a uniformly defocused frame's blur) from the spectrum, over
+    // tiles whose depth is valid.
+    let tile_ok = |x0: usize, y0: usize, t: usize| {
+        (y0..y0 + t).step_by(8).all(|yy| (x0..x0 + t).step_by(8).all(|x| valid_depth(depth.get(x, yy), units)))
+    };
+    let spectrum = crate::fit::defocus_spectrum::disc_signature(y, tile_ok);
+    st.lap("search.spectrum");
+    let kernel = match &spectrum {
+        Some(s) if s.is_disc => DofKernel::Disc,
+        _ => DofKernel::Gaussian,
+    };
+    let shape_note = match &spectrum {
+        Some(s) => format!(
+            "kernel {} (spectrum over {} tiles of {} px: cepstral ring z {:.1} at R {:.2} px, second-notch contrast {:.3}; \
+             a disc needs z ≥ {} and contrast ≥ {})",
+            if s.is_disc { "disc" } else { "gaussian" },
+            s.tiles,
+            s.tile_px,
+            s.ring_z,
+            s.radius_px,
+            s.notch_contrast,
+            crate::fit::defocus_spectrum::RING_MIN_Z,
+            crate::fit::defocus_spectrum::NOTCH_MIN_CONTRAST
+        ),
+        None => "kernel gaussian (too few textured tiles with valid depth for the spectrum)".into(),
+    };
+    // One depth across the frame: the spectrum's disc is the answer (edge ratios are
+    // biased by thin strokes and texture; the ring measures the aperture itself).
+    // (`constant_depth` reads 77 000 depths at 1280×960: only where a disc was seen.)
+    // The spectrum comes first so that such a frame skips the re-blur and the edge
+    // scan (~7 ms at 1280×960) whose samples it would not use.
+    let disc = spectrum.as_ref().filter(|s| s.is_disc);
+    if let Some((s, range)) = disc.and_then(|s| Some((s, constant_depth(depth, units)?))) {
+        let c = s.sigma_px.min(opts.dof_max_sigma_px);
+        let present = c >= 0.1 && c > 3.0 * s.stderr_px;
+        let dof = DepthOfField {
+            present,
+            units,
+            curve: Some(DofCurve::Constant { c }),
+            depth_range: range,
+            kernel,
+            diagnostics: Diagnostics {
+                status: if present { Status::Present } else { Status::Absent },
+                reason: format!(
+                    "one depth across the frame: constant δ {c:.3} px from the disc radius ({} px, second moment); \
+                     {shape_note}; edge ratios not read (biased by thin strokes and texture where the disc \
+                     measures the aperture)",
+                    s.radius_px
+                ),
+                method: "fast".into(),
+                residual_before: None,
+                residual_after: None,
+                samples_used: s.tiles as u64,
+                fit_time_s: started.elapsed().as_secs_f64(),
+                stderr: Some(s.stderr_px as f64),
+                stages_s: st.done(),
+            },
+        };
+        return (dof, None);
+    }
+    let re = reblur_half(luma.half());
     st.lap("blur");
     let (w, h) = (y.width, y.height);
     let (mut zs, mut sig) = (vec![], vec![]);
@@ -353,64 +416,6 @@ pub fn fit_fast(
         }
     }
     st.lap("search.edges");
-    // Kernel shape (and a uniformly defocused frame's blur) from the spectrum, over
-    // tiles whose depth is valid.
-    let tile_ok = |x0: usize, y0: usize, t: usize| {
-        (y0..y0 + t).step_by(8).all(|yy| (x0..x0 + t).step_by(8).all(|x| valid_depth(depth.get(x, yy), units)))
-    };
-    let spectrum = crate::fit::defocus_spectrum::disc_signature(y, tile_ok);
-    st.lap("search.spectrum");
-    let kernel = match &spectrum {
-        Some(s) if s.is_disc => DofKernel::Disc,
-        _ => DofKernel::Gaussian,
-    };
-    let shape_note = match &spectrum {
-        Some(s) => format!(
-            "kernel {} (spectrum over {} tiles of {} px: cepstral ring z {:.1} at R {:.2} px, second-notch contrast {:.3}; \
-             a disc needs z ≥ {} and contrast ≥ {})",
-            if s.is_disc { "disc" } else { "gaussian" },
-            s.tiles,
-            s.tile_px,
-            s.ring_z,
-            s.radius_px,
-            s.notch_contrast,
-            crate::fit::defocus_spectrum::RING_MIN_Z,
-            crate::fit::defocus_spectrum::NOTCH_MIN_CONTRAST
-        ),
-        None => "kernel gaussian (too few textured tiles with valid depth for the spectrum)".into(),
-    };
-    // One depth across the frame: the spectrum's disc is the answer (edge ratios are
-    // biased by thin strokes and texture; the ring measures the aperture itself).
-    // (`constant_depth` reads 77 000 depths at 1280×960: only where a disc was seen.)
-    let disc = spectrum.as_ref().filter(|s| s.is_disc);
-    if let Some((s, range)) = disc.and_then(|s| Some((s, constant_depth(depth, units)?))) {
-        let c = s.sigma_px.min(opts.dof_max_sigma_px);
-        let present = c >= 0.1 && c > 3.0 * s.stderr_px;
-        let dof = DepthOfField {
-            present,
-            units,
-            curve: Some(DofCurve::Constant { c }),
-            depth_range: range,
-            kernel,
-            diagnostics: Diagnostics {
-                status: if present { Status::Present } else { Status::Absent },
-                reason: format!(
-                    "one depth across the frame: constant δ {c:.3} px from the disc radius ({} px, second moment); \
-                     {shape_note}; {} edge samples not used",
-                    s.radius_px,
-                    sig.len()
-                ),
-                method: "fast".into(),
-                residual_before: None,
-                residual_after: None,
-                samples_used: s.tiles as u64,
-                fit_time_s: started.elapsed().as_secs_f64(),
-                stderr: Some(s.stderr_px as f64),
-                stages_s: st.done(),
-            },
-        };
-        return (dof, None);
-    }
     // Beyond `FAST_MAX_EDGE_SAMPLES` edges the robust curve fit (linear in the
     // samples) would cost more than the rest of the fit while its standard error
     // falls only as 1/√n: every k-th edge in raster order (spread over the frame and
