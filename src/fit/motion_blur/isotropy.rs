@@ -8,9 +8,10 @@ use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
 
 /// The isotropy root on plane `p` at `scale` (1: the frame; 2: its reduction, whose
-/// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`. Samples are frame pixels with flow ≥ 3 px/frame and a
-/// gradient, picked by gradient *magnitude* only, so the selection prefers no
-/// direction.
+/// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`.
+/// Samples are frame pixels with flow ≥ 3 px/frame and a gradient, picked by
+/// gradient *magnitude* only, so the selection prefers no direction (`candidates`),
+/// or the given `pixels` (the coarse scale takes the fine root's, `IsotropyRoot::pixels`).
 /// `stats`: also the subsets' spread, the along-flow excess and the prior's band
 /// (the frame's scale); without, the root alone (the coarse scale's root is only
 /// compared with the fine one: its subsets' roots and excess were computed and never

@@ -427,10 +427,11 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    standard error twice over, the larger counting: (a) the root is taken at two
 ///    scales over the same pixels (±1 px on the frame and ±1 px on its
 ///    half-resolution reduction); an isotropic scene gives both the same root, an
-///    anisotropic one biases them by different amounts; (b) a prior on natural scenes' anisotropy
-///    (`TEXTURE_ANISOTROPY_90`, measured): the roots of C/D = 1 ∓ that bound a ~90%
-///    band for λ, wide where the streak changes the balance little (short streaks,
-///    defocus, noise) — wider than half of [0, 1] is *not identifiable*. The bias
+///    anisotropic one biases them by different amounts; (b) a prior on natural
+///    scenes' anisotropy (`TEXTURE_ANISOTROPY_90`, measured): the roots of C/D =
+///    1 ∓ that bound a ~90% band for λ, wide where the streak changes the balance
+///    little (short streaks, defocus, noise) — wider than half of [0, 1] is *not
+///    identifiable*. The bias
 ///    term is added in quadrature to the spread of the root over `FAST_SUBSETS`
 ///    interleaved subsets / √subsets.
 ///

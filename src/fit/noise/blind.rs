@@ -3,6 +3,7 @@
 //! blocking and (with an aligned neighbour exposure) the difference bands it reads.
 //! The shared regression, windows and clip masks are in `noise/mod.rs`.
 
+use super::blocking::detect_blocking;
 use super::*;
 
 const BLIND_FLAT_FRACTION: f64 = 0.2;
@@ -144,69 +145,6 @@ impl SepWindow {
     }
 }
 
-/// The blind tier's clip limits and per-channel tile masks (`clip_limits` and
-/// `clip_mask_of(img, limits, block, None, &[c])` for each channel c, exactly) from
-/// one pass per channel: every tile's lowest and highest value. A channel's extreme
-/// is the extreme of its tiles' extremes; only tiles that reach it are read again
-/// to count it (a frame clipped over a fifth of its area reads a fifth again), and
-/// a tile holds a clipped pixel exactly when its extreme is the clip level. Two
-/// full passes per channel (the lane-wise counts, then the tile fold) read 3.6 ms
-/// at 1280×960 (`search.clipping`, `BENCH=1 stage_times`); this reads each value
-/// once, as element-wise minima and maxima down each band of `block` rows.
-pub(super) fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
-    let (w, h) = (img.width, img.height);
-    let min_count = clip_min_count(img.len());
-    let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
-    let per_channel = |c: usize| -> ((Option<f32>, Option<f32>), ClipMask) {
-        let ch = &img.channels[c];
-        let (mut tlo, mut thi) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
-        let (mut col_lo, mut col_hi) = (vec![0.0f32; w], vec![0.0f32; w]);
-        for by in 0..bh {
-            let rows = by * block..((by + 1) * block).min(h);
-            col_lo.copy_from_slice(&ch[rows.start * w..(rows.start + 1) * w]);
-            col_hi.copy_from_slice(&col_lo);
-            for y in rows.skip(1) {
-                // `if` selects, not `f32::min`: the input is finite (checked by `fit`),
-                // and the plain comparison vectorises to one min/max per lane.
-                for ((l, u), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(&ch[y * w..(y + 1) * w]) {
-                    *l = if v < *l { v } else { *l };
-                    *u = if v > *u { v } else { *u };
-                }
-            }
-            for (a, b) in col_lo.chunks(block).zip(col_hi.chunks(block)) {
-                tlo.push(a.iter().copied().fold(f32::INFINITY, |m, v| if v < m { v } else { m }));
-                thi.push(b.iter().copied().fold(f32::NEG_INFINITY, |m, v| if v > m { v } else { m }));
-            }
-        }
-        // How often `e` occurs in the tiles whose extreme it is, up to `min_count`
-        // (so at most `min_count` tiles are read again, whatever the frame).
-        let count = |tiles: &[f32], e: f32| {
-            let mut n = 0usize;
-            for (t, _) in tiles.iter().enumerate().filter(|(_, &v)| v == e) {
-                let (bx, by) = (t % bw, t / bw);
-                for y in by * block..((by + 1) * block).min(h) {
-                    n += ch[y * w + bx * block..y * w + ((bx + 1) * block).min(w)].iter().filter(|&&v| v == e).count();
-                }
-                if n >= min_count {
-                    break;
-                }
-            }
-            n
-        };
-        let lo = tlo.iter().copied().fold(f32::INFINITY, f32::min);
-        let hi = thi.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let (lo, hi) = clip_levels((lo, count(&tlo, lo)), (hi, count(&thi, hi)), min_count);
-        if lo.is_none() && hi.is_none() {
-            return ((lo, hi), ClipMask { clipped: None, invalid: None });
-        }
-        let blocks: Vec<f32> =
-            tlo.iter().zip(&thi).map(|(&a, &b)| (Some(a) == lo || Some(b) == hi) as u8 as f32).collect();
-        let ii = IntegralImage::new(&Plane::from_vec(bw, bh, blocks));
-        ((lo, hi), ClipMask { clipped: Some((ii, block)), invalid: None })
-    };
-    let [(l0, m0), (l1, m1), (l2, m2)] = std::array::from_fn(per_channel);
-    ([l0, l1, l2], [m0, m1, m2])
-}
 /// Share of white noise's level-`l` band variance that survives a Catmull–Rom
 /// bicubic resampling at a sub-pixel offset (what `analysis::temporal::align` does
 /// to the neighbour frame), averaged over offsets on a 4×4 grid of phases: the
@@ -265,105 +203,6 @@ struct BinMeasure {
     /// Relative standard error of the bin's std (mean over channels).
     rel_se: f32,
 }
-
-/// Periodic block-grid discontinuities of a block-transform codec (JPEG, MPEG-4,
-/// H.264 at 8 px): the mean absolute luma step across each column (row) phase mod 8,
-/// over the flatter half of the frame (where blocking shows and texture does not
-/// mask it). Blocking is reported when one phase exceeds the median of the other
-/// seven by `BLOCKING_RATIO` in both directions; unblocked frames measured here stay
-/// below 1.05 (the astronaut, the cat, synthetic noise), the vtest clip's DivX
-/// frames reach ~1.3 (tests/real_noise.rs).
-fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Option<crate::model::Blocking> {
-    const PERIOD: usize = 8;
-    let (w, h) = (img.width, img.height);
-    if w < 4 * PERIOD || h < 4 * PERIOD {
-        return None;
-    }
-    // Flat pixels: structure magnitude below its median (structure is a signed band
-    // at 1/scale resolution).
-    let mut s: Vec<f32> = structure.data.iter().map(|v| v.abs()).collect();
-    let med = percentile(&mut s, 0.5);
-    // Row by row, the luma computed on the fly (two rows live, no full-frame plane),
-    // the flat mask as 0/1 weights and the phase sums over 8-px chunks: branch-free,
-    // so the 8 phases vectorise.
-    let lw = crate::image::LUMA_WEIGHTS;
-    let luma_row = |y: usize, out: &mut [f32]| {
-        let i = y * w;
-        for (x, o) in out.iter_mut().enumerate() {
-            *o = lw[0] * img.channels[0][i + x] + lw[1] * img.channels[1][i + x] + lw[2] * img.channels[2][i + x];
-        }
-    };
-    let (mut cur, mut next, mut flat) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
-    luma_row(0, &mut cur);
-    let (mut col, mut ncol, mut row, mut nrow) =
-        ([0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD]);
-    // Above 400k pixels every other band of `PERIOD` rows: each band still holds
-    // every row phase and the column sums half the frame's flat pixels (~150 000 at
-    // 1280×960), far more than the boundary/interior contrast needs (unblocked
-    // frames < 1.05, the vtest clip's ~1.3); the scan was 3 ms of the blind tier.
-    let band_stride = if w * h > 400_000 { 2 } else { 1 };
-    let mut have = 0usize; // the row whose luma `cur` holds
-    for y in 0..h - 1 {
-        if (y / PERIOD) % band_stride != 0 {
-            continue;
-        }
-        if have != y {
-            luma_row(y, &mut cur);
-        }
-        luma_row(y + 1, &mut next);
-        have = y + 1;
-        let sy = (y / scale).min(structure.height - 1);
-        for (x, f) in flat.iter_mut().enumerate() {
-            let v = structure.data[sy * structure.width + (x / scale).min(structure.width - 1)];
-            *f = (v.abs() <= med) as u8 as f32;
-        }
-        // The last column has no right neighbour: its horizontal step is left out.
-        flat[w - 1] = 0.0;
-        let (mut c, mut nc, mut r) = ([0.0f32; PERIOD], [0.0f32; PERIOD], [0.0f32; PERIOD]);
-        let n = (w - 1) / PERIOD * PERIOD;
-        for x0 in (0..n).step_by(PERIOD) {
-            for k in 0..PERIOD {
-                let x = x0 + k;
-                let m = flat[x];
-                c[k] += m * (cur[x + 1] - cur[x]).abs();
-                r[k] += m * (next[x] - cur[x]).abs();
-                nc[k] += m;
-            }
-        }
-        for x in n..w - 1 {
-            let m = flat[x];
-            c[x % PERIOD] += m * (cur[x + 1] - cur[x]).abs();
-            r[x % PERIOD] += m * (next[x] - cur[x]).abs();
-            nc[x % PERIOD] += m;
-        }
-        let (rs, rn): (f32, f32) = (r.iter().sum(), nc.iter().sum());
-        for k in 0..PERIOD {
-            col[k] += c[k] as f64;
-            ncol[k] += nc[k] as f64;
-        }
-        row[y % PERIOD] += rs as f64;
-        nrow[y % PERIOD] += rn as f64;
-        std::mem::swap(&mut cur, &mut next);
-    }
-    let peak = |sum: &[f64; PERIOD], n: &[f64; PERIOD]| -> Option<(usize, f32)> {
-        let m: Vec<f64> = (0..PERIOD).map(|i| sum[i] / n[i].max(1.0)).collect();
-        let k = (0..PERIOD).max_by(|&a, &b| m[a].total_cmp(&m[b]))?;
-        let mut rest: Vec<f32> = (0..PERIOD).filter(|&i| i != k).map(|i| m[i] as f32).collect();
-        let base = percentile(&mut rest, 0.5) as f64;
-        (base > 0.0).then(|| (k, (m[k] / base) as f32))
-    };
-    let (px, rx) = peak(&col, &ncol)?;
-    let (py, ry) = peak(&row, &nrow)?;
-    let strength = rx.min(ry);
-    (strength >= BLOCKING_RATIO).then_some(crate::model::Blocking {
-        period_px: PERIOD as u32,
-        phase_px: [px as u32, py as u32],
-        strength,
-    })
-}
-
-/// Smallest boundary/interior step ratio reported as blocking (see `detect_blocking`).
-const BLOCKING_RATIO: f32 = 1.15;
 
 /// Fast tier: the frame alone.
 ///

@@ -1,0 +1,229 @@
+//! Which noise samples to leave out: pixels clipped at a channel's extreme (a
+//! repeated white or black level) and pixels where an aligned reference does not
+//! hold, as per-tile counts read over each sample's footprint.
+
+use super::*;
+
+/// Clipped pixels: a channel is clipped at its maximum (minimum) when that exact
+/// value repeats in at least 0.05% of the pixels (and 2) and is bright, ≥ 0.6
+/// (dark, ≤ 0.1). This finds 8-bit 255s, 16-bit 65535s and float frames clipped at
+/// any white level, while unclipped float frames (over- and undershoot included)
+/// have no repeated extreme and lose nothing.
+pub(super) fn clip_mask(img: &Rgb, block: usize, valid: Option<&Plane>) -> ClipMask {
+    clip_mask_of(img, &clip_limits(img), block, valid, &[0, 1, 2])
+}
+
+/// Per channel, the clipped low and high values (see `clip_mask`), if any.
+pub(super) type ClipLimits = [(Option<f32>, Option<f32>); 3];
+
+/// The clipped extremes of every channel (`channel_clip_limits`; the accurate
+/// tier's — the blind tier reads them from tile extremes, `blind_clip_masks`).
+pub(super) fn clip_limits(img: &Rgb) -> ClipLimits {
+    let min_count = clip_min_count(img.len());
+    std::array::from_fn(|c| channel_clip_limits(&img.channels[c], min_count))
+}
+
+/// How often a channel's extreme must repeat to be a clip level (`clip_mask`):
+/// 0.05% of the pixels, and at least 2.
+pub(super) fn clip_min_count(pixels: usize) -> usize {
+    (pixels / 2000).max(2)
+}
+
+/// A channel's clip levels from its extremes and their counts (`clip_mask`): the
+/// minimum when dark (≤ 0.1), the maximum when bright (≥ 0.6), each repeated at
+/// least `min_count` times.
+pub(super) fn clip_levels(lo: (f32, usize), hi: (f32, usize), min_count: usize) -> (Option<f32>, Option<f32>) {
+    ((lo.0 <= 0.1 && lo.1 >= min_count).then_some(lo.0), (hi.0 >= 0.6 && hi.1 >= min_count).then_some(hi.0))
+}
+
+/// One channel's `clip_limits`, in one pass over 8 independent lanes: per lane the
+/// extremes and how often each was seen (a new extreme restarts its count), then
+/// the lanes merged (the channel's extreme counts in every lane that reached it).
+/// Measured both ways, in different surroundings: while the blocking scan before it
+/// read every row (the frame cached), a lane-wise single pass was 2× slower than a
+/// pass for the extremes and another counting them; with blocking on half the rows
+/// the passes are bound by memory (three 4.9 MB planes at 1280×960), and one pass
+/// read 3.7 ms against 4.4 ms for two (`search.clipping`, `BENCH=1 stage_times`).
+/// The lanes compare with `<`/`>`: the fit's input is checked finite first.
+pub(super) fn channel_clip_limits(ch: &[f32], min_count: usize) -> (Option<f32>, Option<f32>) {
+    const LANES: usize = 8;
+    let (mut lo, mut hi) = ([f32::INFINITY; LANES], [f32::NEG_INFINITY; LANES]);
+    let (mut nlo, mut nhi) = ([0u32; LANES], [0u32; LANES]);
+    let mut see = |i: usize, v: f32| {
+        nlo[i] = if v < lo[i] { 1 } else { nlo[i] + (v == lo[i]) as u32 };
+        lo[i] = if v < lo[i] { v } else { lo[i] };
+        nhi[i] = if v > hi[i] { 1 } else { nhi[i] + (v == hi[i]) as u32 };
+        hi[i] = if v > hi[i] { v } else { hi[i] };
+    };
+    let chunks = ch.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    for k in chunks {
+        for (i, &v) in k.iter().enumerate() {
+            see(i, v);
+        }
+    }
+    for (i, &v) in tail.iter().enumerate() {
+        see(i, v);
+    }
+    let merge = |ext: &[f32; LANES], n: &[u32; LANES], better: fn(f32, f32) -> f32| {
+        let e = ext.iter().copied().fold(ext[0], better);
+        let count: usize = ext.iter().zip(n).filter(|(x, _)| **x == e).map(|(_, &c)| c as usize).sum();
+        (e, count)
+    };
+    clip_levels(merge(&lo, &nlo, f32::min), merge(&hi, &nhi, f32::max), min_count)
+}
+
+/// `clip_mask` counting clipped values in `channels` only (the blind tier measures
+/// each channel where that channel is unclipped: on the vtest clip the dark grass's
+/// blue channel sits at 0 in 8% of the pixels, which would otherwise take the green
+/// and red noise of the whole lawn with it).
+pub(super) fn clip_mask_of(
+    img: &Rgb,
+    limits: &ClipLimits,
+    block: usize,
+    valid: Option<&Plane>,
+    channels: &[usize],
+) -> ClipMask {
+    // Pixels where the reference does not hold: a sample is kept while they are at
+    // most `MAX_INVALID_FRACTION` of its footprint (the residual is zero there, so
+    // they lower its variance by at most that fraction). Excluding every footprint
+    // that touches one would empty the coarse levels, whose windows are ~70 px wide.
+    let holds = |x: f32| x > 0.5; // NaN: does not hold
+    let invalid = valid.filter(|v| v.data.iter().any(|x| !holds(*x))).map(|v| {
+        IntegralImage::new(&Plane::from_vec(
+            v.width,
+            v.height,
+            v.data.iter().map(|x| if holds(*x) { 0.0 } else { 1.0 }).collect(),
+        ))
+    });
+    let channels: Vec<usize> =
+        channels.iter().copied().filter(|&c| limits[c].0.is_some() || limits[c].1.is_some()).collect();
+    if channels.is_empty() {
+        return ClipMask { clipped: None, invalid };
+    }
+    // Mark block×block tiles holding any clipped pixel; footprint tests then run on
+    // the tile grid (conservative by up to one tile). The accurate tier uses 1 (exact),
+    // the blind tier 8 (a 1/64-size table; it can afford to lose border samples).
+    let (bw, bh) = (img.width.div_ceil(block), img.height.div_ceil(block));
+    let mut blocks = Plane::new(bw, bh, 0.0);
+    for &c in &channels {
+        let (lo, hi) = limits[c];
+        let (lo, hi) = (lo.unwrap_or(f32::NAN), hi.unwrap_or(f32::NAN)); // NaN equals nothing
+        for (y, row) in img.channels[c].chunks_exact(img.width).enumerate() {
+            // Whole tiles at once (no early exit: a branch-free fold vectorises).
+            for (bx, tile) in row.chunks(block).enumerate() {
+                if tile.iter().fold(false, |a, &v| a | (v == lo) | (v == hi)) {
+                    blocks.data[(y / block) * bw + bx] = 1.0;
+                }
+            }
+        }
+    }
+    ClipMask { clipped: Some((IntegralImage::new(&blocks), block)), invalid }
+}
+
+/// Largest share of a noise sample's footprint where the reference may not hold.
+pub(super) const MAX_INVALID_FRACTION: f64 = 0.02;
+
+/// Clipped-tile counts over boxes (and the tile size; `None` when the frame has no
+/// clipping at all), and the invalid-reference pixel counts (`None`: valid
+/// everywhere).
+pub(super) struct ClipMask {
+    clipped: Option<(IntegralImage, usize)>,
+    invalid: Option<IntegralImage>,
+}
+
+impl ClipMask {
+    /// Whether any clipped pixel may lie within `r` of (x, y) (level-0 pixels):
+    /// the box is widened to whole tiles, so the test errs on the safe side.
+    ///
+    /// `coarse`: levels 3 and the low-pass, whose footprints are ~100–180 px wide, so
+    /// that one clipped pixel anywhere near would empty them on a small frame;
+    /// there a footprint may hold up to `MAX_INVALID_FRACTION` clipped pixels (they
+    /// carry no noise: the variance is diluted by at most that fraction).
+    pub(super) fn touches(&self, x: usize, y: usize, r: usize, coarse: bool) -> bool {
+        let span = |c: usize, r: usize, n: usize| ((c + r + 1).min(n) - c.saturating_sub(r)) as f64;
+        let clipped = match &self.clipped {
+            None => false,
+            Some((ii, block)) => {
+                let (bx, by) = ((x / block).min(ii.width() - 1), (y / block).min(ii.height() - 1));
+                let rb = r.div_ceil(*block);
+                let count = ii.box_sum(bx, by, rb);
+                if coarse {
+                    count > MAX_INVALID_FRACTION * span(bx, rb, ii.width()) * span(by, rb, ii.height())
+                } else {
+                    count > 0.0
+                }
+            }
+        };
+        clipped
+            || self.invalid.as_ref().is_some_and(|ii| {
+                let (cx, cy) = (x.min(ii.width() - 1), y.min(ii.height() - 1));
+                let area = span(cx, r, ii.width()) * span(cy, r, ii.height());
+                ii.box_sum(cx, cy, r) > MAX_INVALID_FRACTION * area
+            })
+    }
+}
+
+/// The blind tier's clip limits and per-channel tile masks (`clip_limits` and
+/// `clip_mask_of(img, limits, block, None, &[c])` for each channel c, exactly) from
+/// one pass per channel: every tile's lowest and highest value. A channel's extreme
+/// is the extreme of its tiles' extremes; only tiles that reach it are read again
+/// to count it (a frame clipped over a fifth of its area reads a fifth again), and
+/// a tile holds a clipped pixel exactly when its extreme is the clip level. Two
+/// full passes per channel (the lane-wise counts, then the tile fold) read 3.6 ms
+/// at 1280×960 (`search.clipping`, `BENCH=1 stage_times`); this reads each value
+/// once, as element-wise minima and maxima down each band of `block` rows.
+pub(super) fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
+    let (w, h) = (img.width, img.height);
+    let min_count = clip_min_count(img.len());
+    let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
+    let per_channel = |c: usize| -> ((Option<f32>, Option<f32>), ClipMask) {
+        let ch = &img.channels[c];
+        let (mut tlo, mut thi) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
+        let (mut col_lo, mut col_hi) = (vec![0.0f32; w], vec![0.0f32; w]);
+        for by in 0..bh {
+            let rows = by * block..((by + 1) * block).min(h);
+            col_lo.copy_from_slice(&ch[rows.start * w..(rows.start + 1) * w]);
+            col_hi.copy_from_slice(&col_lo);
+            for y in rows.skip(1) {
+                // `if` selects, not `f32::min`: the input is finite (checked by `fit`),
+                // and the plain comparison vectorises to one min/max per lane.
+                for ((l, u), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(&ch[y * w..(y + 1) * w]) {
+                    *l = if v < *l { v } else { *l };
+                    *u = if v > *u { v } else { *u };
+                }
+            }
+            for (a, b) in col_lo.chunks(block).zip(col_hi.chunks(block)) {
+                tlo.push(a.iter().copied().fold(f32::INFINITY, |m, v| if v < m { v } else { m }));
+                thi.push(b.iter().copied().fold(f32::NEG_INFINITY, |m, v| if v > m { v } else { m }));
+            }
+        }
+        // How often `e` occurs in the tiles whose extreme it is, up to `min_count`
+        // (so at most `min_count` tiles are read again, whatever the frame).
+        let count = |tiles: &[f32], e: f32| {
+            let mut n = 0usize;
+            for (t, _) in tiles.iter().enumerate().filter(|(_, &v)| v == e) {
+                let (bx, by) = (t % bw, t / bw);
+                for y in by * block..((by + 1) * block).min(h) {
+                    n += ch[y * w + bx * block..y * w + ((bx + 1) * block).min(w)].iter().filter(|&&v| v == e).count();
+                }
+                if n >= min_count {
+                    break;
+                }
+            }
+            n
+        };
+        let lo = tlo.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = thi.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let (lo, hi) = clip_levels((lo, count(&tlo, lo)), (hi, count(&thi, hi)), min_count);
+        if lo.is_none() && hi.is_none() {
+            return ((lo, hi), ClipMask { clipped: None, invalid: None });
+        }
+        let blocks: Vec<f32> =
+            tlo.iter().zip(&thi).map(|(&a, &b)| (Some(a) == lo || Some(b) == hi) as u8 as f32).collect();
+        let ii = IntegralImage::new(&Plane::from_vec(bw, bh, blocks));
+        ((lo, hi), ClipMask { clipped: Some((ii, block)), invalid: None })
+    };
+    let [(l0, m0), (l1, m1), (l2, m2)] = std::array::from_fn(per_channel);
+    ([l0, l1, l2], [m0, m1, m2])
+}
