@@ -149,30 +149,12 @@ fn fit_thin_lens(u: &[f64], s: &[f64], units: DepthUnits) -> Option<(DofCurve, V
     let grid: Vec<f64> = (0..=n).map(|i| lo - 0.1 * span + 1.2 * span * i as f64 / n as f64).collect();
     let losses: Vec<f64> = grid.iter().map(|&g| loss_at(g)).collect();
     let best = (0..grid.len()).min_by(|&a, &b| losses[a].total_cmp(&losses[b]))?;
-    let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n)]);
-    let g = 0.618_033_988_75;
-    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-    let (mut fc, mut fd) = (loss_at(c), loss_at(d));
+    let (a, b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n)]);
     // 14 steps shrink the two-grid-cell bracket (15% of the samples' inverse-depth
     // span) by 0.618^14 ≈ 1.2e-3, to ~2e-4 of the span: the focus then moves δ by
     // about k·span·2e-4 px, a thousandth of the curve's own range — 25 steps (to
     // 6e-6) cost 11 more IRLS fits for nothing a test or the renderer can see.
-    for _ in 0..14 {
-        if fc < fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - g * (b - a);
-            fc = loss_at(c);
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + g * (b - a);
-            fd = loss_at(d);
-        }
-    }
-    let uf = 0.5 * (a + b);
+    let uf = super::golden_section(a, b, 14, loss_at);
     let (k, c0, res) = fit_thin_lens_at(u, s, uf, 15)?;
     if k.is_nan() || k < 0.0 {
         return None;

@@ -354,6 +354,41 @@ fn tier_for(
     }
 }
 
+/// Golden-section search for the minimum of a unimodal `f` on [a, b]: `steps`
+/// shrinks of the bracket by 0.618, one new evaluation of `f` each; returns the
+/// bracket's midpoint. The bracket ends themselves are never evaluated (callers
+/// that accept an end as the answer test it). Shared by the accurate exposure fit
+/// (λ to 1e-5) and the thin lens's focus search (14 steps).
+fn golden_section(mut a: f64, mut b: f64, steps: usize, f: impl Fn(f64) -> f64) -> f64 {
+    let g = 0.618_033_988_75;
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..steps {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - g * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + g * (b - a);
+            fd = f(d);
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// Golden-section steps that shrink a bracket of `width` below `tol`.
+fn golden_steps(width: f64, tol: f64) -> usize {
+    if width <= tol {
+        return 0;
+    }
+    ((tol / width).ln() / 0.618_033_988_75f64.ln()).ceil() as usize
+}
+
 fn not_identifiable(method: &str, reason: impl Into<String>, started: Instant) -> Diagnostics {
     Diagnostics {
         status: crate::model::Status::NotIdentifiable,

@@ -243,28 +243,6 @@ fn build_profiles(
     p
 }
 
-fn golden(mut a: f32, mut b: f32, f: impl Fn(f32) -> f64) -> f32 {
-    let g = 0.618_034_f32;
-    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-    let (mut fc, mut fd) = (f(c), f(d));
-    while b - a > 1e-5 {
-        if fc < fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - g * (b - a);
-            fc = f(c);
-        } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + g * (b - a);
-            fd = f(d);
-        }
-    }
-    0.5 * (a + b)
-}
-
 fn decide(
     method: &str,
     lambda: f32,
@@ -349,7 +327,9 @@ pub fn fit_accurate(
     let best = (0..lambdas.len()).min_by(|&a, &b| losses[a].total_cmp(&losses[b])).unwrap_or(0);
     let lo = lambdas[best.saturating_sub(1)];
     let hi = lambdas[(best + 1).min(lambdas.len() - 1)];
-    let mut lambda = golden(lo, hi, |l| prof.loss(l));
+    // λ to 1e-5.
+    let steps = super::golden_steps((hi - lo) as f64, 1e-5);
+    let mut lambda = super::golden_section(lo as f64, hi as f64, steps, |l| prof.loss(l as f32)) as f32;
     // The golden section never evaluates the bracket ends; the boundaries λ = 0 and
     // λ = 1 are legitimate answers.
     for edge in [0.0f32, 1.0] {
