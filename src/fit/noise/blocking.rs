@@ -41,6 +41,7 @@ pub(super) fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Opt
     // frames < 1.05, the vtest clip's ~1.3); the scan was 3 ms of the blind tier.
     let band_stride = if w * h > 400_000 { 2 } else { 1 };
     let mut have = 0usize; // the row whose luma `cur` holds
+    let mut flat_row: Option<usize> = None; // the structure row `flat` was built from
     for y in 0..h - 1 {
         if (y / PERIOD) % band_stride != 0 {
             continue;
@@ -50,13 +51,19 @@ pub(super) fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Opt
         }
         luma_row(y + 1, &mut next);
         have = y + 1;
+        // The mask changes only with the structure row (every `scale` frame rows):
+        // rebuilt then, one structure value spread over its `scale` columns.
         let sy = (y / scale).min(structure.height - 1);
-        for (x, f) in flat.iter_mut().enumerate() {
-            let v = structure.data[sy * structure.width + (x / scale).min(structure.width - 1)];
-            *f = (v.abs() <= med) as u8 as f32;
+        if flat_row != Some(sy) {
+            let srow = &structure.data[sy * structure.width..(sy + 1) * structure.width];
+            for (xs, f) in flat.chunks_mut(scale).enumerate() {
+                let m = (srow[xs.min(structure.width - 1)].abs() <= med) as u8 as f32;
+                f.fill(m);
+            }
+            // The last column has no right neighbour: its horizontal step is left out.
+            flat[w - 1] = 0.0;
+            flat_row = Some(sy);
         }
-        // The last column has no right neighbour: its horizontal step is left out.
-        flat[w - 1] = 0.0;
         let (mut c, mut nc, mut r) = ([0.0f32; PERIOD], [0.0f32; PERIOD], [0.0f32; PERIOD]);
         let n = (w - 1) / PERIOD * PERIOD;
         for x0 in (0..n).step_by(PERIOD) {
