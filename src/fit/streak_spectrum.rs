@@ -231,6 +231,8 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     let win = super::defocus_spectrum::hann(n);
     let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
     let mut buf = vec![Complex32::new(0.0, 0.0); n];
+    // One line's samples (`Plane::sample_line`).
+    let mut samples = vec![0.0f32; n];
     let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     // Per line pair: speed, normalised power at bins k = 1 … n/2, noise correlation.
     let mut lines: Vec<Line> = vec![];
@@ -264,9 +266,9 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
                 continue;
             };
             let mut spectrum = |sx: f32, sy: f32, dx: f32, dy: f32| -> Option<(Vec<f32>, f32)> {
+                y.sample_line(sx, sy, dx, dy, &mut samples);
                 let mut mean = 0.0f32;
-                for (j, b) in buf.iter_mut().enumerate() {
-                    let v = y.sample_bilinear(sx + j as f32 * dx, sy + j as f32 * dy);
+                for (b, &v) in buf.iter_mut().zip(&samples) {
                     *b = Complex32::new(v, 0.0);
                     mean += v;
                 }

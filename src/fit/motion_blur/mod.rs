@@ -363,23 +363,21 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
 /// over the whole streak).
 fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32, dir: (f32, f32), m: usize) -> f32 {
     // Node j at (x, y) + (j/m − ½)·dir, stepped from the first node with one
-    // reciprocal (no division per node; the stage time did not move measurably —
-    // the bilinear reads dominate it).
+    // reciprocal (no division per node), all m + 1 read as one line
+    // (`Plane::sample_line`: the same values as a bilinear read per node).
     let inv_m = 1.0 / m as f32;
     let half_step = 0.5 * inv_m;
     let (x0, y0) = (x - 0.5 * dir.0, y - 0.5 * dir.1);
     let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
-    f.reserve(m + 1);
+    let start = f.len();
+    f.resize(start + m + 1, 0.0);
+    p.sample_line(x0, y0, dx, dy, &mut f[start..]);
+    let nodes = &f[start..];
     c.reserve(m + 1);
-    let mut prev = p.sample_bilinear(x0, y0);
-    f.push(prev);
     c.push(0.0);
     let mut cum = 0.0f32;
-    for j in 1..=m {
-        let v = p.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy);
-        cum += half_step * (prev + v);
-        prev = v;
-        f.push(v);
+    for k in nodes.windows(2) {
+        cum += half_step * (k[0] + k[1]);
         c.push(cum);
     }
     cum
