@@ -92,10 +92,10 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
     let m_hi = (w.saturating_sub(1)).min(width.saturating_sub(1) / 2); // exclusive
     let mut tmp = vec![0.0f32; width * h];
     for (row, out) in p.data.chunks_exact(w).zip(tmp.chunks_exact_mut(width)) {
-        for (x, taps) in xtaps.iter().enumerate() {
-            if x < 2 || x / 2 >= m_hi {
-                out[x] = taps.iter().map(|&(j, wt)| wt * row[j]).sum();
-            }
+        // The outputs outside the written-out interior (x < 2 or x / 2 ≥ m_hi): at
+        // most two at each end, visited directly (as in `reduce_slice`).
+        for x in (0..2.min(width)).chain((2 * m_hi).max(2)..width) {
+            out[x] = xtaps[x].iter().map(|&(j, wt)| wt * row[j]).sum();
         }
         if m_hi > 1 {
             for (pair, t) in out[2..2 * m_hi].chunks_exact_mut(2).zip(row.windows(3)) {
