@@ -67,12 +67,16 @@ fn blur_x_rows(p: &Plane, kernel: &[f32], rows: &[bool]) -> Vec<f32> {
     let (w, h) = (p.width, p.height);
     let r = kernel.len() / 2;
     let mut tmp = vec![0.0f32; w * h];
+    if w == 0 {
+        return tmp;
+    }
     let mut padded = vec![0.0f32; w + 2 * r];
     for y in (0..h).filter(|&y| rows[y]) {
         let row = &p.data[y * w..(y + 1) * w];
-        for (i, v) in padded.iter_mut().enumerate() {
-            *v = row[(i as isize - r as isize).clamp(0, w as isize - 1) as usize];
-        }
+        // Clamp-to-edge padding: the row itself, its end values repeated r times.
+        padded[..r].fill(row[0]);
+        padded[r..r + w].copy_from_slice(row);
+        padded[r + w..].fill(row[w - 1]);
         let out = &mut tmp[y * w..(y + 1) * w];
         for (k, &wk) in kernel.iter().enumerate() {
             for (o, &v) in out.iter_mut().zip(&padded[k..k + w]) {
