@@ -359,6 +359,26 @@ mod tests {
         }
     }
 
+    /// `first_non_finite` finds what a plain scan finds: NaN, +∞ and −∞ at every
+    /// position class (first, last, a block's and a lane group's edges, the lanes'
+    /// remainder) in lengths around the block and lane sizes, and nothing in finite
+    /// data holding the extremes (±f32::MAX, subnormals, −0).
+    #[test]
+    fn first_non_finite_is_the_plain_scan() {
+        for n in [0usize, 1, 15, 16, 17, 1023, 1024, 1025, 3000] {
+            let mut v: Vec<f32> = (0..n).map(|i| [0.25, f32::MAX, -f32::MAX, 1e-40, -0.0][i % 5]).collect();
+            assert_eq!(first_non_finite(&v), None, "finite, length {n}");
+            for at in [0, 15, 16, 1023, 1024, 2047, 2999].into_iter().filter(|&i| i < n).chain(n.checked_sub(1)) {
+                for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+                    let keep = v[at];
+                    v[at] = bad;
+                    assert_eq!(first_non_finite(&v), v.iter().position(|x| !x.is_finite()), "{bad} at {at} of {n}");
+                    v[at] = keep;
+                }
+            }
+        }
+    }
+
     /// `sample_line` writes what `sample_bilinear` reads at every node, bit for bit:
     /// lines inside the plane (the one-test path), lines leaving it through either
     /// end or crossing it, lines along the last row and column (the interior's open
