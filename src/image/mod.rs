@@ -359,10 +359,10 @@ mod tests {
         }
     }
 
-    /// `first_non_finite` finds what a plain scan finds: NaN, +∞ and −∞ at every
-    /// position class (first, last, a block's and a lane group's edges, the lanes'
-    /// remainder) in lengths around the block and lane sizes, and nothing in finite
-    /// data holding the extremes (±f32::MAX, subnormals, −0).
+    /// `first_non_finite` finds what a plain scan finds: NaN, +∞ and −∞ first, last,
+    /// at a block's edges and in a short last block, in lengths around the block
+    /// size, and nothing in finite data holding the extremes (±f32::MAX,
+    /// subnormals, −0).
     #[test]
     fn first_non_finite_is_the_plain_scan() {
         for n in [0usize, 1, 15, 16, 17, 1023, 1024, 1025, 3000] {
