@@ -118,18 +118,26 @@ pub(super) fn clip_mask_of(
             }
         }
     }
-    ClipMask { clipped: Some((IntegralImage::new(&blocks), block)), invalid }
+    ClipMask { clipped: Some((IntegralImage::new(&blocks), block_shift(block))), invalid }
 }
 
 /// Largest share of a noise sample's footprint where the reference may not hold.
 pub(super) const MAX_INVALID_FRACTION: f64 = 0.02;
 
-/// Clipped-tile counts over boxes (and the tile size; `None` when the frame has no
-/// clipping at all), and the invalid-reference pixel counts (`None`: valid
+/// Clipped-tile counts over boxes (and log2 of the tile size; `None` when the frame
+/// has no clipping at all), and the invalid-reference pixel counts (`None`: valid
 /// everywhere).
 pub(super) struct ClipMask {
-    clipped: Option<(IntegralImage, usize)>,
+    clipped: Option<(IntegralImage, u32)>,
     invalid: Option<IntegralImage>,
+}
+
+/// log2 of a tile size (1 for the accurate tier, 8 for the blind one): `touches`
+/// runs for every channel at every grid point of every level, and three integer
+/// divisions by a run-time tile size per call were most of its cost.
+fn block_shift(block: usize) -> u32 {
+    assert!(block.is_power_of_two(), "clip tiles are a power of two px (got {block})");
+    block.trailing_zeros()
 }
 
 impl ClipMask {
@@ -144,9 +152,9 @@ impl ClipMask {
         let span = |c: usize, r: usize, n: usize| ((c + r + 1).min(n) - c.saturating_sub(r)) as f64;
         let clipped = match &self.clipped {
             None => false,
-            Some((ii, block)) => {
-                let (bx, by) = ((x / block).min(ii.width() - 1), (y / block).min(ii.height() - 1));
-                let rb = r.div_ceil(*block);
+            Some((ii, shift)) => {
+                let (bx, by) = ((x >> shift).min(ii.width() - 1), (y >> shift).min(ii.height() - 1));
+                let rb = (r + (1 << shift) - 1) >> shift; // r.div_ceil(block)
                 let count = ii.box_sum(bx, by, rb);
                 if coarse {
                     count > MAX_INVALID_FRACTION * span(bx, rb, ii.width()) * span(by, rb, ii.height())
@@ -222,7 +230,7 @@ pub(super) fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMas
         let blocks: Vec<f32> =
             tlo.iter().zip(&thi).map(|(&a, &b)| (Some(a) == lo || Some(b) == hi) as u8 as f32).collect();
         let ii = IntegralImage::new(&Plane::from_vec(bw, bh, blocks));
-        ((lo, hi), ClipMask { clipped: Some((ii, block)), invalid: None })
+        ((lo, hi), ClipMask { clipped: Some((ii, block_shift(block))), invalid: None })
     };
     let [(l0, m0), (l1, m1), (l2, m2)] = std::array::from_fn(per_channel);
     ([l0, l1, l2], [m0, m1, m2])
