@@ -3,7 +3,9 @@
 //! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
 //! where the streak zeros are not identified; its method is documented there).
 
-use super::{push_profile, Profiles, FAST_SAMPLES, FAST_SUBSETS, MIN_SAMPLES, TEXTURE_ANISOTROPY_90};
+use super::{
+    push_profile, AtLambda, GridTaps, Profiles, FAST_SAMPLES, FAST_SUBSETS, MIN_SAMPLES, TEXTURE_ANISOTROPY_90,
+};
 use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
 
@@ -56,10 +58,12 @@ pub(super) fn isotropy_root(
     // 1: every sample). C/D rises with λ: the extra box along v lowers D.
     let imbalance = |lambda: f32, subset: usize, of: usize| -> f64 {
         let (mut c, mut d) = (0.0f64, 0.0f64);
+        let mut at = AtLambda::new(lambda);
         for s in (subset..n).step_by(of) {
-            let b = |k: usize| prof.blurred(4 * s + k, lambda);
-            c += (0.5 * (b(0) - b(1)) as f64).powi(2);
-            d += (0.5 * (b(2) - b(3)) as f64).powi(2);
+            let mut b = |k: usize| prof.blurred_at(4 * s + k, &mut at);
+            let (b0, b1, b2, b3) = (b(0), b(1), b(2), b(3));
+            c += (0.5 * (b0 - b1) as f64).powi(2);
+            d += (0.5 * (b2 - b3) as f64).powi(2);
         }
         c - d
     };
@@ -136,9 +140,10 @@ pub(super) fn isotropy_root(
     let mut evidence = IsotropyEvidence::default();
     let (mut c, mut d) = ([0.0f64; GRID], [0.0f64; GRID]);
     let mut b = [[0.0f32; GRID]; 4];
+    let mut taps = GridTaps::default();
     for (s, &(fx, fy)) in flows.iter().enumerate() {
         for (k, bk) in b.iter_mut().enumerate() {
-            prof.blurred_grid(4 * s + k, bk);
+            prof.blurred_grid(4 * s + k, bk, &mut taps);
         }
         for j in 0..GRID {
             c[j] = (0.5 * (b[0][j] - b[1][j]) as f64).powi(2);
