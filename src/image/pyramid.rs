@@ -20,9 +20,15 @@ pub fn reduce_slice(data: &[f32], w: usize, h: usize) -> Plane {
     // Rows first: w2 columns at full height. The interior (every tap inside the row)
     // runs without clamps — the same sums in the same order, 3–4× faster; only the
     // outputs whose taps leave the row clamp.
-    let mut tmp = vec![0.0f32; w2 * h];
+    // Grown a row at a time: each row's zero fill lands in cache just before the row
+    // is written (a zeroed plane up front was a 2.4 MB memset per channel at
+    // 1280×960, 4% of the blind noise fit by perf).
+    let mut tmp: Vec<f32> = Vec::with_capacity(w2 * h);
     let interior = if w >= 5 { 1..(w - 3) / 2 + 1 } else { 0..0 }; // 2·x2 − 2 ≥ 0 and 2·x2 + 2 ≤ w − 1
-    for (row, out) in data.chunks_exact(w).zip(tmp.chunks_exact_mut(w2)) {
+    for row in data.chunks_exact(w) {
+        let start = tmp.len();
+        tmp.resize(start + w2, 0.0);
+        let out = &mut tmp[start..];
         let edge = |x2: usize| {
             let cx = 2 * x2 as isize;
             let mut acc = 0.0;
@@ -90,8 +96,12 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
     // same products summed in the same order as `expand_taps`).
     let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
     let m_hi = (w.saturating_sub(1)).min(width.saturating_sub(1) / 2); // exclusive
-    let mut tmp = vec![0.0f32; width * h];
-    for (row, out) in p.data.chunks_exact(w).zip(tmp.chunks_exact_mut(width)) {
+    // Grown a row at a time (see `reduce_slice`).
+    let mut tmp: Vec<f32> = Vec::with_capacity(width * h);
+    for row in p.data.chunks_exact(w) {
+        let start = tmp.len();
+        tmp.resize(start + width, 0.0);
+        let out = &mut tmp[start..];
         // The outputs outside the written-out interior (x < 2 or x / 2 ≥ m_hi): at
         // most two at each end, visited directly (as in `reduce_slice`).
         for x in (0..2.min(width)).chain((2 * m_hi).max(2)..width) {
