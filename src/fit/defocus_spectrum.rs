@@ -253,14 +253,25 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     // feed the first split half, the odd the second, as before.
     // Row y of the tile at (x0, y0), as a slice (one bounds check per row).
     let row = |x0: usize, y0: usize, y: usize| &luma.data[(y0 + y) * w + x0..(y0 + y) * w + x0 + t];
+    // The tile's mean in f64 over 8 lanes (one serial chain of 65 536 dependent
+    // additions was ~0.7 ms of the spectrum at 256²; the lanes vectorise). f64 keeps
+    // the reordering's effect ~1e-16 relative, far below the f32 the mean is
+    // rounded to: the same mean but at a rounding boundary.
     let mean_of_tile = |x0: usize, y0: usize| -> f32 {
-        let mut mean = 0.0f64;
+        let mut lanes = [0.0f64; 8];
         for y in 0..t {
-            for &v in row(x0, y0, y) {
-                mean += v as f64;
+            let r = row(x0, y0, y);
+            let chunks = r.chunks_exact(8);
+            for (k, &v) in chunks.remainder().iter().enumerate() {
+                lanes[k] += v as f64;
+            }
+            for c in chunks {
+                for (l, &v) in lanes.iter_mut().zip(c) {
+                    *l += v as f64;
+                }
             }
         }
-        (mean / (t * t) as f64) as f32
+        (lanes.iter().sum::<f64>() / (t * t) as f64) as f32
     };
     for pair in tiles.chunks(2) {
         let (x0, y0) = pair[0];
