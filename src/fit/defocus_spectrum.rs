@@ -254,9 +254,10 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     // Row y of the tile at (x0, y0), as a slice (one bounds check per row).
     let row = |x0: usize, y0: usize, y: usize| &luma.data[(y0 + y) * w + x0..(y0 + y) * w + x0 + t];
     // The tile's mean in f64 over 8 lanes (one serial chain of 65 536 dependent
-    // additions was ~0.7 ms of the spectrum at 256²; the lanes vectorise). f64 keeps
-    // the reordering's effect ~1e-16 relative, far below the f32 the mean is
-    // rounded to: the same mean but at a rounding boundary.
+    // additions was ~0.7 ms of the spectrum at 256²; the lanes vectorise). The
+    // reordering moves the f64 sum by ~1e-16 relative, far below the f32 the mean is
+    // rounded to: the same f32 mean unless the sum sits that close to a rounding
+    // boundary (20 frames' signatures identical, BENCHMARKS.md).
     let mean_of_tile = |x0: usize, y0: usize| -> f32 {
         let mut lanes = [0.0f64; 8];
         for y in 0..t {

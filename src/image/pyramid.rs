@@ -96,7 +96,7 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
     // same products summed in the same order as `expand_taps`).
     let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
     let m_hi = (w.saturating_sub(1)).min(width.saturating_sub(1) / 2); // exclusive
-    // Grown a row at a time (see `reduce_slice`).
+                                                                       // Grown a row at a time (see `reduce_slice`).
     let mut tmp: Vec<f32> = Vec::with_capacity(width * h);
     for row in p.data.chunks_exact(w) {
         let start = tmp.len();

@@ -140,7 +140,7 @@ pub(super) fn isotropy_root(
     let mut evidence = IsotropyEvidence::default();
     let (mut c, mut d) = ([0.0f64; GRID], [0.0f64; GRID]);
     let mut b = [[0.0f32; GRID]; 4];
-    let mut taps = GridTaps::default();
+    let mut taps = GridTaps::new();
     for (s, &(fx, fy)) in flows.iter().enumerate() {
         for (k, bk) in b.iter_mut().enumerate() {
             prof.blurred_grid(4 * s + k, bk, &mut taps);

@@ -408,40 +408,47 @@ impl MeanArgs {
     }
 }
 
+/// A value per profile length, made on first use (profile lengths are few: the
+/// flow's speeds over the spacing, so a handful of distinct values per frame).
+struct PerLength<T>(Vec<Option<T>>);
+
+impl<T: Copy> PerLength<T> {
+    fn get(&mut self, len: usize, make: impl FnOnce() -> T) -> &T {
+        if self.0.len() <= len {
+            self.0.resize(len + 1, None);
+        }
+        self.0[len].get_or_insert_with(make)
+    }
+}
+
 /// `MeanArgs` of one λ per profile length (`Profiles::blurred_at`).
 pub(super) struct AtLambda {
     lambda: f32,
-    by_len: Vec<Option<MeanArgs>>,
+    by_len: PerLength<MeanArgs>,
 }
 
 impl AtLambda {
     pub(super) fn new(lambda: f32) -> Self {
-        Self { lambda, by_len: vec![] }
+        Self { lambda, by_len: PerLength(vec![]) }
     }
 
     fn of_len(&mut self, len: usize) -> &MeanArgs {
-        if self.by_len.len() <= len {
-            self.by_len.resize(len + 1, None);
-        }
         let lambda = self.lambda;
-        self.by_len[len].get_or_insert_with(|| MeanArgs::new(len, lambda))
+        self.by_len.get(len, || MeanArgs::new(len, lambda))
     }
 }
 
 /// `MeanArgs` of every node of the pooled fit's λ grid, λ_j = j/(GRID − 1), per
 /// profile length (`Profiles::blurred_grid`).
-#[derive(Default)]
-pub(super) struct GridTaps {
-    by_len: Vec<Option<[MeanArgs; GRID]>>,
-}
+pub(super) struct GridTaps(PerLength<[MeanArgs; GRID]>);
 
 impl GridTaps {
+    pub(super) fn new() -> Self {
+        Self(PerLength(vec![]))
+    }
+
     fn of_len(&mut self, len: usize) -> &[MeanArgs; GRID] {
-        if self.by_len.len() <= len {
-            self.by_len.resize(len + 1, None);
-        }
-        self.by_len[len]
-            .get_or_insert_with(|| std::array::from_fn(|j| MeanArgs::new(len, j as f32 / (GRID - 1) as f32)))
+        self.0.get(len, || std::array::from_fn(|j| MeanArgs::new(len, j as f32 / (GRID - 1) as f32)))
     }
 }
 
