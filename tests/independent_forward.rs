@@ -128,17 +128,15 @@ fn frame_rmse(fitted: &DepthOfField, truth: &DofCurve, depth: &Plane) -> f64 {
 }
 
 /// δ(Z) over the whole frame under Gaussian layers. Measured (BENCHMARKS.md): frame
-/// RMSE 0.049 / 0.078 px on the fully textured scenes, 0.20 / 0.067 px with 14% of
+/// RMSE 0.029 / 0.048 px on the fully textured scenes, 0.19 / 0.066 px with 14% of
 /// the frame textureless and nearer than every textured sample (0.68 / 0.12 px when
-/// the model was clamped to the textured depths), 0.058 px with a textureless far
-/// band. Tolerances: 0.1 px where the frame is textured — not the core issue's
-/// 0.05 px: a sampled Gaussian of std σ attenuates high frequencies more than the
-/// discrete Gaussian of variance σ² that defines δ in this project (synth and the GPU
-/// pass), and the per-pixel search reads it +0.03…+0.06 px larger at σ 0.7–2 px (a
-/// convention difference, not noise: the same search reads synth's frames within
-/// ±0.001 px at 0.25 px nodes); 0.25 px where the frame holds depths without texture,
-/// whose δ is extrapolated (at most one textured inverse-depth span, see
-/// `fit::dof::EXTRAPOLATION_FRACTION`).
+/// the model was clamped to the textured depths), 0.049 px with a textureless far
+/// band; median **0.049 px**, the 0.05 (0.067 before the blend map of
+/// `constant_blur_reads_its_sigma_under_three_kernels`). Tolerances: the median
+/// 0.05 px (the goal); 0.06 px per scene where the frame is textured (a
+/// sampled Gaussian of std σ still reads +0.01…+0.06 px long, see the test below);
+/// 0.25 px where the frame holds depths without texture, whose δ is extrapolated (at
+/// most one textured inverse-depth span, see `fit::dof::EXTRAPOLATION_FRACTION`).
 #[test]
 fn dof_on_independent_gaussian_layers() {
     let mut rmses = vec![];
@@ -162,7 +160,7 @@ fn dof_on_independent_gaussian_layers() {
         );
         assert!(got.present, "{}", scene.name);
         let textureless = scene.name.contains("textureless");
-        let tol = if textureless { 0.25 } else { 0.1 };
+        let tol = if textureless { 0.25 } else { 0.06 };
         assert!(rmse <= tol, "{}: frame RMSE {rmse} px > {tol}", scene.name);
         if scene.name.contains("nearer") {
             // The model covers the frame's near depths (0.2–0.5 m), not only the
@@ -171,11 +169,63 @@ fn dof_on_independent_gaussian_layers() {
         }
         rmses.push(rmse);
     }
-    println!(
-        "median frame RMSE {:.4} px, worst {:.4}",
-        median(rmses.clone()),
-        rmses.iter().cloned().fold(0.0, f64::max)
-    );
+    let med = median(rmses.clone());
+    println!("median frame RMSE {med:.4} px, worst {:.4}", rmses.iter().cloned().fold(0.0, f64::max));
+    assert!(med <= 0.05, "median frame RMSE {med} px");
+}
+
+/// One depth, one σ, three forward models: the exact discrete Gaussian of variance
+/// σ² (what δ means in this project), `synth`'s variance-matched blend of its
+/// 0.25 px nodes (what the renderer draws) and the independent Gaussian layers
+/// (sampled Gaussians). The per-pixel search blends stack nodes 0.5 px apart, and a
+/// blend of two Gaussians carries more high frequency than the Gaussian of its
+/// variance: read through the variance-linear map it overstated σ between nodes by
+/// up to +0.041 / +0.050 px (astronaut / chelsea at σ 0.7; 0 on the nodes). With the
+/// map corrected for the frame's own spectrum (`fit::dof` `BlendMap`) the exact
+/// Gaussian reads within ±0.005 px at every σ measured (tolerance 0.01: twice
+/// that), `synth`'s blends within −0.013 px (they carry the same excess at their
+/// 0.25 px spacing; tolerance 0.02). The sampled Gaussians read +0.011…+0.058 px
+/// long: a sampled Gaussian of std σ has the variance σ² (σ ≥ 0.7) but not the
+/// discrete Gaussian's fourth cumulant, so the best-matching discrete Gaussian is
+/// wider — a kernel-family difference, stated, not asserted beyond 0.08 px.
+#[test]
+fn constant_blur_reads_its_sigma_under_three_kernels() {
+    use blind_augment::image::{blur_separable, discrete_gaussian_kernel};
+    for name in ["astronaut.png", "chelsea.png"] {
+        let img = photo(name);
+        let (w, h) = (img.width, img.height);
+        let depth = Plane::from_vec(w, h, vec![1.0; w * h]);
+        let mut line = format!("{name} (exact / synth / layers, px):");
+        for &s in &[0.5f32, 0.7, 1.0, 1.3, 1.7, 2.5, 4.0] {
+            let k = discrete_gaussian_kernel(s * s);
+            let mut exact = img.clone();
+            for c in 0..3 {
+                exact.channels[c] = blur_separable(&img.plane(c), &k).data;
+            }
+            let frames = [
+                quantize8(&exact),
+                quantize8(&blind_augment::synth::add_defocus(&img, &Plane::from_vec(w, h, vec![s; w * h]))),
+                quantize8(&layered_defocus(&img, &vec![s; w * h], LAYER_STEP_PX)),
+            ];
+            let mut err = [0.0f32; 3];
+            for (e, f) in err.iter_mut().zip(&frames) {
+                let inp = FitInputs {
+                    defocus_deblurred: Some(&img),
+                    depth: Some(&depth),
+                    depth_units: DepthUnits::MetricM,
+                    ..FitInputs::new(f)
+                };
+                let dof = fit(&inp, &only(false, false, true)).expect("valid inputs").model.depth_of_field;
+                assert!(dof.present, "{name} σ {s}");
+                *e = dof.sigma_px(1.0) - s;
+            }
+            line += &format!(" {s}: {:+.3}/{:+.3}/{:+.3}", err[0], err[1], err[2]);
+            assert!(err[0].abs() <= 0.01, "{name} σ {s}: exact Gaussian read {:+.4} px off", err[0]);
+            assert!(err[1].abs() <= 0.02, "{name} σ {s}: synth's blend read {:+.4} px off", err[1]);
+            assert!(err[2].abs() <= 0.08, "{name} σ {s}: sampled Gaussian read {:+.4} px off", err[2]);
+        }
+        println!("{line}");
+    }
 }
 
 /// λ under interpolation-free (bicubic, midpoint) streaks. Measured: 0.1/0.3/0.5/

@@ -7,9 +7,11 @@
 //! with nodes every `node_spacing` px, continued at half and quarter resolution
 //! once it is band-limited (`stack_levels`). Between nodes S_k, S_{k+1} the blend weight
 //! that best explains a 3×3 patch of I is closed-form,
-//! w = ⟨I − S_k, S_{k+1} − S_k⟩ / |S_{k+1} − S_k|², clamped to [0, 1], and
-//! σ² = σ_k² + w(σ_{k+1}² − σ_k²): a continuous σ, not a 0.1 px grid, and one pass
-//! over the stack instead of 100 blurs.
+//! w = ⟨I − S_k, S_{k+1} − S_k⟩ / |S_{k+1} − S_k|², clamped to [0, 1], and σ² is
+//! the variance whose exact discrete Gaussian that weight best imitates
+//! (`blend::BlendMap`, from the stack's own inner products; the variance-linear
+//! σ_k² + w(σ_{k+1}² − σ_k²) read up to +0.05 px long between nodes): a continuous
+//! σ, not a 0.1 px grid, and one pass over the stack instead of 100 blurs.
 //!
 //! Textureless rule: a sample is kept when the mean squared luma gradient of the
 //! sharp image over its 3×3 patch is ≥ 1e-4 (a 1%-per-pixel ramp) — below that the
@@ -29,6 +31,7 @@
 //! Blind: `blind` (Zhuo & Sim 2011's edge re-blur ratio on isolated edges, pooled
 //! over views by `fit_fast_pooled`).
 
+mod blend;
 mod blind;
 
 pub use blind::{fit_fast, fit_fast_pooled, POOLED_MAX_EDGE_SAMPLES};
@@ -36,6 +39,7 @@ pub use blind::{fit_fast, fit_fast_pooled, POOLED_MAX_EDGE_SAMPLES};
 use super::curve::fit_dof_curve;
 use crate::image::{blur_separable, discrete_gaussian_kernel, gradient_sq, reduce, Plane, Rgb};
 use crate::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, DofKernel, Status};
+use blend::{BlendMap, Gram};
 use std::sync::OnceLock;
 use std::time::Instant;
 
@@ -53,6 +57,9 @@ const TEXTURE_MIN_GRAD_SQ: f32 = 1e-4;
 /// quarter-resolution levels (pixel j there ↔ pixel 2j / 4j here).
 const SAMPLE_STRIDE: usize = 4;
 const MIN_SAMPLES: usize = 32;
+/// Every how many samples' patches the blend map's Gram sums read (all of them cost
+/// ~1 ms of a 20 ms fit at 512²; one in four reads the same map to ~1e-3 in w).
+const GRAM_SAMPLE_STEP: usize = 4;
 
 #[derive(Clone, Debug, Default)]
 pub struct DofPlotData {
@@ -298,8 +305,8 @@ pub fn fit_accurate(
     let n = centres.len();
     let spacing = opts.dof_node_spacing_px;
     let max_sigma = opts.dof_max_sigma_px;
-    // Per level: (first node σ, number of intervals, statistics).
-    let mut levels: Vec<(f32, usize, IntervalStats)> = vec![];
+    // Per level: (first node σ, number of intervals, statistics, blend maps).
+    let mut levels: Vec<(f32, usize, IntervalStats, Vec<BlendMap>)> = vec![];
     if n >= MIN_SAMPLES {
         let mut frame = yi.clone();
         let mut start_plane = ys.clone();
@@ -321,6 +328,30 @@ pub fn fit_accurate(
             let mut handoff: Option<Plane> = None;
             let next_lo = stack.get(level.shift + 1).map(|l| (l.lo / spacing).floor() * spacing);
             let mut prev = start_plane.clone();
+            // The stack's Gram samples for `BlendMap`, g(t_a + t_b) = ⟨S_a − m, S_b − m⟩,
+            // over every `GRAM_SAMPLE_STEP`-th sample's patch: the pixels the search
+            // weighs (full-plane sums cost ~1 ms at 512²).
+            let patch = |x: usize, y: usize| {
+                let (cx, cy) = ((x >> level.shift).clamp(1, fw.max(3) - 2), (y >> level.shift).clamp(1, fh.max(3) - 2));
+                (cy.saturating_sub(1)..(cy + 2).min(fh))
+                    .flat_map(move |j| (cx.saturating_sub(1)..(cx + 2).min(fw)).map(move |i| j * fw + i))
+            };
+            let (mut m, mut pixels) = (0.0f64, 0usize);
+            for &(x, y) in centres.iter().step_by(GRAM_SAMPLE_STEP) {
+                for idx in patch(x, y) {
+                    m += prev.data[idx] as f64;
+                    pixels += 1;
+                }
+            }
+            let pixels = pixels.max(1) as f64;
+            let m = (m / pixels) as f32;
+            let mut gram = Gram::default();
+            let e0: f64 = centres
+                .iter()
+                .step_by(GRAM_SAMPLE_STEP)
+                .map(|&(x, y)| patch(x, y).map(|idx| (prev.data[idx] - m).powi(2)).sum::<f32>() as f64)
+                .sum();
+            gram.push(2.0 * lo * lo, e0 / pixels);
             for k in 0..intervals {
                 let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
                 if Some(s0) == next_lo {
@@ -329,30 +360,44 @@ pub fn fit_accurate(
                 // Increment in this level's pixel units: variances scale by 1/scale².
                 let next = blur_separable(&prev, &discrete_gaussian_kernel((s1 * s1 - s0 * s0) / (scale * scale)));
                 for (s, &(x, y)) in centres.iter().enumerate() {
-                    let (cx, cy) =
-                        ((x >> level.shift).clamp(1, fw.max(3) - 2), (y >> level.shift).clamp(1, fh.max(3) - 2));
                     let (mut aa, mut ad, mut dd) = (0.0f32, 0.0f32, 0.0f32);
-                    for j in cy.saturating_sub(1)..(cy + 2).min(fh) {
-                        for i in cx.saturating_sub(1)..(cx + 2).min(fw) {
-                            let idx = j * fw + i;
-                            let av = frame.data[idx] - prev.data[idx];
-                            let dv = next.data[idx] - prev.data[idx];
-                            aa += av * av;
-                            ad += av * dv;
-                            dd += dv * dv;
-                        }
+                    for idx in patch(x, y) {
+                        let (f, p, q) = (frame.data[idx], prev.data[idx], next.data[idx]);
+                        let (av, dv) = (f - p, q - p);
+                        aa += av * av;
+                        ad += av * dv;
+                        dd += dv * dv;
                     }
                     let o = s * intervals + k;
                     st.aa[o] = aa;
                     st.ad[o] = ad;
                     st.dd[o] = dd;
                 }
+                let (mut pn_sum, mut nn_sum) = (0.0f64, 0.0f64);
+                for &(x, y) in centres.iter().step_by(GRAM_SAMPLE_STEP) {
+                    let (mut pn, mut nn) = (0.0f32, 0.0f32);
+                    for idx in patch(x, y) {
+                        let (p, q) = (prev.data[idx] - m, next.data[idx] - m);
+                        pn += p * q;
+                        nn += q * q;
+                    }
+                    pn_sum += pn as f64;
+                    nn_sum += nn as f64;
+                }
+                gram.push(s0 * s0 + s1 * s1, pn_sum / pixels);
+                gram.push(2.0 * s1 * s1, nn_sum / pixels);
                 prev = next;
             }
             if Some(lo + intervals as f32 * spacing) == next_lo {
                 handoff = Some(prev.clone());
             }
-            levels.push((lo, intervals, st));
+            let maps = (0..intervals)
+                .map(|k| {
+                    let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
+                    BlendMap::new(&gram, s0 * s0, s1 * s1)
+                })
+                .collect();
+            levels.push((lo, intervals, st, maps));
             match handoff {
                 Some(p) if fw > 3 && fh > 3 => {
                     start_plane = decimate(&p);
@@ -363,14 +408,14 @@ pub fn fit_accurate(
         }
     }
     st.lap("blur");
-    // Residual and best blend of sample s in interval k of a level.
-    let eval = |lv: &(f32, usize, IntervalStats), s: usize, k: usize, wgt: Option<f32>| -> (f32, f32) {
-        let (lo, intervals, st) = lv;
+    // Residual and best blend weight of sample s in interval k of a level (σ from
+    // the weight by the interval's `BlendMap`, only for the interval chosen).
+    type Level = (f32, usize, IntervalStats, Vec<BlendMap>);
+    let eval = |lv: &Level, s: usize, k: usize, wgt: Option<f32>| -> (f32, f32) {
+        let (_, intervals, st, _) = lv;
         let o = s * intervals + k;
         let wgt = wgt.unwrap_or(if st.dd[o] > 1e-12 { (st.ad[o] / st.dd[o]).clamp(0.0, 1.0) } else { 0.0 });
-        let r = (st.aa[o] - 2.0 * wgt * st.ad[o] + wgt * wgt * st.dd[o]).max(0.0);
-        let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
-        (r, (s0 * s0 + wgt * (s1 * s1 - s0 * s0)).sqrt())
+        ((st.aa[o] - 2.0 * wgt * st.ad[o] + wgt * wgt * st.dd[o]).max(0.0), wgt)
     };
     // Coarse-to-fine choice: a level's answer stands if its minimum is interior
     // (below the next level's start + 0.25 px), else the next level decides.
@@ -379,8 +424,16 @@ pub fn fit_accurate(
     for (s, &(x, y)) in centres.iter().enumerate() {
         let mut chosen = 0.0f32;
         for (li, lv) in levels.iter().enumerate() {
-            let best = (0..lv.1).map(|k| eval(lv, s, k, None)).min_by(|a, b| a.0.total_cmp(&b.0));
-            if let Some((_, sigma)) = best {
+            // The first interval with the least residual (as `min_by`).
+            let mut best: Option<(usize, f32, f32)> = None;
+            for k in 0..lv.1 {
+                let (r, w) = eval(lv, s, k, None);
+                if best.map_or(true, |b| r.total_cmp(&b.1).is_lt()) {
+                    best = Some((k, r, w));
+                }
+            }
+            if let Some((k, _, wgt)) = best {
+                let sigma = lv.3[k].variance(wgt).sqrt();
                 chosen = sigma;
                 let limit = levels.get(li + 1).map_or(f32::INFINITY, |next| next.0 + 0.25);
                 if sigma < limit {
@@ -397,9 +450,7 @@ pub fn fit_accurate(
         let li = levels.iter().rposition(|lv| sigma >= lv.0 + 0.25 || lv.0 == 0.0).unwrap_or(0);
         let lv = &levels[li];
         let k = (((sigma - lv.0) / spacing).floor().max(0.0) as usize).min(lv.1 - 1);
-        let (s0, s1) = (lv.0 + k as f32 * spacing, lv.0 + (k + 1) as f32 * spacing);
-        let wgt = ((sigma * sigma - s0 * s0) / (s1 * s1 - s0 * s0)).clamp(0.0, 1.0);
-        eval(lv, s, k, Some(wgt)).0
+        eval(lv, s, k, Some(lv.3[k].weight(sigma * sigma))).0
     };
     let residual_at = |dof: &DepthOfField| -> Option<(f64, f64)> {
         if levels.is_empty() {
