@@ -44,14 +44,18 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 /// Node spacing of the fitting stack. 0.5 px keeps the stack 2× cheaper than the
-/// synth reference's 0.25 px; the variance-matched blend makes the mismatch a
-/// higher-order effect (measured in tests/validation.rs and BENCHMARKS.md).
+/// synth reference's 0.25 px; the blend map (`blend::BlendMap`) reads exact
+/// Gaussians between its nodes (measured in tests/validation.rs,
+/// tests/independent_forward.rs and BENCHMARKS.md). 1 px would save a quarter of
+/// the fit but reads an independent forward model 0.035 px RMSE instead of 0.028.
 pub const DEFAULT_NODE_SPACING_PX: f32 = 0.5;
 /// Default handoff of the DoF stack to half resolution (see `stack_levels`).
-/// Measured at 512² (BENCHMARKS.md): at 5 px the strong-blur RMSE is 0.009 px
-/// (full resolution: 0.005) for two thirds of the time; at 3 px it is 0.046 px,
-/// too close to the 0.05 px tolerance for 6 ms.
-pub const DEFAULT_PYRAMID_FROM_PX: Option<f32> = Some(5.0);
+/// Measured at 512² with the blend map (BENCHMARKS.md, `cargo bench --bench
+/// quality`): at 4 px the strong-blur RMSE is 0.0086 px (5 px: 0.0140; full
+/// resolution: 0.0077) in 60% of the full-resolution time (19.1 vs 31.8 ms); at
+/// 3 px it is 0.049 px, at the 0.05 px tolerance. (Before the map 4 px read
+/// 0.080 px: the variance-linear map's bias on the coarse grid.)
+pub const DEFAULT_PYRAMID_FROM_PX: Option<f32> = Some(4.0);
 const TEXTURE_MIN_GRAD_SQ: f32 = 1e-4;
 /// Sample centres on multiples of 4, so each one is also a pixel of the half- and
 /// quarter-resolution levels (pixel j there ↔ pixel 2j / 4j here).
