@@ -1,0 +1,195 @@
+//! The calibrator's configuration: the tier (the user's speed/accuracy trade), its
+//! schedule and window, and the analysis providers per role.
+
+use crate::analysis::onnx::{OnnxDeblur, OnnxDenoiser, OnnxDepth, OnnxError, OnnxFlow, OnnxModel};
+use crate::analysis::{
+    DefocusDeblurrer, Denoiser, DepthProvider, FlowProvider, GivenFlow, Intrinsics, LucasKanadeFlow, MotionDeblurrer,
+    PoseDepthFlow, Role, TemporalDenoiser, TemporalMotionDeblur,
+};
+use crate::fit::Effects;
+
+/// How much compute each update may spend (the user's speed/accuracy trade).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CalibrationTier {
+    /// The frame alone (blind estimators), every frame.
+    Fast,
+    /// Temporal noise reference from 4 frames; motion blur and DoF blind.
+    Balanced,
+    /// Temporal references for noise (8 frames) and motion blur (sharp frames).
+    Accurate,
+}
+
+impl CalibrationTier {
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "fast" => Some(Self::Fast),
+            "balanced" => Some(Self::Balanced),
+            "accurate" => Some(Self::Accurate),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Fast => "fast",
+            Self::Balanced => "balanced",
+            Self::Accurate => "accurate",
+        }
+    }
+
+    /// Video time between updates after the burst.
+    pub fn update_interval_s(self) -> f64 {
+        match self {
+            Self::Fast => 0.0,
+            Self::Balanced => 0.2,
+            Self::Accurate => 0.25,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct CalibratorConfig {
+    pub tier: CalibrationTier,
+    /// Nominal frame interval (s): flow is per this interval.
+    pub frame_interval_s: f64,
+    pub intrinsics: Option<Intrinsics>,
+    pub effects: Effects,
+    /// Start-up burst (boundary setup): fit every frame for this long.
+    pub burst_s: f64,
+    /// Video time between fits after the burst (0: every frame).
+    pub update_interval_s: f64,
+    /// Estimates aggregated: the last this many seconds of video.
+    pub window_s: f64,
+    /// Video time between refits of each effect (noise, motion blur, depth of
+    /// field) after the burst; an update fits only the effects that are due, so
+    /// the cost of rarely changing ones is spread out (a fixed-focus camera's DoF
+    /// only changes with a detected change, which restarts the burst).
+    pub refit_s: [f64; 3],
+    /// Newest frames held for temporal references (besides the sharp ones).
+    pub frames_held: usize,
+    /// Sharp frames (head at rest) held, and how long (s).
+    pub sharp_held: usize,
+    pub sharp_max_age_s: f64,
+    /// The blind noise fit reads a strip of full rows of about this many pixels per
+    /// refit (at least `MIN_STRIP_ROWS` rows), the next strip down each time, and
+    /// aligns only that strip of the previous frame (`None`: the whole frame every
+    /// time). Aggregation (the median over `window_s`) then sees the whole frame.
+    pub noise_strip_px: Option<usize>,
+}
+
+impl CalibratorConfig {
+    pub fn new(tier: CalibrationTier, frame_interval_s: f64, intrinsics: Option<Intrinsics>) -> Self {
+        Self {
+            tier,
+            frame_interval_s,
+            intrinsics,
+            effects: Effects::ALL,
+            burst_s: 1.0,
+            update_interval_s: tier.update_interval_s(),
+            refit_s: match tier {
+                // λ against sharp frames reads ±0.002 per fit: every 0.1 s is plenty.
+                // Blind δ(Z) varies from frame to frame (0.22–0.55 px RMSE on the
+                // calibration video depending on which frames it was fitted on):
+                // every 0.1 s, on the updates that refit neither noise nor λ, the
+                // window's median sees ten of them.
+                CalibrationTier::Fast => [0.1, 0.1, 0.1],
+                _ => [0.0, 0.0, 1.0],
+            },
+            window_s: 1.0,
+            frames_held: match tier {
+                CalibrationTier::Fast => 1, // the previous frame: flow fallback, noise probe
+                CalibrationTier::Balanced => 6,
+                CalibrationTier::Accurate => 10,
+            },
+            // Sharp frames (head at rest) are the motion-blur fit's I_noMB: the
+            // accurate tier averages three, the others align two sparsely as two
+            // independent references (`TemporalMotionDeblur::sparse`).
+            sharp_held: match tier {
+                CalibrationTier::Accurate => 3,
+                _ => 2,
+            },
+            sharp_max_age_s: 3.0,
+            noise_strip_px: Some(NOISE_STRIP_PX),
+        }
+    }
+}
+
+/// Pixels per blind noise refit (`CalibratorConfig::noise_strip_px`): a quarter of
+/// 1280×960 (its 960 rows in 4 strips of 240), all of 640×480. The fit samples
+/// ~20 000 points per level whatever the size, so a strip is not short of samples;
+/// its pyramid and the alignment are what scale with the pixels (60 + 37 ms of one
+/// core for the whole 1280×960 frame).
+pub const NOISE_STRIP_PX: usize = 320 * 1024;
+/// Fewest rows in a noise strip: the fit's coarsest structure band is 1/32 of the
+/// resolution.
+pub const MIN_STRIP_ROWS: usize = 128;
+
+/// The providers per role. `for_tier` picks the defaults; `--onnx` replaces them.
+pub struct Providers {
+    /// Depth for frames that bring none (a depth network). Frames with depth
+    /// (headset-native: environment depth reprojected, depth files) use their own,
+    /// moved in without a copy.
+    pub depth: Option<Box<dyn DepthProvider>>,
+    pub flow: Box<dyn FlowProvider>,
+    /// Fallback flow when the primary one cannot serve a frame.
+    pub flow_fallback: Option<Box<dyn FlowProvider>>,
+    pub denoise: Option<Box<dyn Denoiser>>,
+    pub motion_deblur: Option<Box<dyn MotionDeblurrer>>,
+    pub defocus_deblur: Option<Box<dyn DefocusDeblurrer>>,
+}
+
+impl Providers {
+    /// Headset-native depth and pose + depth flow (Lucas–Kanade when a frame has no
+    /// pose or depth); temporal references for the tiers that use them.
+    pub fn for_tier(tier: CalibrationTier) -> Self {
+        let denoise: Option<Box<dyn Denoiser>> = match tier {
+            CalibrationTier::Fast => None,
+            CalibrationTier::Balanced => {
+                Some(Box::new(TemporalDenoiser { frames: 4, min_frames: 3, ..Default::default() }))
+            }
+            CalibrationTier::Accurate => Some(Box::new(TemporalDenoiser::default())),
+        };
+        // I_noMB from frames taken with the head at rest, in every tier: blind, a
+        // streak of ≤ 3 px (λ = 0.25 on a slow turn) is not identifiable
+        // (BENCHMARKS.md), against the reference it is. The fast and balanced tiers
+        // align two sharp frames on a sample of rows, as two independent references.
+        let motion_deblur: Box<dyn MotionDeblurrer> = match tier {
+            CalibrationTier::Accurate => Box::new(TemporalMotionDeblur::default()),
+            _ => Box::new(TemporalMotionDeblur::sparse()),
+        };
+        Self {
+            depth: None,
+            flow: Box::new(PoseDepthFlow),
+            flow_fallback: Some(Box::new(LucasKanadeFlow::default())),
+            denoise,
+            motion_deblur: Some(motion_deblur),
+            defocus_deblur: None,
+        }
+    }
+
+    /// Replace `role`'s provider by the ONNX model at `path` (loaded under the role's
+    /// contract, `analysis::onnx`; a breach is an error naming the file). Depth:
+    /// used for frames that bring none. Flow: the network first, Lucas–Kanade when
+    /// it cannot serve a frame (the first one).
+    pub fn with_onnx(mut self, role: Role, path: &std::path::Path) -> Result<Self, OnnxError> {
+        let model = OnnxModel::load(role, path, None)?;
+        match role {
+            Role::Denoise => self.denoise = Some(Box::new(OnnxDenoiser::new(model))),
+            Role::MotionDeblur => self.motion_deblur = Some(Box::new(OnnxDeblur { model })),
+            Role::DefocusDeblur => self.defocus_deblur = Some(Box::new(OnnxDeblur { model })),
+            Role::Depth => self.depth = Some(Box::new(OnnxDepth { model })),
+            Role::Flow => {
+                self.flow = Box::new(OnnxFlow { model });
+                self.flow_fallback = Some(Box::new(LucasKanadeFlow::default()));
+            }
+        }
+        Ok(self)
+    }
+
+    /// Flow files instead of computed flow.
+    pub fn with_given_flow(mut self) -> Self {
+        self.flow = Box::new(GivenFlow);
+        self.flow_fallback = None;
+        self
+    }
+}
