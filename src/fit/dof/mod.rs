@@ -310,7 +310,8 @@ pub fn fit_accurate(
     let spacing = opts.dof_node_spacing_px;
     let max_sigma = opts.dof_max_sigma_px;
     // Per level: (first node σ, number of intervals, statistics, blend maps).
-    let mut levels: Vec<(f32, usize, IntervalStats, Vec<BlendMap>)> = vec![];
+    type Level = (f32, usize, IntervalStats, Vec<BlendMap>);
+    let mut levels: Vec<Level> = vec![];
     if n >= MIN_SAMPLES {
         let mut frame = yi.clone();
         let mut start_plane = ys.clone();
@@ -340,22 +341,27 @@ pub fn fit_accurate(
                 (cy.saturating_sub(1)..(cy + 2).min(fh))
                     .flat_map(move |j| (cx.saturating_sub(1)..(cx + 2).min(fw)).map(move |i| j * fw + i))
             };
-            let (mut m, mut pixels) = (0.0f64, 0usize);
-            for &(x, y) in centres.iter().step_by(GRAM_SAMPLE_STEP) {
-                for idx in patch(x, y) {
-                    m += prev.data[idx] as f64;
-                    pixels += 1;
+            let gram_centres = || centres.iter().step_by(GRAM_SAMPLE_STEP);
+            let pixels = gram_centres().map(|&(x, y)| patch(x, y).count()).sum::<usize>().max(1) as f64;
+            let m = (gram_centres().flat_map(|&(x, y)| patch(x, y)).map(|i| prev.data[i] as f64).sum::<f64>() / pixels)
+                as f32;
+            // (⟨a − m, b − m⟩, ⟨b − m, b − m⟩) per pixel over those patches.
+            let gram_sums = |a: &Plane, b: &Plane| -> (f64, f64) {
+                let (mut ab, mut bb) = (0.0f64, 0.0f64);
+                for &(x, y) in gram_centres() {
+                    let (mut pab, mut pbb) = (0.0f32, 0.0f32);
+                    for i in patch(x, y) {
+                        let (u, v) = (a.data[i] - m, b.data[i] - m);
+                        pab += u * v;
+                        pbb += v * v;
+                    }
+                    ab += pab as f64;
+                    bb += pbb as f64;
                 }
-            }
-            let pixels = pixels.max(1) as f64;
-            let m = (m / pixels) as f32;
+                (ab / pixels, bb / pixels)
+            };
             let mut gram = Gram::default();
-            let e0: f64 = centres
-                .iter()
-                .step_by(GRAM_SAMPLE_STEP)
-                .map(|&(x, y)| patch(x, y).map(|idx| (prev.data[idx] - m).powi(2)).sum::<f32>() as f64)
-                .sum();
-            gram.push(2.0 * lo * lo, e0 / pixels);
+            gram.push(2.0 * lo * lo, gram_sums(&prev, &prev).1);
             for k in 0..intervals {
                 let (s0, s1) = (lo + k as f32 * spacing, lo + (k + 1) as f32 * spacing);
                 if Some(s0) == next_lo {
@@ -377,19 +383,9 @@ pub fn fit_accurate(
                     st.ad[o] = ad;
                     st.dd[o] = dd;
                 }
-                let (mut pn_sum, mut nn_sum) = (0.0f64, 0.0f64);
-                for &(x, y) in centres.iter().step_by(GRAM_SAMPLE_STEP) {
-                    let (mut pn, mut nn) = (0.0f32, 0.0f32);
-                    for idx in patch(x, y) {
-                        let (p, q) = (prev.data[idx] - m, next.data[idx] - m);
-                        pn += p * q;
-                        nn += q * q;
-                    }
-                    pn_sum += pn as f64;
-                    nn_sum += nn as f64;
-                }
-                gram.push(s0 * s0 + s1 * s1, pn_sum / pixels);
-                gram.push(2.0 * s1 * s1, nn_sum / pixels);
+                let (pn, nn) = gram_sums(&prev, &next);
+                gram.push(s0 * s0 + s1 * s1, pn);
+                gram.push(2.0 * s1 * s1, nn);
                 prev = next;
             }
             if Some(lo + intervals as f32 * spacing) == next_lo {
@@ -414,7 +410,6 @@ pub fn fit_accurate(
     st.lap("blur");
     // Residual and best blend weight of sample s in interval k of a level (σ from
     // the weight by the interval's `BlendMap`, only for the interval chosen).
-    type Level = (f32, usize, IntervalStats, Vec<BlendMap>);
     let eval = |lv: &Level, s: usize, k: usize, wgt: Option<f32>| -> (f32, f32) {
         let (_, intervals, st, _) = lv;
         let o = s * intervals + k;
