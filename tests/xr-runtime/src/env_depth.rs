@@ -241,7 +241,7 @@ pub(crate) unsafe extern "system" fn enumerate_swapchain_images(
             return xr::Result::ERROR_HANDLE_INVALID;
         };
         // SAFETY: the caller's two-call arguments.
-        unsafe { crate::vulkan::enumerate_images(&chain.images, capacity, count, out) }
+        unsafe { crate::swapchain::enumerate_images(&chain.images, capacity, count, out) }
     })
 }
 

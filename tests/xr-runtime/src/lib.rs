@@ -19,6 +19,7 @@ mod env_depth;
 mod frame;
 mod input;
 mod session;
+mod swapchain;
 mod vulkan;
 
 pub use config::{Command, Config, Head};
@@ -271,13 +272,13 @@ unsafe extern "system" fn get_instance_proc_addr(
         "xrBeginFrame" => pfn!(frame::begin_frame),
         "xrEndFrame" => pfn!(frame::end_frame),
         "xrLocateViews" => pfn!(session::locate_views),
-        "xrEnumerateSwapchainFormats" => pfn!(vulkan::enumerate_swapchain_formats),
-        "xrCreateSwapchain" => pfn!(vulkan::create_swapchain),
-        "xrDestroySwapchain" => pfn!(vulkan::destroy_swapchain),
-        "xrEnumerateSwapchainImages" => pfn!(vulkan::enumerate_swapchain_images),
-        "xrAcquireSwapchainImage" => pfn!(vulkan::acquire_swapchain_image),
-        "xrWaitSwapchainImage" => pfn!(vulkan::wait_swapchain_image),
-        "xrReleaseSwapchainImage" => pfn!(vulkan::release_swapchain_image),
+        "xrEnumerateSwapchainFormats" => pfn!(swapchain::enumerate_swapchain_formats),
+        "xrCreateSwapchain" => pfn!(swapchain::create_swapchain),
+        "xrDestroySwapchain" => pfn!(swapchain::destroy_swapchain),
+        "xrEnumerateSwapchainImages" => pfn!(swapchain::enumerate_swapchain_images),
+        "xrAcquireSwapchainImage" => pfn!(swapchain::acquire_swapchain_image),
+        "xrWaitSwapchainImage" => pfn!(swapchain::wait_swapchain_image),
+        "xrReleaseSwapchainImage" => pfn!(swapchain::release_swapchain_image),
         "xrCreateActionSet" => pfn!(input::create_action_set),
         "xrDestroyActionSet" => pfn!(input::destroy_action_set),
         "xrCreateAction" => pfn!(input::create_action),
