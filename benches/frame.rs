@@ -163,6 +163,11 @@ fn main() {
         worker_on_off(&ctx, &scene);
         return;
     }
+    // FRAME_BENCH_KERNEL=1: only the DoF kernel-shape rows (Gaussian vs disc).
+    if std::env::var("FRAME_BENCH_KERNEL").is_ok_and(|v| v == "1") {
+        kernel_rows(&ctx, &scene);
+        return;
+    }
     let sizes: &[(u32, u32)] = if quick { &[(1680, 1760)] } else { &[(1680, 1760), (2064, 2208)] };
     let coverages: &[f64] = if quick { &[0.1] } else { &[0.1, 0.5] };
     for &(w, h) in sizes {
@@ -195,6 +200,7 @@ fn main() {
     }
     if !quick {
         near_focus_rows(&ctx, &scene);
+        kernel_rows(&ctx, &scene);
         settings_table(&ctx, &scene, &snap);
         worker_on_off(&ctx, &scene);
     }
@@ -325,6 +331,39 @@ fn near_focus_rows(ctx: &GpuContext, scene: &Scene) {
             (p.dof_ms + p.mb_ms + p.grain_ms) / p.gbuffer_ms,
             p.effects_stats.compute_invocations.saturating_sub(composite_invocations(w, h)),
         );
+    }
+}
+
+/// The DoF stage with each kernel shape the model can carry (`DofKernel`): the
+/// demo's camera (focused at 3.14 m, δ = 4.4 camera px at the object), the same
+/// second moment drawn as a Gaussian (`layer_dof_h`/`_v`, separable) or as a disc
+/// (`layer_dof_disc`, a 2-D gather over the disc of radius 2σ), both at half
+/// resolution. Same frames, same rectangles: only the kernel differs.
+fn kernel_rows(ctx: &GpuContext, scene: &Scene) {
+    use blind_augment::model::DofKernel;
+    println!("\n## DoF kernel shape: Gaussian vs disc (same σ map)\n");
+    println!("| eye (px) | coverage | kernel | DoF ms | matched frame ms | compute inv. (effects) |");
+    println!("|---|---|---|---|---|---|");
+    for (w, h) in [(1680u32, 1760u32), (2064, 2208)] {
+        let f = 743.0 * w as f32 / 1680.0;
+        let mut r = StereoRenderer::new(ctx, scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
+        r.enable_profiling().expect("timestamps");
+        r.set_background(&vec![128u8; (w * h * 4 * 2) as usize]).expect("background");
+        for coverage in [0.1, 0.5] {
+            let (s, got) = setup(scene, &r, f, coverage);
+            for (id, kernel) in [(10, DofKernel::Gaussian), (11, DofKernel::Disc)] {
+                let mut m = model();
+                m.depth_of_field.kernel = kernel;
+                let p = profile(&mut r, &Snapshot::new(id, m), &s, true);
+                println!(
+                    "| {w}×{h} | {:.0}% | {kernel:?} | {} | {} | {} |",
+                    got * 100.0,
+                    ms(p.dof_ms),
+                    ms(total(&p)),
+                    p.effects_stats.compute_invocations.saturating_sub(composite_invocations(w, h)),
+                );
+            }
+        }
     }
 }
 

@@ -67,3 +67,30 @@ float disc_scatter_tap(float dx, float dy, float h, float sigma) {
     float r = disc_radius_px(sigma);
     return disc_cell_area(dx, dy, h, r) / (3.14159265 * r * r);
 }
+
+// The disc loop's bounds, per workgroup (uniform, like tap_reach; σ_max from
+// layer_dof_reach.comp). A disc tap is zero once the cell's nearest point lies at R
+// or beyond (disc_cell_area), R = disc_radius_px(σ) ≤ 2σ, so per coordinate beyond
+// R + h; a Gaussian product below DISC_MIN_SIGMA_PX is zero beyond 4σ + h per
+// coordinate (`tap`). The Gaussian's 4σ_max + h square (tap_reach) holds about four
+// times the disc's taps. +1 absorbs float rounding of the bound.
+int disc_tap_reach(float sigma_max, float h, int radius) {
+    float g = 4.0 * min(sigma_max, DISC_MIN_SIGMA_PX);
+    return clamp(int(ceil(max(2.0 * sigma_max, g) + h)) + 1, 0, radius);
+}
+
+// Row dy's half-width inside that square: a disc's non-zero cells satisfy
+// (|dx| − h)₊² + (|dy| − h)₊² < R² ≤ (2σ_max)², i.e. |dx| < h + √((2σ_max)² − ny²);
+// the sub-DISC_MIN Gaussians fill the 4σ + h square. Cutting the square to the
+// circle skips another ~21% of the taps, all of them exactly zero, so the sums
+// are bit-identical to the full loop's (the twin needs no change).
+int disc_row_reach(int dy, float sigma_max, float h, int reach) {
+    float rmax = 2.0 * sigma_max;
+    float ny = max(abs(float(dy)) - h, 0.0);
+    float span = h + sqrt(max(rmax * rmax - ny * ny, 0.0));
+    float g = 4.0 * min(sigma_max, DISC_MIN_SIGMA_PX);
+    if (ny <= g) {
+        span = max(span, g + h);
+    }
+    return clamp(int(ceil(span)) + 1, 0, reach);
+}

@@ -4,8 +4,8 @@
 // Gaussian's h/v pair when the camera model says `kernel: disc`. Scatter-as-gather
 // like layer_dof_h: every covered source spreads its premultiplied colour with the
 // disc of its OWN σ(Z), so silhouettes spread into transparent pixels. A disc is not
-// separable: one 2-D loop, bounded per workgroup by layer_dof_reach (taps beyond
-// 2σ + √2·h of a source are zero, inside the 4σ + h bound it computes).
+// separable: one 2-D loop, bounded per workgroup by the largest source σ within
+// reach (layer_dof_reach) to the disc's own support, row by row (dof_disc.glsl).
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray colour_in;
@@ -37,14 +37,17 @@ void main() {
     vec4 acc = vec4(0.0);
     float h = 0.5 * float(p.step);
     float sigma_max = imageLoad(reach_in, ivec3(gl_WorkGroupID.xy, layer)).x;
-    int reach = tap_reach(sigma_max, h, p.radius);
+    int reach = disc_tap_reach(sigma_max, h, p.radius);
     int d0 = tap_start(reach, p.radius, p.step);
     for (int dy = d0; dy <= reach; dy += p.step) {
         int y = xy.y + dy;
         if (y < r.y || y >= r.y + r.w) {
             continue;
         }
-        for (int dx = d0; dx <= reach; dx += p.step) {
+        // Same lattice as the full loop (tap_start), so the taps visited are its
+        // non-zero ones, in its order.
+        int row = disc_row_reach(dy, sigma_max, h, reach);
+        for (int dx = tap_start(row, p.radius, p.step); dx <= row; dx += p.step) {
             int x = xy.x + dx;
             if (x < r.x || x >= r.x + r.z) {
                 continue;
