@@ -48,6 +48,13 @@
 //!    for truths 0, 0.2 and 0.5: its ratio falls smoothly to the floor and the
 //!    template put its zero at the knee.
 //!
+//! 7. and the dip must be the along-flow power's: the ratio also dips where the
+//!    across-flow spectrum peaks (a text line's letter pitch), so the along-flow
+//!    power's own detrended ln must dip at the zero (`MIN_ALONG_DIP`) and the
+//!    across-flow peak may supply at most `MAX_ACROSS_SHARE` of the ratio's dip.
+//!    Without them streaks of 31 px across text lines read 3.4–5.5 px ± 0.1, and
+//!    sharp photographs (coffee, rocket, a scanned page) 17–20 px streaks ± 0.1.
+//!
 //! Standard error: the spread of λ over `SUBSETS` interleaved subsets of lines /
 //! √subsets, in quadrature with the λ shift when the noise floor is doubled and
 //! halved, floored at the grid step. The match is trusted (`identified`) when the
@@ -64,8 +71,8 @@
 //! noise +35%). Noisy short streaks now read 0.295 ± 0.036 for 0.25 — not
 //! identified, the isotropy estimator of `motion_blur::fit_fast` takes over, with
 //! its stated band.
-//! A page of text is not identified: its line pitch puts its own periodic structure
-//! along the flow.
+//! A page of text is often not identified: its line pitch puts its own periodic
+//! structure along the flow, its letter pitch across it.
 //!
 //! A streak shorter than ~3 px puts its first zero near or past Nyquist: not
 //! identifiable here (the isotropy estimator of `motion_blur::fit_fast` takes over).
@@ -130,6 +137,25 @@ const ABOVE_FULL: f32 = 1.3;
 /// the noise (their zeros were only the knee, as the texture's are; the isotropy
 /// fallback and the worker's pool answer them).
 pub const MIN_SIDE_LOBE: f32 = 0.2;
+/// Least depth of the along-flow power's own dip at the first zero: the mean of
+/// its detrended ln (1, ln φ, ln² φ, as the ratio) over φλ ∈ [0.85, 1.15] must lie
+/// this far below 0. The template is matched to the along/across *ratio*, and a
+/// ratio also dips where the across-flow spectrum peaks; a streak's zero is in the
+/// along-flow power. Measured (`benches/streak_gates/probe.py`: nine photographs
+/// and four text pages, box streaks 0–31 px at 0°/45°/90°, clean and with 3 DN
+/// noise, 50 px/frame; BENCHMARKS.md "Zeros of the ratio that are not zeros of the
+/// streak"): right reads' dips 0.23 (31 px under noise) to 2.2; six of the eleven
+/// wrong identifications −0.32 to 0.20 (the sharp coffee cup and rocket read as
+/// 19–20 px streaks: 0.20, 0.12; a 16 px streak on text under noise read 40.6 px:
+/// −0.10). A threshold where the two meet, not a separation.
+pub const MIN_ALONG_DIP: f32 = 0.2;
+/// Largest share of the ratio's dip at the first zero that the across-flow
+/// spectrum's own peak may supply (its detrended ln there over the ratio's dip). A
+/// text line's letter pitch (3–6 px) is a peak across the flow, and the ratio dips
+/// there whatever the along-flow power does: 31 px streaks across text lines read
+/// 3.4–5.5 px ± 0.15 (shares 0.66–1.0). Measured as for `MIN_ALONG_DIP`: right
+/// reads' shares up to 0.57 (a brick wall, 16 px at 45°).
+pub const MAX_ACROSS_SHARE: f32 = 0.6;
 
 /// What the spectrum along the flow says about the streak.
 #[derive(Clone, Debug, PartialEq)]
@@ -155,6 +181,12 @@ pub struct StreakSignature {
     /// ln of the along-flow power over the best template's first side lobe, over
     /// the noise floor (see `MIN_SIDE_LOBE`; NaN where the lobe lies past the band).
     pub side_lobe: f32,
+    /// Depth of the along-flow power's own dip at the first zero (see
+    /// `MIN_ALONG_DIP`; detrended ln, positive = a dip).
+    pub along_dip: f32,
+    /// Share of the ratio's dip at the first zero that is the across-flow
+    /// spectrum's peak (see `MAX_ACROSS_SHARE`; +∞ where the ratio does not dip).
+    pub across_share: f32,
     pub identified: bool,
 }
 
@@ -386,9 +418,13 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     } else {
         f32::INFINITY
     };
-    let TemplateMatch { lambda, score, runner_up, inside, side_lobe } = best;
-    let identified =
-        inside && score >= MIN_SCORE && stderr <= MAX_RELATIVE_STDERR * lambda && side_lobe >= MIN_SIDE_LOBE;
+    let TemplateMatch { lambda, score, runner_up, inside, side_lobe, along_dip, across_share } = best;
+    let identified = inside
+        && score >= MIN_SCORE
+        && stderr <= MAX_RELATIVE_STDERR * lambda
+        && side_lobe >= MIN_SIDE_LOBE
+        && along_dip >= MIN_ALONG_DIP
+        && across_share <= MAX_ACROSS_SHARE;
     Some(StreakSignature {
         lambda,
         stderr,
@@ -400,6 +436,8 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
         inside,
         floor_shift,
         side_lobe,
+        along_dip,
+        across_share,
         identified,
     })
 }
@@ -417,6 +455,8 @@ struct TemplateMatch {
     /// ln of the mean along-flow power over the first side lobe's span, over the
     /// noise floor (NaN where that span lies outside the band).
     side_lobe: f32,
+    along_dip: f32,
+    across_share: f32,
 }
 
 /// sinc²(πφλ) on the search's λ grid (λ_k = `BELOW_BAND`·lambda_min + k·`LAMBDA_STEP`
@@ -632,12 +672,39 @@ fn match_template(
             (power / noise).ln()
         }
     });
+    // Where the ratio's dip at the first zero comes from (`MIN_ALONG_DIP`,
+    // `MAX_ACROSS_SHARE`): the ratio is ln along − ln across (smoothed), and
+    // detrending is linear, so the along-flow power's own detrended ln is the
+    // ratio's residual plus the across-flow reference's.
+    let r_ref: Vec<f64> = match inv {
+        Some(inv) => {
+            let coef = inv * project(&lref);
+            lref.iter().zip(&rows).map(|(&v, b)| v - coef.dot(glam::DVec3::from(*b))).collect()
+        }
+        None => vec![0.0; lref.len()],
+    };
+    let (mut ratio_sum, mut across_sum, mut count) = (0.0f64, 0.0f64, 0usize);
+    for (i, &k) in idx.iter().enumerate() {
+        if (0.85..=1.15).contains(&(s.phi[k] as f64 * lambda as f64)) {
+            ratio_sum += r_obs[i];
+            across_sum += r_ref[i];
+            count += 1;
+        }
+    }
+    let (along_dip, across_share) = if count == 0 {
+        (f64::NAN, f64::INFINITY)
+    } else {
+        let (ratio, across) = (ratio_sum / count as f64, across_sum / count as f64);
+        (-(ratio + across), if ratio < 0.0 { across / -ratio } else { f64::INFINITY })
+    };
     Some(TemplateMatch {
         lambda,
         score: sbest as f32,
         runner_up: runner_up as f32,
         inside: lbest >= lambda_min && lbest <= 1.0,
         side_lobe: side_lobe as f32,
+        along_dip: along_dip as f32,
+        across_share: across_share as f32,
     })
 }
 

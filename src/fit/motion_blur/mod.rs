@@ -522,12 +522,15 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         let mut mb = decide("fast", lambda, sig.stderr as f64, None, sig.lines, started);
         mb.diagnostics.reason = format!(
             "λ = {lambda:.4} ± {:.4} from the streak's spectral zeros along the flow ({} lines, correlation {:.2}, \
-             next best {:.2}, first side lobe e^{:.2} × the noise floor); {}",
+             next best {:.2}, first side lobe e^{:.2} × the noise floor, along-flow dip e^−{:.2} at the zero, \
+             {:.0}% of it across-flow texture); {}",
             sig.stderr,
             sig.lines,
             sig.score,
             sig.runner_up,
             sig.side_lobe,
+            sig.along_dip,
+            100.0 * sig.across_share.max(0.0),
             if mb.present { "present" } else { "absent" }
         );
         // The pooled fit's evidence where asked (`FitOptions::mb_isotropy_evidence`).
@@ -573,7 +576,11 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
             "not identified (the best template, λ {:.3}, lies outside [{:.3}, 1]: a fall-off, not a zero in the band)",
             s.lambda, s.lambda_min
         ),
-        Some(s) => format!("not identified (correlation {:.2}, λ {:.3} ± {:.3})", s.score, s.lambda, s.stderr),
+        Some(s) => format!(
+            "not identified (correlation {:.2}, λ {:.3} ± {:.3}, side lobe e^{:.2}, along-flow dip e^−{:.2}, across \
+             share {:.2})",
+            s.score, s.lambda, s.stderr, s.side_lobe, s.along_dip, s.across_share
+        ),
         None => "not measurable (no line along the flow fits the frame)".into(),
     };
     // Even the prior's most along-heavy texture (C/D = 1 + `TEXTURE_ANISOTROPY_90`)
