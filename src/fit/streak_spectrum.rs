@@ -684,11 +684,24 @@ fn match_template(
         None => vec![0.0; lref.len()],
     };
     let (mut ratio_sum, mut across_sum, mut count) = (0.0f64, 0.0f64, 0usize);
-    for (i, &k) in idx.iter().enumerate() {
-        if (0.85..=1.15).contains(&(s.phi[k] as f64 * lambda as f64)) {
+    let at_zero = |i: usize| s.phi[idx[i]] as f64 * lambda as f64;
+    for i in 0..idx.len() {
+        if (0.85..=1.15).contains(&at_zero(i)) {
             ratio_sum += r_obs[i];
             across_sum += r_ref[i];
             count += 1;
+        }
+    }
+    // Fast flow puts few bins at low φ (φ steps by speed / LINE_PX: 0.39 cycles per
+    // frame at 50 px/frame, so a full-frame streak's zero at φ = 1 has no bin within
+    // ±15%): then the bin nearest to the zero, if within ±30% (sinc² ≤ 0.14 there,
+    // still the zero's trough against the main lobe).
+    if count == 0 {
+        let nearest = (0..idx.len()).min_by(|&a, &b| (at_zero(a) - 1.0).abs().total_cmp(&(at_zero(b) - 1.0).abs()));
+        if let Some(i) = nearest.filter(|&i| (0.7..=1.3).contains(&at_zero(i))) {
+            ratio_sum = r_obs[i];
+            across_sum = r_ref[i];
+            count = 1;
         }
     }
     let (along_dip, across_share) = if count == 0 {
