@@ -134,6 +134,16 @@ fn composite_invocations(w: u32, h: u32) -> u64 {
     (w.div_ceil(8) * 8) as u64 * (h.div_ceil(8) * 8) as u64 * 2
 }
 
+/// A profiling renderer at `w × h` per eye with the default settings over a grey
+/// background, and its focal length (the Quest 3 eye's 743 px at 1680 wide, scaled).
+fn profiled_renderer<'a>(ctx: &'a GpuContext, scene: &'a Scene, w: u32, h: u32) -> (StereoRenderer<'a>, f32) {
+    let f = 743.0 * w as f32 / 1680.0;
+    let mut r = StereoRenderer::new(ctx, scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
+    r.enable_profiling().expect("timestamps");
+    r.set_background(&vec![128u8; (w * h * 4 * 2) as usize]).expect("background");
+    (r, f)
+}
+
 fn total(p: &FrameProfile) -> f64 {
     p.gbuffer_ms + p.dof_ms + p.mb_ms + p.grain_ms + p.composite_ms
 }
@@ -171,11 +181,7 @@ fn main() {
     let sizes: &[(u32, u32)] = if quick { &[(1680, 1760)] } else { &[(1680, 1760), (2064, 2208)] };
     let coverages: &[f64] = if quick { &[0.1] } else { &[0.1, 0.5] };
     for &(w, h) in sizes {
-        let f = 743.0 * w as f32 / 1680.0;
-        let mut r = StereoRenderer::new(&ctx, &scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
-        r.enable_profiling().expect("timestamps");
-        let grey = vec![128u8; (w * h * 4 * 2) as usize];
-        r.set_background(&grey).expect("background");
+        let (mut r, f) = profiled_renderer(&ctx, &scene, w, h);
         let composite_inv = composite_invocations(w, h);
         for &coverage in coverages {
             let (s, got) = setup(&scene, &r, f, coverage);
@@ -316,10 +322,7 @@ fn near_focus_rows(ctx: &GpuContext, scene: &Scene) {
     println!("| eye (px) | G-buffer ms | DoF ms | MB ms | grain ms | effects / G-buffer | compute inv. (effects) |");
     println!("|---|---|---|---|---|---|---|");
     for (w, h) in [(1680u32, 1760u32), (2064, 2208)] {
-        let f = 743.0 * w as f32 / 1680.0;
-        let mut r = StereoRenderer::new(ctx, scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
-        r.enable_profiling().expect("timestamps");
-        r.set_background(&vec![128u8; (w * h * 4 * 2) as usize]).expect("background");
+        let (mut r, f) = profiled_renderer(ctx, scene, w, h);
         let (s, _) = setup(scene, &r, f, 0.1);
         let p = profile(&mut r, &snap, &s, true);
         println!(
@@ -345,10 +348,7 @@ fn kernel_rows(ctx: &GpuContext, scene: &Scene) {
     println!("| eye (px) | coverage | kernel | DoF ms | matched frame ms | compute inv. (effects) |");
     println!("|---|---|---|---|---|---|");
     for (w, h) in [(1680u32, 1760u32), (2064, 2208)] {
-        let f = 743.0 * w as f32 / 1680.0;
-        let mut r = StereoRenderer::new(ctx, scene, w, h, LayerSettings::default(), Some(f)).expect("renderer");
-        r.enable_profiling().expect("timestamps");
-        r.set_background(&vec![128u8; (w * h * 4 * 2) as usize]).expect("background");
+        let (mut r, f) = profiled_renderer(ctx, scene, w, h);
         for coverage in [0.1, 0.5] {
             let (s, got) = setup(scene, &r, f, coverage);
             for (id, kernel) in [(10, DofKernel::Gaussian), (11, DofKernel::Disc)] {

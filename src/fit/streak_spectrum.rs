@@ -555,13 +555,18 @@ fn match_template(
         }
         atb
     };
-    let r_obs: Vec<f64> = match inv {
-        Some(inv) => {
-            let coef = inv * project(&obs);
-            obs.iter().zip(&rows).map(|(&v, b)| v - coef.dot(glam::DVec3::from(*b))).collect()
+    // The residual of a per-bin series after the basis (itself where the system is
+    // singular).
+    let detrend = |v: &[f64]| -> Vec<f64> {
+        match inv {
+            Some(inv) => {
+                let coef = inv * project(v);
+                v.iter().zip(&rows).map(|(&x, b)| x - coef.dot(glam::DVec3::from(*b))).collect()
+            }
+            None => v.to_vec(),
         }
-        None => obs.clone(),
     };
+    let r_obs = detrend(&obs);
     let n_obs = r_obs.iter().map(|v| v * v).sum::<f64>().sqrt();
     if n_obs.is_nan() || n_obs <= 0.0 {
         return None;
@@ -676,13 +681,7 @@ fn match_template(
     // `MAX_ACROSS_SHARE`): the ratio is ln along − ln across (smoothed), and
     // detrending is linear, so the along-flow power's own detrended ln is the
     // ratio's residual plus the across-flow reference's.
-    let r_ref: Vec<f64> = match inv {
-        Some(inv) => {
-            let coef = inv * project(&lref);
-            lref.iter().zip(&rows).map(|(&v, b)| v - coef.dot(glam::DVec3::from(*b))).collect()
-        }
-        None => vec![0.0; lref.len()],
-    };
+    let r_ref = detrend(&lref);
     let (mut ratio_sum, mut across_sum, mut count) = (0.0f64, 0.0f64, 0usize);
     let at_zero = |i: usize| s.phi[idx[i]] as f64 * lambda as f64;
     for i in 0..idx.len() {
