@@ -92,7 +92,7 @@ def main():
                             detail = f"{got:.1f} px"
                         else:
                             kind, detail = "not identified", ""
-                            m = re.search(r"along-flow dip e\^−([-0-9.NaN]+), across share ([-0-9.infNa]+)", reason)
+                            m = re.search(r"along-flow dip ([-0-9.NaN]+), across share ([-0-9.infNa]+)", reason)
                             if m:
                                 detail = f"(dip {m.group(1)}, share {m.group(2)})"
                         counts[kind] += 1

@@ -52,8 +52,11 @@
 //!    across-flow spectrum peaks (a text line's letter pitch), so the along-flow
 //!    power's own detrended ln must dip at the zero (`MIN_ALONG_DIP`) and the
 //!    across-flow peak may supply at most `MAX_ACROSS_SHARE` of the ratio's dip.
-//!    Without them streaks of 31 px across text lines read 3.4–5.5 px ± 0.1, and
-//!    sharp photographs (coffee, rocket, a scanned page) 17–20 px streaks ± 0.1.
+//!    Without them 31 px streaks across text lines read 3.4–5.5 px (± 0.15) and
+//!    sharp photographs (coffee, rocket) 19–20 px streaks, all identified; a sharp
+//!    scanned page's 17.5 px and a 31 px streak at 45° to text lines read as 4.4
+//!    px still pass (BENCHMARKS.md "Zeros of the ratio that are not zeros of the
+//!    streak").
 //!
 //! Standard error: the spread of λ over `SUBSETS` interleaved subsets of lines /
 //! √subsets, in quadrature with the λ shift when the noise floor is doubled and

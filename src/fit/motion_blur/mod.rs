@@ -522,8 +522,8 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         let mut mb = decide("fast", lambda, sig.stderr as f64, None, sig.lines, started);
         mb.diagnostics.reason = format!(
             "λ = {lambda:.4} ± {:.4} from the streak's spectral zeros along the flow ({} lines, correlation {:.2}, \
-             next best {:.2}, first side lobe e^{:.2} × the noise floor, along-flow dip e^−{:.2} at the zero, \
-             {:.0}% of it across-flow texture); {}",
+             next best {:.2}, first side lobe e^{:.2} × the noise floor, along-flow dip {:.2} (ln) at the zero, \
+             {:.0}% of the ratio's dip across-flow texture); {}",
             sig.stderr,
             sig.lines,
             sig.score,
@@ -577,7 +577,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
             s.lambda, s.lambda_min
         ),
         Some(s) => format!(
-            "not identified (correlation {:.2}, λ {:.3} ± {:.3}, side lobe e^{:.2}, along-flow dip e^−{:.2}, across \
+            "not identified (correlation {:.2}, λ {:.3} ± {:.3}, side lobe e^{:.2}, along-flow dip {:.2}, across \
              share {:.2})",
             s.score, s.lambda, s.stderr, s.side_lobe, s.along_dip, s.across_share
         ),
