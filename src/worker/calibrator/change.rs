@@ -135,19 +135,53 @@ impl Calibrator {
         } else {
             0..0
         };
-        let aligned = self.cfg.intrinsics.as_ref().and_then(|k| {
-            let prev = self.window.back()?;
-            if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
-                return None;
-            }
-            let t0 = Instant::now();
-            let stride = band_stride(img.width, img.height, PROBE_PX);
-            let row = |y: usize| in_band(y, stride) || strip.contains(&y);
-            let aligned = crate::analysis::temporal::align_rows(prev, current, k, &row).map(Arc::new);
-            self.stages.add("alignment", t0);
-            aligned
-        });
+        let stride = band_stride(img.width, img.height, PROBE_PX);
+        let aligned = self.align_previous(current, &|y| in_band(y, stride) || strip.contains(&y));
         self.aligned_previous = Some((index, aligned.clone()));
+        aligned
+    }
+
+    /// The previous frame aligned into `current` over `strip`: the blind noise
+    /// fit's neighbour where the temporal denoiser was asked first and failed (too
+    /// few earlier frames moving alike, a burst's start). `aligned_previous` holds
+    /// only the probe's bands then; where they cover the strip (frames up to
+    /// `PROBE_PX`) it serves, else the strip is aligned on its own (not cached: a
+    /// fallback's cost). Without it the fallback fitted the frame alone, and on the
+    /// demo's video every other such fit read levels 1–3 at +110…+710% (texture in
+    /// the flattest samples): published for 0.2 s after a reset (BENCHMARKS.md,
+    /// "The worker's noise at a burst's start and after a reset").
+    pub(super) fn aligned_strip(
+        &mut self,
+        current: &Analysed,
+        strip: std::ops::Range<usize>,
+    ) -> Option<Arc<crate::analysis::temporal::Aligned>> {
+        let cached = self.aligned_previous(current)?;
+        let img = &current.frame.image;
+        let stride = band_stride(img.width, img.height, PROBE_PX);
+        let holds_strip =
+            (self.cfg.effects.noise && self.providers.denoise.is_none()) || strip.clone().all(|y| in_band(y, stride));
+        if holds_strip {
+            Some(cached)
+        } else {
+            self.align_previous(current, &|y| strip.contains(&y))
+        }
+    }
+
+    /// `current`'s previous frame in the window aligned into it over the rows `row`
+    /// accepts (None: see `aligned_previous`).
+    fn align_previous(
+        &mut self,
+        current: &Analysed,
+        row: &(dyn Fn(usize) -> bool + Sync),
+    ) -> Option<Arc<crate::analysis::temporal::Aligned>> {
+        let k = self.cfg.intrinsics.as_ref()?;
+        let prev = self.window.back()?;
+        if current.frame.t_s - prev.frame.t_s > 2.5 * self.cfg.frame_interval_s {
+            return None;
+        }
+        let t0 = Instant::now();
+        let aligned = crate::analysis::temporal::align_rows(prev, current, k, row).map(Arc::new);
+        self.stages.add("alignment", t0);
         aligned
     }
 

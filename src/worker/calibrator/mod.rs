@@ -582,6 +582,12 @@ impl Calibrator {
             let t0 = Instant::now();
             let (w, h) = (image.width, image.height);
             let strip = self.noise_strip(w, h);
+            // A temporal denoiser that failed leaves the fit blind: it still reads
+            // the previous frame aligned (`aligned_strip`).
+            let neighbour = match neighbour {
+                None if self.providers.denoise.is_some() => self.aligned_strip(current, strip.clone()),
+                n => n,
+            };
             self.noise_strips_fitted += 1;
             let (y0, rows) = (strip.start, strip.len());
             let crop = |img: &crate::image::Rgb| img.crop(0, y0, w, rows);
