@@ -1,7 +1,8 @@
 //! Robust aggregation of per-frame models (`fit --frames`): the coefficient-wise
 //! median of present fits, so a few bad frames (a cut, a flash, a wrong flow) do
-//! not move the result. The DoF curve of the median frame (by δ at mid-range) is
-//! kept whole, since curve coefficients do not average meaningfully.
+//! not move the result (noise: over the fits near the medoid, of their most shared
+//! form, `noise_pool`). The DoF curve of the median frame (by δ at mid-range) is kept
+//! whole, since curve coefficients do not average meaningfully.
 
 use super::FitError;
 use crate::model::{CameraModel, Diagnostics, Status};

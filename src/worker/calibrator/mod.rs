@@ -14,7 +14,8 @@
 //!    given by `--onnx`. Depth of field has no video reference (the focus does not
 //!    change), so it runs blind unless a defocus-deblur provider is given.
 //! 3. **Aggregate** the estimates of the last `window_s` seconds of video: the
-//!    coefficient-wise median (`fit::aggregate_models`: outliers do not move it),
+//!    coefficient-wise median (`fit::aggregate_models`: outliers do not move it;
+//!    noise over the fits near the medoid, of the form most of them share),
 //!    presence with hysteresis (on at ≥ 60% of identifiable estimates, off at
 //!    ≤ 30%) so effects do not flicker.
 //! 4. **Detect change** (`change.rs`): a shift of the luminance histogram, a step in
