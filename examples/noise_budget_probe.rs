@@ -5,7 +5,8 @@
 //! three seeds each, 8-bit, against the added white noise's band std per level and
 //! luma — and on the real DivX clip against its temporal reference (level 0 inside
 //! the fitted range, as `tests/real_noise.rs`). `BUDGETS=a,b,…` overrides the list;
-//! `DETAIL=1` prints every frame's level-0 error.
+//! `DETAIL=1` prints every frame's level-0 error; `LEVELS=1` every frame's signed
+//! error per level, M where the fit measured the level, D where it derived it.
 //!
 //! The photographs carry noise of their own, which the "truth" leaves out (printed
 //! first: the blind fit on each clean photograph — its own noise, or texture taken
@@ -157,6 +158,25 @@ fn main() {
                 }
             }
             let [lo, hi] = n.luminance_range;
+            if std::env::var("LEVELS").is_ok_and(|v| v == "1") {
+                // Per level: median signed error over 9 lumas × 3 channels, and
+                // whether the fit measured the level (M) or derived it (D).
+                let per: Vec<String> = (0..NOISE_LEVELS)
+                    .map(|l| {
+                        let e: Vec<f64> = (0..27)
+                            .map(|k| {
+                                let (y, c) = (lo + (hi - lo) * ((k / 3) as f32 + 0.5) / 9.0, k % 3);
+                                let truth = unit[l] as f64 * ((a[c] + b[c] * y) as f64).sqrt();
+                                n.levels[l].std(n.form, c, y) as f64 / truth - 1.0
+                            })
+                            .collect();
+                        let tag =
+                            if derived.split(']').next().unwrap_or("").contains(&l.to_string()) { 'D' } else { 'M' };
+                        format!("{tag} {:+5.0}%", 100.0 * common::median(e))
+                    })
+                    .collect();
+                println!("  {name:28} {}", per.join("  "));
+            }
             for k in 0..9 {
                 let y = lo + (hi - lo) * (k as f32 + 0.5) / 9.0;
                 for (l, errs) in per_level.iter_mut().enumerate() {

@@ -311,9 +311,8 @@ pub fn fit_fast(
     // bins, or when its median std over the bins it shares with the finer level
     // exceeds `MAX_LEVEL_STD_RATIO` times that level's (camera noise falls toward
     // coarse levels, texture does not). It and every coarser level then follow the
-    // finest measured level by the measured per-level decay (the two finest measured
-    // levels' excess over white, see below) or, with one level, the white-noise
-    // ratios; the reason names them. Coarser levels are then not sampled at all:
+    // finest measured level by the white-noise band ratios (see below); the reason
+    // names them. Coarser levels are then not sampled at all:
     // nothing would read them (levels 2–3 hold ~60% of the grid points at 1280×960,
     // and over `examples/noise_budget_probe.rs`' 27 frames level 2 was measured on 6,
     // level 3 on none).
@@ -372,27 +371,21 @@ pub fn fit_fast(
     let fitted = fitted.map(|LevelFit { form, intensity, levels: lv, covs, rel_res, nll }| {
         let unit = crate::synth::unit_band_std();
         let last = lv.len() - 1;
-        // Beyond the finest measured levels: white noise's per-level ratios, scaled
-        // by how much slower than white the two finest measured levels decayed
-        // (correlated noise decays slower; at most `MAX_LEVEL_STD_RATIO` per level).
-        let excess = if lv.len() >= 2 {
-            let s = |i: usize| {
-                (0..3)
-                    .map(|c| lv[i].std(form, c, luma_span(&points[i].y).map_or(0.5, |[lo, hi]| 0.5 * (lo + hi))))
-                    .sum::<f32>()
-            };
-            let (m1, m0) = (measured_levels[last], measured_levels[last - 1]);
-            (s(last) / s(last - 1).max(1e-12)) / (unit[m1] / unit[m0])
-        } else {
-            1.0
-        };
+        // Beyond the finest measured levels: white noise's per-level ratios. They
+        // used to be scaled by how much slower than white the two finest measured
+        // levels decayed (correlated noise decays slower); measured, that excess was
+        // only ever texture: over `examples/noise_budget_probe.rs`' 27 frames of
+        // white noise it fired on the 12 with two or more levels measured — a level
+        // 1 or 2 read high by texture (+6…+232%) — and compounded it (chelsea's
+        // strongest noise: level 3 +423% where level 2 read +232%; levels 2–3 median
+        // 36.8 / 40.6% → 25.4 / 25.4% without it), and the real clip's fit measures
+        // one level only, so it never reached correlated noise.
         let levels = (0..NOISE_LEVELS)
             .map(|l| match measured_levels.iter().position(|&m| m == l) {
                 Some(i) => lv[i],
                 None => {
                     let from = measured_levels[last];
-                    let r: f32 =
-                        (from + 1..=l).map(|k| (excess * unit[k] / unit[k - 1]).min(MAX_LEVEL_STD_RATIO)).product();
+                    let r: f32 = unit[l] / unit[from];
                     let k = if form == NoiseForm::LinearStd { r } else { r * r };
                     NoiseLevel { slope: lv[last].slope.map(|v| v * k), intercept: lv[last].intercept.map(|v| v * k) }
                 }
@@ -432,7 +425,7 @@ pub fn fit_fast(
     if noise.present && !derived.is_empty() {
         noise.diagnostics.reason += &format!(
             "; levels {derived:?} not identifiable from this frame (texture exceeds the noise there, or too few flat luma bins): \
-             they continue the finest measured level by the measured per-level decay"
+             they continue the finest measured level by white-noise band ratios"
         );
     }
     if let Some(b) = blocking {
