@@ -145,23 +145,21 @@ impl Calibrator {
     /// fit's neighbour where the temporal denoiser was asked first and failed (too
     /// few earlier frames moving alike, a burst's start). `aligned_previous` holds
     /// only the probe's bands then; where they cover the strip (frames up to
-    /// `PROBE_PX`) it serves, else the strip is aligned on its own (not cached: a
-    /// fallback's cost). Without it the fallback fitted the frame alone, and on the
-    /// demo's video every other such fit read levels 1–3 at +110…+710% (texture in
-    /// the flattest samples): published for 0.2 s after a reset (BENCHMARKS.md,
-    /// "The worker's noise at a burst's start and after a reset").
+    /// `PROBE_PX`) it serves (made now if the probe has not run on this frame),
+    /// else the strip alone is aligned (not cached: a fallback's cost). Without it
+    /// the fallback fitted the frame alone, and on the demo's video every other
+    /// such fit read levels 1–3 at +110…+710% (texture in the flattest samples):
+    /// published for 0.2 s after a reset (BENCHMARKS.md, "The worker's noise at a
+    /// burst's start and after a reset").
     pub(super) fn aligned_strip(
         &mut self,
         current: &Analysed,
         strip: std::ops::Range<usize>,
     ) -> Option<Arc<crate::analysis::temporal::Aligned>> {
-        let cached = self.aligned_previous(current)?;
         let img = &current.frame.image;
         let stride = band_stride(img.width, img.height, PROBE_PX);
-        let holds_strip =
-            (self.cfg.effects.noise && self.providers.denoise.is_none()) || strip.clone().all(|y| in_band(y, stride));
-        if holds_strip {
-            Some(cached)
+        if strip.clone().all(|y| in_band(y, stride)) {
+            self.aligned_previous(current)
         } else {
             self.align_previous(current, &|y| strip.contains(&y))
         }
