@@ -10,7 +10,7 @@ use crate::model::{CameraModel, Diagnostics, Status};
 /// The median; of an even count, the mean of the middle two (the upper one alone
 /// made a window of two estimates publish the larger: a contaminated noise fit
 /// beside a clean one read +45% at the calibration video's level 3).
-fn median(mut v: Vec<f32>) -> f32 {
+pub(crate) fn median(mut v: Vec<f32>) -> f32 {
     v.sort_by(|a, b| a.total_cmp(b));
     match v.len() {
         0 => 0.0,

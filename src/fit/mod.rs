@@ -19,6 +19,7 @@ mod noise;
 pub mod streak_spectrum;
 
 pub use aggregate::aggregate_models;
+pub(crate) use aggregate::median;
 pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
 pub use isotropy_pool::{fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure};

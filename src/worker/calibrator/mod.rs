@@ -20,9 +20,10 @@
 //!    ≤ 30%) so effects do not flicker.
 //! 4. **Detect change** (`change.rs`): a shift of the luminance histogram, a step in
 //!    the noise probe (this frame minus the previous one aligned, every 0.1 s), or
-//!    two confident exposure estimates in a row off the model (an exposure, gain or
-//!    focus change) drops the estimates and held frames from before it and restarts
-//!    the burst, so the new camera is published within a few frames.
+//!    two confident exposure estimates in a row off the model beyond their own and
+//!    the window's scatter (an exposure, gain or focus change) drops the estimates
+//!    and held frames from before it and restarts the burst, so the new camera is
+//!    published within a few frames.
 //!
 //! Every published model is validated (no NaN, nothing out of range).
 
