@@ -1,4 +1,6 @@
 //! Probe: the calibrator over a synthetic sequence, per tier.
+#[path = "../tests/common/mod.rs"]
+mod common;
 use blind_augment::analysis::timing::TimedPose;
 use blind_augment::analysis::{DepthMap, Frame};
 use blind_augment::model::compare::*;
@@ -25,18 +27,9 @@ fn main() {
     // NOCHANGE=1: no camera change (the bench's 1280×960 run).
     let change = std::env::var_os("NOCHANGE").is_none().then_some(frames as f64 / 60.0);
     let mut spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, frames, change);
-    // DEMO_TRUTH=1: the camera `blind-augment demo` distorts its live video with
-    // (noise, λ 0.4, its thin-lens δ(Z); src/platform/desktop/demo.rs `truth_model`).
+    // DEMO_TRUTH=1: the camera `blind-augment demo` distorts its live video with.
     if std::env::var_os("DEMO_TRUTH").is_some() {
-        spec.truth.noise =
-            blind_augment::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
-        spec.truth.motion_blur.exposure = Some(0.4);
-        let (f, b, d) = (3979.911f32 / 4.0, 0.193001f32, 124.343f32 / 4.0);
-        spec.truth.depth_of_field.curve = Some(blind_augment::model::DofCurve::ThinLens {
-            k: 0.12 * f * b,
-            focus_depth: f * b / (30.0 + d),
-            c0: 0.2,
-        });
+        common::demo_camera(&mut spec);
     }
     let mut cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
     // WINDOW=s: the aggregation window (a tiny one publishes each fit as it is).

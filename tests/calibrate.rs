@@ -4,6 +4,8 @@
 //! follows the change within 1 s of video, the worker thread publishes through the
 //! channel without blocking the submitter, and bad input is refused by name.
 
+mod common;
+
 use blind_augment::analysis::timing::TimedPose;
 use blind_augment::analysis::{AnalysisError, Denoiser, DepthMap, Frame, FrameContext, Reference};
 use blind_augment::image::Rgb;
@@ -664,11 +666,7 @@ fn changes_over(tier: CalibrationTier, spec: &SequenceSpec) -> ChangesAndLambdas
 #[test]
 fn a_drifting_reference_is_not_a_camera_change() {
     let mut spec = SequenceSpec::motorcycle(scene(), 320, 240, 45, None);
-    spec.truth.noise = blind_augment::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
-    spec.truth.motion_blur.exposure = Some(0.4);
-    let (f, b, d) = (3979.911f32 / 4.0, 0.193001f32, 124.343f32 / 4.0);
-    spec.truth.depth_of_field.curve =
-        Some(blind_augment::model::DofCurve::ThinLens { k: 0.12 * f * b, focus_depth: f * b / (30.0 + d), c0: 0.2 });
+    common::demo_camera(&mut spec);
     for tier in [CalibrationTier::Fast, CalibrationTier::Accurate] {
         let (changes, _) = changes_over(tier, &spec);
         assert!(changes.is_empty(), "{tier:?}: {changes:?}");

@@ -179,3 +179,19 @@ pub fn noise_errors(noise: &blind_augment::model::Noise, truth: impl Fn(usize, f
     }
     errs
 }
+
+/// `blind-augment demo`'s camera (src/platform/desktop/demo.rs `truth_model`: its
+/// noise, λ 0.4, its thin-lens δ(Z) focused at disparity 30 of the Middlebury
+/// Motorcycle at quarter size) on a calibration sequence: the camera whose live
+/// video showed the worker's noise spikes and false changes (BENCHMARKS.md "The
+/// worker's noise at a burst's start and after a reset").
+pub fn demo_camera(spec: &mut blind_augment::synth::sequence::SequenceSpec) {
+    spec.truth.noise = blind_augment::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
+    spec.truth.motion_blur.exposure = Some(0.4);
+    let (focal_px, baseline_m, doffs_px) = (3979.911f32 / 4.0, 0.193001f32, 124.343f32 / 4.0);
+    spec.truth.depth_of_field.curve = Some(blind_augment::model::DofCurve::ThinLens {
+        k: 0.12 * focal_px * baseline_m,
+        focus_depth: focal_px * baseline_m / (30.0 + doffs_px),
+        c0: 0.2,
+    });
+}
