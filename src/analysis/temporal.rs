@@ -462,7 +462,12 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         let picked: Vec<&Arc<Analysed>> = sharp.iter().take(self.frames.max(1)).map(|(a, _)| *a).collect();
         let img = &ctx.current.frame.image;
         let stride = self.stride(img.width, img.height);
-        mean_reference(ctx, &picked, stride, self.split, P, "the sharp frames", &mut self.pool)
+        let mut r = mean_reference(ctx, &picked, stride, self.split, P, "the sharp frames", &mut self.pool)?;
+        // Not near depth edges (`DEPTH_EDGE_PX`).
+        if let (Some(valid), Some(depth)) = (r.valid.as_mut(), metric(ctx.current)) {
+            mask_depth_edges(valid, depth, DEPTH_EDGE_PX, stride);
+        }
+        Ok(r)
     }
 
     fn recycle(&mut self, spare: Reference) {
@@ -471,6 +476,59 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         if self.pool.key == (w, h, self.stride(w, h)) {
             self.pool.rgb.extend(std::iter::once(spare.image).chain(spare.second));
             self.pool.plane.extend(spare.valid);
+        }
+    }
+}
+
+/// Pixels of a sharp-frame reference this close (px, Chebyshev) to a depth
+/// discontinuity of the current frame are left out of it. The reference is a rest
+/// frame reprojected by depth, ever farther as a turn goes on; at a depth edge
+/// parallax, disocclusion and the defocus that straddles the edge do not move with
+/// either surface, and both halves of a split reference carry the same error, so
+/// the cross loss (which cancels only independent noise) took it for blur. On the
+/// demo's camera (near δ 3.8 px) the fast tier's λ climbed 0.32 → 0.64 over one
+/// turn for a truth of 0.40, and swapping the two halves moved single fits from
+/// 0.39 to 0.00; without the edges' 3 px it reads 0.35–0.40 over that turn (0.29 on
+/// its last two frames), the halves agree within 0.02, and on the calibration
+/// bench's camera λ is as before within 0.003 (BENCHMARKS.md "The worker's noise at
+/// a burst's start and after a reset"). 6 px kept half the pixels and read no better.
+const DEPTH_EDGE_PX: usize = 3;
+/// Relative depth step between 4-neighbours that counts as a discontinuity.
+const DEPTH_EDGE_STEP: f32 = 0.03;
+
+/// Clear `valid` (on the band rows of `stride`) within `reach` px of a depth
+/// discontinuity of `depth`: a step of more than `DEPTH_EDGE_STEP` between
+/// 4-neighbours. Separable box dilation by running counts: O(pixels).
+fn mask_depth_edges(valid: &mut Plane, depth: &Plane, reach: usize, stride: usize) {
+    let (w, h) = (depth.width, depth.height);
+    if (valid.width, valid.height) != (w, h) {
+        return;
+    }
+    let z = &depth.data;
+    let step = |a: f32, b: f32| a.is_finite() && b.is_finite() && (a - b).abs() > DEPTH_EDGE_STEP * a.min(b);
+    // Edge pixels, dilated along rows: `near_x[i]` = an edge within `reach` in the row.
+    let mut near_x = vec![0u32; w * h];
+    let mut edge_row = vec![0u32; w + 1];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let e = (x + 1 < w && step(z[i], z[i + 1]))
+                || (x > 0 && step(z[i], z[i - 1]))
+                || (y + 1 < h && step(z[i], z[i + w]))
+                || (y > 0 && step(z[i], z[i - w]));
+            edge_row[x + 1] = edge_row[x] + u32::from(e);
+        }
+        for x in 0..w {
+            let (lo, hi) = (x.saturating_sub(reach), (x + reach + 1).min(w));
+            near_x[y * w + x] = edge_row[hi] - edge_row[lo];
+        }
+    }
+    for y in (0..h).filter(|&y| in_band(y, stride)) {
+        let (lo, hi) = (y.saturating_sub(reach), (y + reach + 1).min(h));
+        for x in 0..w {
+            if (lo..hi).any(|yy| near_x[yy * w + x] > 0) {
+                valid.data[y * w + x] = 0.0;
+            }
         }
     }
 }
@@ -528,6 +586,28 @@ mod tests {
     use super::*;
     use crate::analysis::{DepthMap, Frame};
     use crate::image::sample_bicubic;
+
+    /// A depth step clears the reference within `reach` px of it (Chebyshev), on
+    /// the band rows only, and nothing else; a 1%-per-pixel depth ramp is no edge.
+    #[test]
+    fn depth_edges_clear_the_reference_around_them() {
+        let (w, h) = (40usize, 30usize);
+        // Two planes, 2 m and 3 m, split between x = 19 and 20, each ramping 1% per row.
+        let z: Vec<f32> =
+            (0..w * h).map(|i| (if i % w < 20 { 2.0 } else { 3.0 }) * (1.0 + 0.01 * (i / w) as f32)).collect();
+        let depth = Plane::from_vec(w, h, z);
+        for stride in [1usize, 2] {
+            let mut valid = Plane::new(w, h, 1.0);
+            mask_depth_edges(&mut valid, &depth, 3, stride);
+            for y in 0..h {
+                for x in 0..w {
+                    // Edge pixels x = 19, 20; within 3 px: 16..=23.
+                    let cleared = in_band(y, stride) && (16..=23).contains(&x);
+                    assert_eq!(valid.data[y * w + x] == 0.0, cleared, "stride {stride}, ({x}, {y})");
+                }
+            }
+        }
+    }
 
     fn analysed(image: Rgb, depth: Plane, world_from_camera: Mat4) -> Analysed {
         Analysed {
