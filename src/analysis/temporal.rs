@@ -463,9 +463,12 @@ impl MotionDeblurrer for TemporalMotionDeblur {
         let img = &ctx.current.frame.image;
         let stride = self.stride(img.width, img.height);
         let mut r = mean_reference(ctx, &picked, stride, self.split, P, "the sharp frames", &mut self.pool)?;
-        // Not near depth edges (`DEPTH_EDGE_PX`).
+        // Not near depth edges (`DEPTH_EDGE_PX`); a step beyond the occlusion
+        // tolerance is another surface.
         if let (Some(valid), Some(depth)) = (r.valid.as_mut(), metric(ctx.current)) {
-            mask_depth_edges(valid, depth, DEPTH_EDGE_PX, stride);
+            crate::image::clear_near_depth_steps(valid, depth, DEPTH_EDGE_PX, OCCLUSION_TOLERANCE, &|y| {
+                in_band(y, stride)
+            });
         }
         Ok(r)
     }
@@ -493,50 +496,6 @@ impl MotionDeblurrer for TemporalMotionDeblur {
 /// bench's camera λ is as before within 0.003 (BENCHMARKS.md "The worker's noise at
 /// a burst's start and after a reset"). 6 px kept half the pixels and read no better.
 const DEPTH_EDGE_PX: usize = 3;
-/// Relative depth step between 4-neighbours that counts as a discontinuity.
-const DEPTH_EDGE_STEP: f32 = 0.03;
-
-/// Clear `valid` (on the band rows of `stride`) within `reach` px of a depth
-/// discontinuity of `depth`: a step of more than `DEPTH_EDGE_STEP` between
-/// 4-neighbours. Separable box dilation by running counts, over the rows the bands
-/// reach: O(those pixels).
-fn mask_depth_edges(valid: &mut Plane, depth: &Plane, reach: usize, stride: usize) {
-    let (w, h) = (depth.width, depth.height);
-    if (valid.width, valid.height) != (w, h) {
-        return;
-    }
-    let z = &depth.data;
-    let step = |a: f32, b: f32| a.is_finite() && b.is_finite() && (a - b).abs() > DEPTH_EDGE_STEP * a.min(b);
-    // Edge pixels, dilated along rows: `near_x[i]` = an edge within `reach` in the row.
-    // Only rows within `reach` of a band row are read (a sixth of 1280×960 in the
-    // fast tier: the full frame's edges cost 2.3 ms per update there).
-    let needed: Vec<bool> =
-        (0..h).map(|y| (y.saturating_sub(reach)..(y + reach + 1).min(h)).any(|yy| in_band(yy, stride))).collect();
-    let mut near_x = vec![0u32; w * h];
-    let mut edge_row = vec![0u32; w + 1];
-    for y in (0..h).filter(|&y| needed[y]) {
-        for x in 0..w {
-            let i = y * w + x;
-            let e = (x + 1 < w && step(z[i], z[i + 1]))
-                || (x > 0 && step(z[i], z[i - 1]))
-                || (y + 1 < h && step(z[i], z[i + w]))
-                || (y > 0 && step(z[i], z[i - w]));
-            edge_row[x + 1] = edge_row[x] + u32::from(e);
-        }
-        for x in 0..w {
-            let (lo, hi) = (x.saturating_sub(reach), (x + reach + 1).min(w));
-            near_x[y * w + x] = edge_row[hi] - edge_row[lo];
-        }
-    }
-    for y in (0..h).filter(|&y| in_band(y, stride)) {
-        let (lo, hi) = (y.saturating_sub(reach), (y + reach + 1).min(h));
-        for x in 0..w {
-            if (lo..hi).any(|yy| near_x[yy * w + x] > 0) {
-                valid.data[y * w + x] = 0.0;
-            }
-        }
-    }
-}
 
 /// For callers that compare two frames' poses: `world_from_camera` as a matrix.
 pub fn pose_matrix(p: &super::timing::TimedPose) -> Mat4 {
@@ -591,28 +550,6 @@ mod tests {
     use super::*;
     use crate::analysis::{DepthMap, Frame};
     use crate::image::sample_bicubic;
-
-    /// A depth step clears the reference within `reach` px of it (Chebyshev), on
-    /// the band rows only, and nothing else; a 1%-per-pixel depth ramp is no edge.
-    #[test]
-    fn depth_edges_clear_the_reference_around_them() {
-        let (w, h) = (40usize, 30usize);
-        // Two planes, 2 m and 3 m, split between x = 19 and 20, each ramping 1% per row.
-        let z: Vec<f32> =
-            (0..w * h).map(|i| (if i % w < 20 { 2.0 } else { 3.0 }) * (1.0 + 0.01 * (i / w) as f32)).collect();
-        let depth = Plane::from_vec(w, h, z);
-        for stride in [1usize, 2] {
-            let mut valid = Plane::new(w, h, 1.0);
-            mask_depth_edges(&mut valid, &depth, 3, stride);
-            for y in 0..h {
-                for x in 0..w {
-                    // Edge pixels x = 19, 20; within 3 px: 16..=23.
-                    let cleared = in_band(y, stride) && (16..=23).contains(&x);
-                    assert_eq!(valid.data[y * w + x] == 0.0, cleared, "stride {stride}, ({x}, {y})");
-                }
-            }
-        }
-    }
 
     fn analysed(image: Rgb, depth: Plane, world_from_camera: Mat4) -> Analysed {
         Analysed {

@@ -7,11 +7,13 @@
 //! operation is defined for any size down to 1×1.
 
 mod blur;
+mod depth_steps;
 mod pyramid;
 mod sample;
 pub mod yuv;
 
 pub use blur::{blur_separable, blur_separable_rows, blur_x, discrete_gaussian_kernel};
+pub use depth_steps::clear_near_depth_steps;
 pub use pyramid::{
     expand, expand_window9, gaussian_pyramid, laplacian_pyramid, reduce, reduce_slice, LaplacianPyramid,
 };
