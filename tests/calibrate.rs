@@ -11,7 +11,7 @@ use blind_augment::analysis::{AnalysisError, Denoiser, DepthMap, Frame, FrameCon
 use blind_augment::image::Rgb;
 use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_relative_error};
 use blind_augment::model::{CameraModel, DepthUnits};
-use blind_augment::synth::sequence::{motorcycle, procedural, Scene, SequenceSpec};
+use blind_augment::synth::sequence::{motorcycle, procedural, Scene, SequenceFrame, SequenceSpec};
 use blind_augment::worker::{
     CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Providers, Worker,
 };
@@ -47,6 +47,19 @@ fn frame(f: &blind_augment::synth::sequence::SequenceFrame) -> Frame {
         image: f.image.clone(),
         depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
         flow: None,
+    }
+}
+
+/// Feed `cal` the frames of `spec` rendered from `scene` as a headset would (poses
+/// two frames ahead) and hand every event to `on` with its frame.
+fn drive(cal: &mut Calibrator, spec: &SequenceSpec, scene: &Scene, mut on: impl FnMut(&SequenceFrame, Event)) {
+    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
+    for i in 0..spec.frames {
+        cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
+        let f = spec.frame(scene, i);
+        for e in cal.push_frame(frame(&f)).expect("valid frame") {
+            on(&f, e);
+        }
     }
 }
 
@@ -121,24 +134,19 @@ fn fast_tier_reads_depth_of_field_on_a_texture_of_known_blur() {
     let spec = SequenceSpec::motorcycle(&textured, 640, 480, 45, None);
     let cfg = CalibratorConfig::new(CalibrationTier::Fast, 1.0 / 30.0, Some(spec.view));
     let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Fast)).expect("valid config");
-    cal.push_poses(&[pose(&spec, 0), pose(&spec, 1)]).expect("poses");
     let r = spec.truth.depth_of_field.depth_range;
     let depths: Vec<f32> = (0..16).map(|i| r[0] + (r[1] - r[0]) * (i as f32 + 0.5) / 16.0).collect();
     let mut checked = 0;
-    for i in 0..spec.frames {
-        cal.push_poses(&[pose(&spec, i + 2)]).expect("poses");
-        let f = spec.frame(&textured, i);
-        for e in cal.push_frame(frame(&f)).expect("valid frame") {
-            let Event::Published(u) = e else { continue };
-            if u.t_s < 0.5 {
-                continue;
-            }
-            let d = &u.model.depth_of_field;
-            let rmse = dof_rmse_px(d, &f.truth.depth_of_field, &depths).expect("δ(Z) published");
-            assert!(rmse <= 0.1, "t = {:.2} s: δ RMSE {rmse:.3} px ({})", u.t_s, d.diagnostics.reason);
-            checked += 1;
+    drive(&mut cal, &spec, &textured, |f, e| {
+        let Event::Published(u) = e else { return };
+        if u.t_s < 0.5 {
+            return;
         }
-    }
+        let d = &u.model.depth_of_field;
+        let rmse = dof_rmse_px(d, &f.truth.depth_of_field, &depths).expect("δ(Z) published");
+        assert!(rmse <= 0.1, "t = {:.2} s: δ RMSE {rmse:.3} px ({})", u.t_s, d.diagnostics.reason);
+        checked += 1;
+    });
     assert!(checked >= 10, "{checked} publications checked");
 }
 
@@ -229,19 +237,14 @@ fn accurate_tier_without_its_reference_aligns_its_noise_strip_at_full_size() {
     let tier = CalibrationTier::Accurate;
     let providers = Providers { denoise: Some(Box::new(NoTemporalReference)), ..Providers::for_tier(tier) };
     let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), providers).expect("config");
-    cal.push_poses(&[pose(&spec, 0), pose(&spec, 1)]).expect("poses");
     let mut errs = vec![];
-    for i in 0..spec.frames {
-        cal.push_poses(&[pose(&spec, i + 2)]).expect("poses");
-        let f = spec.frame(scene(), i);
-        for e in cal.push_frame(frame(&f)).expect("valid frame") {
-            if let Event::Published(u) = e {
-                if i >= 1 {
-                    errs.push(noise_relative_error(&u.model.noise, &f.truth.noise).expect("noise present"));
-                }
+    drive(&mut cal, &spec, scene(), |f, e| {
+        if let Event::Published(u) = e {
+            if f.index >= 1 {
+                errs.push(noise_relative_error(&u.model.noise, &f.truth.noise).expect("noise present"));
             }
         }
-    }
+    });
     eprintln!("noise error per publication from the second frame: {errs:?}");
     assert!(errs.len() >= 5, "publications: {}", errs.len());
     assert!(errs.iter().all(|&e| e <= 0.05), "{errs:?}");
@@ -641,18 +644,12 @@ type ChangesAndLambdas = (Vec<(f64, String)>, Vec<(f64, Option<f32>)>);
 fn changes_over(tier: CalibrationTier, spec: &SequenceSpec) -> ChangesAndLambdas {
     let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier))
         .expect("valid config");
-    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
     let (mut changes, mut lambdas) = (vec![], vec![]);
-    for i in 0..spec.frames {
-        cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
-        for e in cal.push_frame(frame(&spec.frame(scene(), i))).expect("valid frame") {
-            match e {
-                Event::ChangeDetected { t_s, cause, .. } => changes.push((t_s, cause)),
-                Event::Published(u) => lambdas.push((u.t_s, u.model.motion_blur.exposure)),
-                _ => {}
-            }
-        }
-    }
+    drive(&mut cal, spec, scene(), |_, e| match e {
+        Event::ChangeDetected { t_s, cause, .. } => changes.push((t_s, cause)),
+        Event::Published(u) => lambdas.push((u.t_s, u.model.motion_blur.exposure)),
+        _ => {}
+    });
     (changes, lambdas)
 }
 
