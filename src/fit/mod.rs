@@ -24,7 +24,10 @@ pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
 pub use isotropy_pool::{fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure};
 pub use motion_blur::MbPlotData;
-pub use noise::{effective_stride as effective_noise_stride, NoisePlotData, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO};
+pub use noise::{
+    effective_stride as effective_noise_stride, NoisePlotData, FAST_WITH_NEIGHBOUR as NOISE_FAST_WITH_NEIGHBOUR,
+    MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO,
+};
 
 use crate::image::{Flow, Plane, Rgb};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, MotionBlur, Noise, SCHEMA};

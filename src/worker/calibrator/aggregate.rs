@@ -3,6 +3,12 @@
 
 use super::*;
 
+/// How long after the start or a reset frame-alone blind noise fits wait for a fit
+/// with an aligned neighbour before they are published (`Calibrator::aggregate`):
+/// 9 frames at 30 Hz. The second frame brings one wherever alignment works; a worker
+/// under load may see its second frame a few tenths of a second late.
+const NEIGHBOUR_WAIT_S: f64 = 0.3;
+
 /// Presence with hysteresis.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Presence {
@@ -35,6 +41,26 @@ impl Calibrator {
             self.estimates.pop_front();
         }
         let mut models: Vec<CameraModel> = self.estimates.iter().map(|e| e.model.clone()).collect();
+        // Blind noise fitted on the frame alone (no aligned neighbour: the first
+        // frame, a reset that dropped the held frames, a failed alignment) takes the
+        // flattest texture for noise: +57% on the calibration video's first frame,
+        // +208% seen on the demo's, against 2–3% with the previous frame aligned. Where
+        // the window holds fits with a neighbour, those decide; where it holds none,
+        // the frame-alone fits wait `NEIGHBOUR_WAIT_S` from the (re)start for one
+        // (without intrinsics, depth or poses none will come, and they are all there is).
+        let alone = |d: &crate::model::Diagnostics| d.method == "fast";
+        let with_neighbour =
+            models.iter().any(|m| m.noise.present && m.noise.diagnostics.method == fit::NOISE_FAST_WITH_NEIGHBOUR);
+        if with_neighbour || t_s - self.noise_since_s < NEIGHBOUR_WAIT_S {
+            let why = if with_neighbour {
+                "superseded by fits that read an aligned neighbour"
+            } else {
+                "fitted on the frame alone: waiting for a fit with an aligned neighbour"
+            };
+            for m in models.iter_mut().filter(|m| alone(&m.noise.diagnostics)) {
+                m.noise = crate::model::Noise::absent(crate::model::Diagnostics::not_fitted(why));
+            }
+        }
         // Presence votes: every identifiable estimate.
         let count = |f: &dyn Fn(&CameraModel) -> (bool, bool)| {
             models.iter().fold((0, 0), |(p, i), m| {

@@ -46,6 +46,7 @@ impl Calibrator {
         self.estimates.retain(|e| e.t_s >= since_s);
         self.probes.retain(|p| p.t_s >= since_s);
         self.burst_until_s = t_s + 0.5 * self.cfg.burst_s;
+        self.noise_since_s = t_s;
         self.after_change = true;
         self.window.retain(|a| a.frame.t_s >= since_s);
         self.sharp.retain(|a| a.frame.t_s >= since_s);

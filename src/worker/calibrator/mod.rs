@@ -107,6 +107,9 @@ pub struct Calibrator {
     size: Option<(usize, usize)>,
     last_t_s: Option<f64>,
     burst_until_s: f64,
+    /// The start or the last reset: frame-alone noise fits wait from here for one
+    /// with an aligned neighbour (`aggregate`).
+    noise_since_s: f64,
     last_fit_s: f64,
     histogram: Option<[f32; 16]>,
     probes: VecDeque<Probe>,
@@ -159,6 +162,7 @@ impl Calibrator {
             size: None,
             last_t_s: None,
             burst_until_s: f64::NEG_INFINITY,
+            noise_since_s: f64::NEG_INFINITY,
             last_fit_s: f64::NEG_INFINITY,
             histogram: None,
             probes: VecDeque::new(),
@@ -287,6 +291,7 @@ impl Calibrator {
         let (index, t_s) = (frame.index, frame.t_s);
         if self.burst_until_s == f64::NEG_INFINITY {
             self.burst_until_s = t_s + self.cfg.burst_s;
+            self.noise_since_s = t_s;
         }
 
         // 1. Analysis.
