@@ -25,8 +25,10 @@ fn main() {
         sparse_flow: None,
     };
     let use_nb = std::env::var("NB").is_ok();
-    let mut prev = if from > 0 { Some(an(&spec.frame(&scene, from - 1))) } else { None };
+    // LAG=k: the neighbour is the frame k before (default 1).
+    let lag: usize = std::env::var("LAG").ok().and_then(|s| s.parse().ok()).unwrap_or(1);
     for i in from..to {
+        let prev = (i >= lag).then(|| an(&spec.frame(&scene, i - lag)));
         let f = spec.frame(&scene, i);
         let cur = an(&f);
         let ta = std::time::Instant::now();
@@ -48,7 +50,6 @@ fn main() {
         if let (Some(a), Some(v)) = (al.as_ref(), valid.as_ref()) {
             inp.neighbour = Some(blind_augment::fit::Neighbour { image: &a.image, valid: v });
         }
-        prev = Some(cur);
         let t0 = std::time::Instant::now();
         let o = fit(
             &inp,

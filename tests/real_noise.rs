@@ -10,52 +10,8 @@ use blind_augment::fit::{fit, FitInputs, FitOptions, Tier};
 use blind_augment::image::{gaussian_pyramid, laplacian_pyramid, Rgb};
 use blind_augment::model::{Noise, NOISE_LEVELS};
 use blind_augment::synth::noise_field;
+use common::vtest::{cells, reference};
 use common::*;
-use serde::Deserialize;
-
-#[derive(Deserialize)]
-struct Reference {
-    levels: Vec<RefLevel>,
-}
-
-#[derive(Deserialize)]
-struct RefLevel {
-    level: usize,
-    bins: Vec<RefBin>,
-}
-
-#[derive(Deserialize)]
-struct RefBin {
-    luma: [f32; 2],
-    #[serde(default)]
-    std: Option<[Option<f32>; 3]>,
-    #[serde(default)]
-    relative_stderr: Option<[Option<f32>; 3]>,
-}
-
-fn reference() -> Reference {
-    let text = std::fs::read_to_string(data("noise_vtest/reference.json")).expect("vendored reference");
-    serde_json::from_str(&text).expect("reference.json parses")
-}
-
-/// Reference cells precise enough to judge a 20% tolerance: relative standard error
-/// ≤ 5% (bins with a handful of pixels, e.g. the 4 darkest level-3 pixels, are out).
-fn cells(r: &Reference) -> Vec<(usize, usize, [f32; 2], f32)> {
-    let mut out = vec![];
-    for lv in &r.levels {
-        for b in &lv.bins {
-            let (Some(std), Some(se)) = (&b.std, &b.relative_stderr) else { continue };
-            for c in 0..3 {
-                if let (Some(s), Some(e)) = (std[c], se[c]) {
-                    if e <= 0.05 && s > 0.0 {
-                        out.push((lv.level, c, b.luma, s));
-                    }
-                }
-            }
-        }
-    }
-    out
-}
 
 fn blind_noise(img: &Rgb) -> Noise {
     let opts = FitOptions { tier: Some(Tier::Fast), ..FitOptions::default() };
@@ -183,6 +139,40 @@ fn compression_blocking_is_recognised() {
     for name in ["astronaut.png", "chelsea.png"] {
         let n = blind_noise(&quantize8(&add_sensor_noise(&photo(name), [4e-5; 3], [1e-4; 3], 3)));
         assert!(n.blocking.is_none(), "{name}: {:?}", n.blocking);
+    }
+}
+
+/// A block codec predicts each frame from the last: skipped blocks copy its noise
+/// exactly, predicted ones carry it under their residual. On this clip 72% of frame
+/// 400's pixels equal frame 401's, and the blind fit with a neighbour 1–10 frames
+/// away read level 0 at −59…−82% (`examples/real_noise_neighbour.rs`, against the
+/// temporal reference; alone −31%). So where the frame shows the codec's grid the
+/// fit reads it alone and says why. Checked with the extreme of a copy — the frame
+/// itself as its own aligned neighbour: the difference holds no noise at all (no
+/// model, or level 0 below a fifth of the frame-alone fit's), while `fit` returns
+/// the frame-alone model unchanged.
+#[test]
+fn a_neighbour_is_not_used_on_a_frame_with_a_codec_grid() {
+    use blind_augment::fit::{fit_noise_fast, Neighbour};
+    let frame = photo("noise_vtest/frame.png");
+    let alone = blind_noise(&frame);
+    let valid = blind_augment::image::Plane::new(frame.width, frame.height, 1.0);
+    let nb = Neighbour { image: &frame, valid: &valid };
+    let opts = FitOptions { tier: Some(Tier::Fast), ..FitOptions::default() };
+    let raw = fit_noise_fast(&frame, Some(&nb), opts.noise_fast_samples_per_level).0;
+    let std0 = |n: &Noise| n.levels[0].std(n.form, 1, n.clamp_luma(0.6));
+    eprintln!(
+        "level 0 at luma 0.6: alone {:.5}, difference with a copy {:?}",
+        std0(&alone),
+        raw.present.then(|| std0(&raw))
+    );
+    assert!(!raw.present || std0(&raw) < 0.2 * std0(&alone), "the copy's difference held noise");
+    let got = fit(&FitInputs { neighbour: Some(nb), ..FitInputs::new(&frame) }, &opts).expect("fit").model.noise;
+    assert_eq!(got.diagnostics.method, "fast");
+    assert!(got.diagnostics.reason.contains("neighbour was not used"), "{}", got.diagnostics.reason);
+    assert_eq!((got.form, got.intensity, got.luminance_range), (alone.form, alone.intensity, alone.luminance_range));
+    for (a, b) in got.levels.iter().zip(&alone.levels) {
+        assert_eq!((a.slope, a.intercept), (b.slope, b.intercept));
     }
 }
 

@@ -24,6 +24,9 @@ pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
 pub use isotropy_pool::{fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure};
 pub use motion_blur::MbPlotData;
+/// The blind noise fit as it reads, neighbour and all (`fit` reads a frame with a
+/// codec's block grid alone); for probes.
+pub use noise::fit_fast as fit_noise_fast;
 pub use noise::{
     effective_stride as effective_noise_stride, NoisePlotData, FAST_WITH_NEIGHBOUR as NOISE_FAST_WITH_NEIGHBOUR,
     MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO,
@@ -444,7 +447,27 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
     }
     let (noise, data) = match (tier, inp.denoised) {
         (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, inp.reference_valid, opts),
-        _ => noise::fit_fast(inp.image, inp.neighbour.as_ref(), opts.noise_fast_samples_per_level),
+        _ => {
+            let per_level = opts.noise_fast_samples_per_level;
+            let (with, data) = noise::fit_fast(inp.image, inp.neighbour.as_ref(), per_level);
+            match (&with.blocking, inp.neighbour.is_some()) {
+                // A block codec's inter-frame prediction copies a frame's noise into
+                // the next (skipped blocks; predicted ones carry it under their
+                // residual), so the difference with a neighbour holds little of it:
+                // on the DivX clip (tests/data/noise_vtest; 72% of pixels identical
+                // to the next frame's) level 0 read −59…−82% with a neighbour 1–10
+                // frames away, −31% alone (within 20% inside the luma range it
+                // measures). Where the frame shows the codec's grid, it is read alone.
+                (Some(_), true) => {
+                    let (mut alone, data) = noise::fit_fast(inp.image, None, per_level);
+                    alone.diagnostics.fit_time_s += with.diagnostics.fit_time_s;
+                    alone.diagnostics.reason += "; the aligned neighbour was not used: a block codec carries noise \
+                        from frame to frame, so their difference reads it low";
+                    (alone, data)
+                }
+                _ => (with, data),
+            }
+        }
     };
     (noise, Some(data))
 }

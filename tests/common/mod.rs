@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 pub mod independent;
+pub mod vtest;
 
 use blind_augment::image::{Flow, Plane, Rgb};
 use blind_augment::io;
