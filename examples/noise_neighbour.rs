@@ -9,11 +9,27 @@ fn main() {
     let w: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(320);
     let scene = motorcycle().unwrap();
     let spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, 150, Some(2.5));
+    // JPEG=q: every frame through a JPEG encoder at quality q (an intra-only codec:
+    // its noise is independent from frame to frame).
+    let jpeg: Option<u8> = std::env::var("JPEG").ok().and_then(|s| s.parse().ok());
+    // SAVE=dir: every rendered frame written there (8-bit PNG, frame_NNN.png);
+    // LOAD=dir: frames read from there instead (e.g. after a video codec).
+    let frame_image = |f: &SequenceFrame, jpeg: Option<u8>| {
+        let name = format!("frame_{:03}.png", f.index);
+        if let Ok(dir) = std::env::var("SAVE") {
+            let path = std::path::Path::new(&dir).join(&name);
+            blind_augment::io::save_rgb(&path, &f.image, blind_augment::io::BitDepth::Eight).unwrap();
+        }
+        if let Ok(dir) = std::env::var("LOAD") {
+            return blind_augment::io::load_rgb(&std::path::Path::new(&dir).join(&name)).unwrap().0;
+        }
+        jpeg.map_or_else(|| f.image.clone(), |q| jpeg_round_trip(&f.image, q))
+    };
     let an = |f: &SequenceFrame| blind_augment::analysis::Analysed {
         frame: blind_augment::analysis::Frame {
             index: f.index as u64,
             t_s: f.t_s,
-            image: f.image.clone(),
+            image: frame_image(f, jpeg),
             depth: None,
             flow: None,
         },
@@ -46,12 +62,12 @@ fn main() {
                 a.valid.iter().map(|&v| v as u8 as f32).collect(),
             )
         });
-        let mut inp = FitInputs::new(&f.image);
+        let mut inp = FitInputs::new(&cur.frame.image);
         if let (Some(a), Some(v)) = (al.as_ref(), valid.as_ref()) {
             inp.neighbour = Some(blind_augment::fit::Neighbour { image: &a.image, valid: v });
         }
         let t0 = std::time::Instant::now();
-        let o = fit(
+        let mut o = fit(
             &inp,
             &FitOptions {
                 tier: Some(Tier::Fast),
@@ -60,6 +76,12 @@ fn main() {
             },
         )
         .unwrap();
+        // RAW=1: the neighbour read whatever the frame (`fit` reads a frame with a
+        // codec's block grid alone).
+        if std::env::var_os("RAW").is_some() {
+            let per_level = FitOptions::default().noise_fast_samples_per_level;
+            o.model.noise = blind_augment::fit::fit_noise_fast(&cur.frame.image, inp.neighbour.as_ref(), per_level).0;
+        }
         if std::env::var("TIME").is_ok() {
             eprintln!("fit {:.1} ms {:?}", t0.elapsed().as_secs_f64() * 1e3, o.model.noise.diagnostics.stages_s);
         }
@@ -103,4 +125,27 @@ fn truth_at(t: &blind_augment::model::Noise) {
         t.form,
         t.levels[1].std(t.form, 1, 0.4) / t.levels[0].std(t.form, 1, 0.4)
     );
+}
+
+/// `img` encoded as 8-bit JPEG at `quality` and decoded.
+fn jpeg_round_trip(img: &blind_augment::image::Rgb, quality: u8) -> blind_augment::image::Rgb {
+    let (w, h) = (img.width, img.height);
+    let mut bytes = Vec::with_capacity(w * h * 3);
+    for i in 0..w * h {
+        for c in 0..3 {
+            bytes.push((img.channels[c][i].clamp(0.0, 1.0) * 255.0).round() as u8);
+        }
+    }
+    let mut out = vec![];
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality)
+        .encode(&bytes, w as u32, h as u32, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    let dec = image::load_from_memory(&out).unwrap().to_rgb8();
+    let mut r = blind_augment::image::Rgb::new(w, h, [0.0; 3]);
+    for (i, p) in dec.pixels().enumerate() {
+        for c in 0..3 {
+            r.channels[c][i] = p.0[c] as f32 / 255.0;
+        }
+    }
+    r
 }

@@ -47,6 +47,17 @@ fn main() {
     let frame = common::photo("noise_vtest/frame.png");
     let opts = FitOptions { tier: Some(Tier::Fast), ..FitOptions::default() };
     report("alone", &fit(&FitInputs::new(&frame), &opts).expect("fit").model.noise);
+    // MEAN=path: the accurate fit against that image as I_noNoise (e.g. the mean of
+    // the 8 frames around 400, as the worker's temporal denoiser makes it; the
+    // mean's own 1/8 of the noise variance is not divided out: −6% in std).
+    if let Some(path) = std::env::var_os("MEAN") {
+        if let Ok((mean, _)) = blind_augment::io::load_rgb(std::path::Path::new(&path)) {
+            let inp = FitInputs { denoised: Some(&mean), ..FitInputs::new(&frame) };
+            let effects = blind_augment::fit::Effects { noise: true, motion_blur: false, depth_of_field: false };
+            let acc = FitOptions { tier: Some(Tier::Accurate), effects, ..FitOptions::default() };
+            report("accurate against MEAN", &fit(&inp, &acc).expect("fit").model.noise);
+        }
+    }
     for path in std::env::args().skip(1) {
         let Ok((nb, _)) = blind_augment::io::load_rgb(std::path::Path::new(&path)) else {
             eprintln!("{path}: not a readable image");

@@ -135,10 +135,16 @@ fn compression_blocking_is_recognised() {
     let noise = blind_noise(&photo("noise_vtest/frame.png"));
     let b = noise.blocking.expect("the DivX frame's 8-px block grid");
     assert_eq!(b.period_px, 8);
+    // The detector alone (`fit::compression_blocking`, for callers without a fit)
+    // finds the same grid.
+    let alone = blind_augment::fit::compression_blocking(&photo("noise_vtest/frame.png")).expect("the grid, alone");
+    eprintln!("in the fit {b:?}; alone {alone:?}");
+    assert_eq!((alone.period_px, alone.phase_px), (b.period_px, b.phase_px));
     assert!(noise.diagnostics.reason.contains("blocking"), "{}", noise.diagnostics.reason);
     for name in ["astronaut.png", "chelsea.png"] {
         let n = blind_noise(&quantize8(&add_sensor_noise(&photo(name), [4e-5; 3], [1e-4; 3], 3)));
         assert!(n.blocking.is_none(), "{name}: {:?}", n.blocking);
+        assert!(blind_augment::fit::compression_blocking(&photo(name)).is_none(), "{name}");
     }
 }
 

@@ -24,6 +24,7 @@ pub use curve::{fit_dof_curve, CurveFit};
 pub use dof::{fit_fast_pooled, DofPlotData, POOLED_MAX_EDGE_SAMPLES};
 pub use isotropy_pool::{fit_fast_pooled_exposure, pooled_exposure, IsotropyEvidence, PooledExposure};
 pub use motion_blur::MbPlotData;
+pub use noise::compression_blocking;
 /// The blind noise fit as it reads, neighbour and all (`fit` reads a frame with a
 /// codec's block grid alone); for probes.
 pub use noise::fit_fast as fit_noise_fast;

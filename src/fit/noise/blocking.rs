@@ -4,6 +4,15 @@
 
 use super::*;
 
+/// The frame's compression blocking alone, as the blind fit detects it (its
+/// structure measure, the luma's band 2, built here): for callers that hold a
+/// reference from other frames and must know whether the stream's codec copies
+/// noise between them (`worker::Calibrator`).
+pub fn compression_blocking(img: &Rgb) -> Option<crate::model::Blocking> {
+    let bands = crate::image::laplacian_pyramid(&img.luma(), 3).bands;
+    detect_blocking(img, &bands[2], 4)
+}
+
 /// Periodic block-grid discontinuities of a block-transform codec (JPEG, MPEG-4,
 /// H.264 at 8 px): the mean absolute luma step across each column (row) phase mod 8,
 /// over the flatter half of the frame (where blocking shows and texture does not

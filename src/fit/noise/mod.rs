@@ -37,6 +37,7 @@ use std::time::Instant;
 
 mod blind;
 mod blocking;
+pub use blocking::compression_blocking;
 mod clip;
 pub use blind::{fit_fast, DEFAULT_FAST_SAMPLES_PER_LEVEL, FAST_WITH_NEIGHBOUR, MIN_FAST_SAMPLES_PER_LEVEL};
 use clip::*;

@@ -54,6 +54,11 @@ use std::time::Instant;
 /// busy with another costly fit (`Calibrator::fit_frame`).
 const PHASE_WAIT_S: f64 = 0.1;
 
+/// How often the stream is checked for a block codec's grid (`Calibrator::
+/// codec_grid`): a property of the stream, not of the frame, and 10–13 ms of one core
+/// at 1280×960.
+const CODEC_GRID_RECHECK_S: f64 = 1.0;
+
 /// One fit's result, kept for aggregation.
 #[derive(Clone, Debug)]
 struct Estimate {
@@ -128,6 +133,9 @@ pub struct Calibrator {
     dof_pool: VecDeque<PooledEdges>,
     /// The blind motion-blur fits' isotropy evidence of the last `MB_POOL_S` (`pool_mb`).
     mb_pool: VecDeque<PooledIsotropy>,
+    /// Whether the stream shows a block codec's grid, and when that was last checked
+    /// (`codec_grid`).
+    codec_grid: Option<(f64, bool)>,
     /// This frame's stage times.
     stages: Stages,
 }
@@ -176,6 +184,7 @@ impl Calibrator {
             noise_strips_fitted: 0,
             dof_pool: VecDeque::new(),
             mb_pool: VecDeque::new(),
+            codec_grid: None,
             stages: Stages::default(),
         })
     }
@@ -432,6 +441,20 @@ impl Calibrator {
         Ok(events)
     }
 
+    /// Whether the stream shows a block codec's grid (`fit::compression_blocking`),
+    /// checked on this frame if the last check is `CODEC_GRID_RECHECK_S` old.
+    fn codec_grid(&mut self, current: &Analysed) -> bool {
+        let t_s = current.frame.t_s;
+        match self.codec_grid {
+            Some((at, grid)) if (t_s - at).abs() < CODEC_GRID_RECHECK_S => grid,
+            _ => {
+                let grid = fit::compression_blocking(&current.frame.image).is_some();
+                self.codec_grid = Some((t_s, grid));
+                grid
+            }
+        }
+    }
+
     /// One frame's fit at the configured tier.
     fn fit_frame(
         &mut self,
@@ -477,6 +500,8 @@ impl Calibrator {
         // ~20% to ~5% (BENCHMARKS.md).
         let neighbour =
             if fx.noise && self.providers.denoise.is_none() { self.aligned_previous(current) } else { None };
+        // Checked before `ctx` borrows the calibrator (see the denoised reference).
+        let codec_grid = fx.noise && self.providers.denoise.is_some() && self.codec_grid(current);
         let ctx = FrameContext {
             current,
             window: held,
@@ -509,6 +534,21 @@ impl Calibrator {
         let t_refs = Instant::now();
         let denoised = match (fx.noise, self.providers.denoise.as_mut()) {
             (true, Some(p)) => match p.denoise(&ctx) {
+                // A reference made of other frames holds the noise a block codec
+                // copied into them (skipped and predicted blocks): against the mean
+                // of the 8 frames around it the DivX clip's level 0 read −39%, its
+                // level 3 −83% (BENCHMARKS.md "Noise from video on a block codec's
+                // stream"). Where the frame shows the codec's grid, noise runs blind
+                // (which reads such a frame alone).
+                Ok(r) if !r.sources.is_empty() && codec_grid => {
+                    events.push(Event::Degraded {
+                        frame: index,
+                        reason: "temporal noise reference not used: the frame shows a block codec's grid, and the \
+                                 codec copies noise between frames"
+                            .into(),
+                    });
+                    None
+                }
                 Ok(r) => Some(r),
                 Err(e) => {
                     events.push(Event::Degraded { frame: index, reason: e.to_string() });
