@@ -31,6 +31,11 @@ fn main() {
     if std::env::var_os("DEMO_TRUTH").is_some() {
         common::demo_camera(&mut spec);
     }
+    // NODOF=1: the camera without depth of field (the temporal λ's end-of-turn
+    // bias is the rest frames' other defocus: `examples/defocus_change_probe.rs`).
+    if std::env::var_os("NODOF").is_some() {
+        spec.truth.depth_of_field.present = false;
+    }
     let mut cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
     // WINDOW=s: the aggregation window (a tiny one publishes each fit as it is).
     if let Some(w) = std::env::var("WINDOW").ok().and_then(|s| s.parse().ok()) {
