@@ -2,136 +2,20 @@
 //! Motorcycle photograph with its real depth, re-rendered along a head path and
 //! distorted by a camera that changes mid-sequence): the calibrator converges, it
 //! follows the change within 1 s of video, the worker thread publishes through the
-//! channel without blocking the submitter, and bad input is refused by name.
+//! channel without blocking the submitter, and bad input is refused by name. The
+//! worker's noise on the same video: tests/calibrate_noise.rs.
 
 mod common;
 
-use blind_augment::analysis::timing::TimedPose;
-use blind_augment::analysis::{AnalysisError, Denoiser, DepthMap, Frame, FrameContext, Reference};
+use blind_augment::analysis::Frame;
 use blind_augment::image::Rgb;
 use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_relative_error};
-use blind_augment::model::{CameraModel, DepthUnits};
-use blind_augment::synth::sequence::{motorcycle, procedural, Scene, SequenceFrame, SequenceSpec};
+use blind_augment::model::CameraModel;
+use blind_augment::synth::sequence::{procedural, SequenceSpec};
 use blind_augment::worker::{
     CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Providers, Worker,
 };
-use std::sync::OnceLock;
-
-const CHANGE_S: f64 = 1.5;
-
-fn scene() -> &'static Scene {
-    static S: OnceLock<Scene> = OnceLock::new();
-    S.get_or_init(|| motorcycle().expect("bundled scene"))
-}
-
-/// 90 frames (3 s at 30 Hz) of 320×240, the camera changing at 1.5 s; rendered once.
-fn sequence() -> &'static (SequenceSpec, Vec<blind_augment::synth::sequence::SequenceFrame>) {
-    static S: OnceLock<(SequenceSpec, Vec<blind_augment::synth::sequence::SequenceFrame>)> = OnceLock::new();
-    S.get_or_init(|| {
-        let spec = SequenceSpec::motorcycle(scene(), 320, 240, 90, Some(CHANGE_S));
-        let frames = (0..spec.frames).map(|i| spec.frame(scene(), i)).collect();
-        (spec, frames)
-    })
-}
-
-fn pose(spec: &SequenceSpec, i: usize) -> TimedPose {
-    let t = spec.frame_time_s(i);
-    let (_, q, p) = spec.path.world_from_camera(t).to_scale_rotation_translation();
-    TimedPose { t_ns: (t * 1e9).round() as i64, position_m: p, orientation: q }
-}
-
-fn frame(f: &blind_augment::synth::sequence::SequenceFrame) -> Frame {
-    Frame {
-        index: f.index as u64,
-        t_s: f.t_s,
-        image: f.image.clone(),
-        depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
-        flow: None,
-    }
-}
-
-/// Feed `cal` the frames of `spec` rendered from `scene` as a headset would (poses
-/// two frames ahead) and hand every event to `on` with its frame.
-fn drive(cal: &mut Calibrator, spec: &SequenceSpec, scene: &Scene, on: impl FnMut(&SequenceFrame, Event)) {
-    drive_edited(cal, spec, scene, |_| {}, on)
-}
-
-/// `drive` with every frame's image changed by `edit` before the calibrator sees it
-/// (the truth stays the rendered camera's).
-fn drive_edited(
-    cal: &mut Calibrator,
-    spec: &SequenceSpec,
-    scene: &Scene,
-    mut edit: impl FnMut(&mut Frame),
-    mut on: impl FnMut(&SequenceFrame, Event),
-) {
-    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
-    for i in 0..spec.frames {
-        cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
-        let f = spec.frame(scene, i);
-        let mut input = frame(&f);
-        edit(&mut input);
-        for e in cal.push_frame(input).expect("valid frame") {
-            on(&f, e);
-        }
-    }
-}
-
-/// Every published update's time and stage times (`Update::stages_s`).
-type StageLog = Vec<(f64, Vec<(&'static str, f64)>)>;
-
-/// Run a tier over the sequence; every published (t, model, truth) and the changes.
-fn run(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>) {
-    let (published, changes, _) = run_with_stages(tier);
-    (published, changes)
-}
-
-fn run_with_stages(tier: CalibrationTier) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>, StageLog) {
-    run_configured(tier, |_| {})
-}
-
-/// `run_with_stages` with the tier's configuration changed by `configure`.
-fn run_configured(
-    tier: CalibrationTier,
-    configure: impl FnOnce(&mut CalibratorConfig),
-) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>, StageLog) {
-    run_providers(tier, configure, Providers::for_tier(tier))
-}
-
-/// `run_configured` with the given providers.
-fn run_providers(
-    tier: CalibrationTier,
-    configure: impl FnOnce(&mut CalibratorConfig),
-    providers: Providers,
-) -> (Vec<(f64, CameraModel, CameraModel)>, Vec<f64>, StageLog) {
-    let (spec, frames) = sequence();
-    let mut cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
-    configure(&mut cfg);
-    let mut cal = Calibrator::new(cfg, providers).expect("valid config");
-    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
-    let (mut out, mut changes, mut stages) = (vec![], vec![], vec![]);
-    for f in frames {
-        // Poses lead the camera by two frames, as on a headset.
-        cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
-        for e in cal.push_frame(frame(f)).expect("valid frame") {
-            match e {
-                Event::Published(u) => {
-                    u.model.validate().expect("every published model is valid");
-                    // Each stage lies within the update's wall time (their sum may not:
-                    // the three fits run concurrently where there are cores).
-                    for (k, s) in &u.stages_s {
-                        assert!(*s > 0.0 && *s <= u.compute_s + 1e-6, "stage {k}: {s} s of {} s", u.compute_s);
-                    }
-                    stages.push((u.t_s, u.stages_s));
-                    out.push((u.t_s, u.model, f.truth.clone()));
-                }
-                Event::ChangeDetected { t_s, .. } => changes.push(t_s),
-                _ => {}
-            }
-        }
-    }
-    (out, changes, stages)
-}
+use common::calibration::*;
 
 /// Blind δ(Z) from video, where the frames' own blur is known: the calibration
 /// video's depth and head path under `synth::sequence::procedural`'s hard-edged
@@ -195,169 +79,6 @@ fn accurate_tier_converges_and_follows_a_camera_change() {
     assert!(lam < 0.03, "λ error {lam} at {}", after.0);
 }
 
-/// A temporal denoiser that never has enough frames moving alike (a head that never
-/// repeats its motion): the test double of `TemporalDenoiser`'s refusal.
-struct NoTemporalReference;
-
-impl Denoiser for NoTemporalReference {
-    fn name(&self) -> &str {
-        "no temporal reference"
-    }
-    fn denoise(&mut self, ctx: &FrameContext) -> Result<Reference, AnalysisError> {
-        Err(AnalysisError::unavailable(ctx.current.frame.index, "no temporal reference", "0 earlier frames move alike"))
-    }
-}
-
-/// The accurate tier whose temporal denoiser fails (at a burst's start, after a
-/// reset, on a head that never repeats its motion) fits noise blind, and reads the
-/// previous frame aligned as the fast tier does. Before, the fallback fitted the
-/// frame alone: on the demo's video every other such fit read levels 1–3 at
-/// +110…+710% (texture in the frame's flattest samples) and was published for
-/// 0.2 s after a (false) camera change. Tolerance: every publication from the
-/// second frame to the change within 15%, the median within the fast tier's 10%
-/// target (measured: at most 5.3%, median 3.0%; without the aligned frame 46–65%,
-/// median 57%).
-#[test]
-fn accurate_tier_without_its_reference_fits_noise_on_the_aligned_previous_frame() {
-    let tier = CalibrationTier::Accurate;
-    let providers = Providers { denoise: Some(Box::new(NoTemporalReference)), ..Providers::for_tier(tier) };
-    let (published, _, _) = run_providers(tier, |_| {}, providers);
-    let errs: Vec<f32> = published
-        .iter()
-        .filter(|p| p.0 > 0.02 && p.0 < CHANGE_S)
-        .map(|p| noise_relative_error(&p.1.noise, &p.2.noise).expect("noise present"))
-        .collect();
-    assert!(errs.len() >= 20, "publications before the change: {}", errs.len());
-    let mut sorted = errs.clone();
-    sorted.sort_by(f32::total_cmp);
-    let (median, worst) = (sorted[sorted.len() / 2], sorted[sorted.len() - 1]);
-    eprintln!(
-        "noise error over {} publications: median {:.1}%, worst {:.1}%",
-        errs.len(),
-        100.0 * median,
-        100.0 * worst
-    );
-    assert!(worst <= 0.15, "worst publication {:.1}%: {errs:?}", 100.0 * worst);
-    assert!(median <= 0.10, "median {:.1}%", 100.0 * median);
-}
-
-/// The same at 1280×960, where the noise probe's alignment covers only bands of
-/// rows and the fallback aligns its strip (a quarter of the frame) on its own: 8
-/// frames, every publication from the second within 5% (measured 0.8–1.4%; fitted
-/// on the frame alone, before the fallback read the previous frame, 1.6–9.7%).
-#[test]
-fn accurate_tier_without_its_reference_aligns_its_noise_strip_at_full_size() {
-    let spec = SequenceSpec::motorcycle(scene(), 1280, 960, 8, None);
-    let tier = CalibrationTier::Accurate;
-    let providers = Providers { denoise: Some(Box::new(NoTemporalReference)), ..Providers::for_tier(tier) };
-    let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), providers).expect("config");
-    let mut errs = vec![];
-    drive(&mut cal, &spec, scene(), |f, e| {
-        if let Event::Published(u) = e {
-            if f.index >= 1 {
-                errs.push(noise_relative_error(&u.model.noise, &f.truth.noise).expect("noise present"));
-            }
-        }
-    });
-    eprintln!("noise error per publication from the second frame: {errs:?}");
-    assert!(errs.len() >= 5, "publications: {}", errs.len());
-    assert!(errs.iter().all(|&e| e <= 0.05), "{errs:?}");
-}
-
-/// A block codec copies noise from frame to frame (skipped and predicted blocks), so
-/// a noise reference made of other frames holds it too: against the mean of the 8
-/// frames around it the real DivX clip's level 0 read −39% (BENCHMARKS.md "Noise from
-/// video on a block codec's stream"). Where the frame shows the codec's grid the
-/// accurate tier leaves its temporal noise reference unused and says so. Checked on
-/// the calibration video with an 8-px grid of its own: every frame gets a random
-/// offset per 8×8 block (std 0.02, a DC quantisation error; this video's own noise
-/// hides a weaker grid: at std 0.015 it is detected on 1 frame of 20) — the grid is
-/// detected on those frames and not on the rendered ones, no published noise comes
-/// from the temporal reference, noise is still published (blind, on the frame alone,
-/// from 0.3 s: measured 11 of 20 frames), and each refused reference is an event.
-#[test]
-fn accurate_tier_leaves_its_temporal_noise_reference_on_a_codec_grid() {
-    let spec = SequenceSpec::motorcycle(scene(), 320, 240, 20, None);
-    let tier = CalibrationTier::Accurate;
-    let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier))
-        .expect("config");
-    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-    let mut uniform = move || {
-        // xorshift64*: a fixed sequence, no dependency.
-        seed ^= seed >> 12;
-        seed ^= seed << 25;
-        seed ^= seed >> 27;
-        (seed.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
-    };
-    let mut grids = (0, 0);
-    let (mut refused, mut published, mut from_reference) = (0, 0, 0);
-    drive_edited(
-        &mut cal,
-        &spec,
-        scene(),
-        |f| {
-            let w = f.image.width;
-            grids.0 += blind_augment::fit::compression_blocking(&f.image).is_some() as usize;
-            for by in 0..f.image.height / 8 {
-                for bx in 0..w / 8 {
-                    // Uniform on ±0.035: std 0.02 (5 DN, a heavily compressed stream).
-                    let d = (uniform() - 0.5) * 0.02 * 12f32.sqrt();
-                    for y in by * 8..by * 8 + 8 {
-                        for c in 0..3 {
-                            f.image.channels[c][y * w + bx * 8..y * w + bx * 8 + 8].iter_mut().for_each(|v| *v += d);
-                        }
-                    }
-                }
-            }
-            grids.1 += blind_augment::fit::compression_blocking(&f.image).is_some() as usize;
-        },
-        |_, e| match e {
-            Event::Degraded { reason, .. } if reason.contains("block codec") => refused += 1,
-            Event::Published(u) => {
-                published += u.model.noise.present as usize;
-                from_reference += u.model.noise.diagnostics.method.starts_with("accurate") as usize;
-            }
-            _ => {}
-        },
-    );
-    eprintln!("grid on {} rendered / {} edited frames; {refused} references refused; noise published {published} times, {from_reference} from the reference", grids.0, grids.1);
-    assert_eq!(grids, (0, spec.frames), "the grid is the edit's");
-    assert!(refused >= 5, "refused references: {refused}");
-    assert!(published >= 10, "noise publications: {published}");
-    assert_eq!(from_reference, 0);
-}
-
-/// The first frame (and the first after a reset that dropped the held frames) has
-/// no previous frame to align, and its blind noise fit reads the frame alone:
-/// +56% on this sequence, published until the next fit before the wait. Now the
-/// frame-alone fit is held back while an aligned one can come (intrinsics given)
-/// and is superseded by it: every noise the fast tier publishes before the change
-/// is within 15% (the fast tier's 10% target plus a frame's scatter; measured
-/// 1.9–5.7%), the first on the second frame. Without intrinsics no neighbour ever
-/// comes: the frame-alone fits are then published, from `NEIGHBOUR_WAIT_S` (0.3 s)
-/// after the start.
-#[test]
-fn a_frame_alone_noise_fit_waits_for_one_with_an_aligned_neighbour() {
-    let tier = CalibrationTier::Fast;
-    let (published, _, _) = run_with_stages(tier);
-    let noisy: Vec<(f64, f32)> = published
-        .iter()
-        .filter(|p| p.0 < CHANGE_S && p.1.noise.present)
-        .map(|p| (p.0, noise_relative_error(&p.1.noise, &p.2.noise).expect("noise present")))
-        .collect();
-    eprintln!("noise error per publication before the change: {noisy:?}");
-    let first_s = noisy.first().expect("noise published").0;
-    assert!(first_s < 0.05, "first noise at {first_s} s: the second frame has a neighbour");
-    assert!(noisy.iter().all(|&(_, e)| e <= 0.15), "{noisy:?}");
-    assert!(published.iter().all(|p| p.0 < CHANGE_S || p.1.noise.present), "noise on from its first publication");
-
-    let (alone, _, _) = run_configured(tier, |cfg| cfg.intrinsics = None);
-    let first = alone.iter().find(|p| p.1.noise.present).expect("frame-alone noise published without intrinsics");
-    eprintln!("without intrinsics: first noise at {:.3} s ({:?})", first.0, first.1.noise.diagnostics.method);
-    assert!((0.3 - 1e-6..0.4).contains(&first.0), "first frame-alone noise at {} s", first.0);
-    assert_eq!(first.1.noise.diagnostics.method, "fast");
-}
-
 /// The fast tier (blind fits; the previous frame aligned for noise) publishes every
 /// frame and never anything invalid, presence does not flicker, and:
 /// * noise within the fast tier's 10% target in the half second before the change
@@ -400,33 +121,6 @@ fn fast_tier_publishes_every_frame_and_presence_does_not_flicker() {
     eprintln!("alignments at {aligned:?}");
     assert!(!aligned.is_empty(), "the fast tier aligns the previous frame");
     assert!(aligned.len() as f64 <= span_s / 0.1 + 1.0, "{} alignments in {span_s} s", aligned.len());
-}
-
-/// Median relative noise error of the publications in the half second before the
-/// change.
-fn noise_error_before_change(published: &[(f64, CameraModel, CameraModel)]) -> f32 {
-    let mut errs: Vec<f32> = published
-        .iter()
-        .filter(|p| p.0 >= CHANGE_S - 0.5 && p.0 < CHANGE_S)
-        .filter_map(|p| noise_relative_error(&p.1.noise, &p.2.noise))
-        .collect();
-    errs.sort_by(f32::total_cmp);
-    errs.get(errs.len() / 2).copied().unwrap_or(f32::INFINITY)
-}
-
-/// The fast tier's blind noise fit on strips of the frame, one per refit in turn
-/// (`CalibratorConfig::noise_strip_px`; at 1280×960 it reads a quarter of the frame
-/// per refit): forced here onto this 320×240 sequence as two strips (128 and 112
-/// rows), its published noise stays within the fast tier's 10% target, like the
-/// whole frame's (measured 4.9% on strips, 5.3% whole).
-#[test]
-fn fast_tier_noise_on_strips_reads_like_the_whole_frame() {
-    let (strips, _, _) = run_configured(CalibrationTier::Fast, |c| c.noise_strip_px = Some(320 * 120));
-    let (whole, _, _) = run_configured(CalibrationTier::Fast, |c| c.noise_strip_px = None);
-    let (e_strips, e_whole) = (noise_error_before_change(&strips), noise_error_before_change(&whole));
-    eprintln!("noise error before the change: strips {:.1}%, whole frame {:.1}%", 100.0 * e_strips, 100.0 * e_whole);
-    assert!(e_strips < 0.10, "noise error on strips {e_strips}");
-    assert!(e_whole < 0.10, "noise error on the whole frame {e_whole}");
 }
 
 /// The worker thread: frames submitted far faster than it fits are dropped (the

@@ -2,6 +2,7 @@
 //! and flow with known structure, the true noise generator.
 #![allow(dead_code)]
 
+pub mod calibration;
 pub mod independent;
 pub mod vtest;
 

@@ -1,0 +1,191 @@
+//! The calibration worker's noise on video (`tests/common/calibration.rs`'s
+//! sequence): what it publishes when a temporal reference fails (the aligned
+//! previous frame), at a burst's start (no frame-alone fit while an aligned one can
+//! come), on a block codec's stream (no temporal reference), and on strips of the
+//! frame.
+
+mod common;
+
+use blind_augment::analysis::{AnalysisError, Denoiser, FrameContext, Reference};
+use blind_augment::model::compare::noise_relative_error;
+use blind_augment::synth::sequence::SequenceSpec;
+use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
+use common::calibration::*;
+
+/// A temporal denoiser that never has enough frames moving alike (a head that never
+/// repeats its motion): the test double of `TemporalDenoiser`'s refusal.
+struct NoTemporalReference;
+
+impl Denoiser for NoTemporalReference {
+    fn name(&self) -> &str {
+        "no temporal reference"
+    }
+    fn denoise(&mut self, ctx: &FrameContext) -> Result<Reference, AnalysisError> {
+        Err(AnalysisError::unavailable(ctx.current.frame.index, "no temporal reference", "0 earlier frames move alike"))
+    }
+}
+
+/// The accurate tier whose temporal denoiser fails (at a burst's start, after a
+/// reset, on a head that never repeats its motion) fits noise blind, and reads the
+/// previous frame aligned as the fast tier does. Before, the fallback fitted the
+/// frame alone: on the demo's video every other such fit read levels 1–3 at
+/// +110…+710% (texture in the frame's flattest samples) and was published for
+/// 0.2 s after a (false) camera change. Tolerance: every publication from the
+/// second frame to the change within 15%, the median within the fast tier's 10%
+/// target (measured: at most 5.3%, median 3.0%; without the aligned frame 46–65%,
+/// median 57%).
+#[test]
+fn accurate_tier_without_its_reference_fits_noise_on_the_aligned_previous_frame() {
+    let tier = CalibrationTier::Accurate;
+    let providers = Providers { denoise: Some(Box::new(NoTemporalReference)), ..Providers::for_tier(tier) };
+    let (published, _, _) = run_providers(tier, |_| {}, providers);
+    let errs: Vec<f32> = published
+        .iter()
+        .filter(|p| p.0 > 0.02 && p.0 < CHANGE_S)
+        .map(|p| noise_relative_error(&p.1.noise, &p.2.noise).expect("noise present"))
+        .collect();
+    assert!(errs.len() >= 20, "publications before the change: {}", errs.len());
+    let mut sorted = errs.clone();
+    sorted.sort_by(f32::total_cmp);
+    let (median, worst) = (sorted[sorted.len() / 2], sorted[sorted.len() - 1]);
+    eprintln!(
+        "noise error over {} publications: median {:.1}%, worst {:.1}%",
+        errs.len(),
+        100.0 * median,
+        100.0 * worst
+    );
+    assert!(worst <= 0.15, "worst publication {:.1}%: {errs:?}", 100.0 * worst);
+    assert!(median <= 0.10, "median {:.1}%", 100.0 * median);
+}
+
+/// The same at 1280×960, where the noise probe's alignment covers only bands of
+/// rows and the fallback aligns its strip (a quarter of the frame) on its own: 8
+/// frames, every publication from the second within 5% (measured 0.8–1.4%; fitted
+/// on the frame alone, before the fallback read the previous frame, 1.6–9.7%).
+#[test]
+fn accurate_tier_without_its_reference_aligns_its_noise_strip_at_full_size() {
+    let spec = SequenceSpec::motorcycle(scene(), 1280, 960, 8, None);
+    let tier = CalibrationTier::Accurate;
+    let providers = Providers { denoise: Some(Box::new(NoTemporalReference)), ..Providers::for_tier(tier) };
+    let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), providers).expect("config");
+    let mut errs = vec![];
+    drive(&mut cal, &spec, scene(), |f, e| {
+        if let Event::Published(u) = e {
+            if f.index >= 1 {
+                errs.push(noise_relative_error(&u.model.noise, &f.truth.noise).expect("noise present"));
+            }
+        }
+    });
+    eprintln!("noise error per publication from the second frame: {errs:?}");
+    assert!(errs.len() >= 5, "publications: {}", errs.len());
+    assert!(errs.iter().all(|&e| e <= 0.05), "{errs:?}");
+}
+
+/// A block codec copies noise from frame to frame (skipped and predicted blocks), so
+/// a noise reference made of other frames holds it too: against the mean of the 8
+/// frames around it the real DivX clip's level 0 read −39% (BENCHMARKS.md "Noise from
+/// video on a block codec's stream"). Where the frame shows the codec's grid the
+/// accurate tier leaves its temporal noise reference unused and says so. Checked on
+/// the calibration video with an 8-px grid of its own: every frame gets a random
+/// offset per 8×8 block (std 0.02, a DC quantisation error; this video's own noise
+/// hides a weaker grid: at std 0.015 it is detected on 1 frame of 20) — the grid is
+/// detected on those frames and not on the rendered ones, no published noise comes
+/// from the temporal reference, noise is still published (blind, on the frame alone,
+/// from 0.3 s: measured 11 of 20 frames), and each refused reference is an event.
+#[test]
+fn accurate_tier_leaves_its_temporal_noise_reference_on_a_codec_grid() {
+    let spec = SequenceSpec::motorcycle(scene(), 320, 240, 20, None);
+    let tier = CalibrationTier::Accurate;
+    let mut cal = Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view)), Providers::for_tier(tier))
+        .expect("config");
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = move || {
+        // xorshift64*: a fixed sequence, no dependency.
+        seed ^= seed >> 12;
+        seed ^= seed << 25;
+        seed ^= seed >> 27;
+        (seed.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut grids = (0, 0);
+    let (mut refused, mut published, mut from_reference) = (0, 0, 0);
+    drive_edited(
+        &mut cal,
+        &spec,
+        scene(),
+        |f| {
+            let w = f.image.width;
+            grids.0 += blind_augment::fit::compression_blocking(&f.image).is_some() as usize;
+            for by in 0..f.image.height / 8 {
+                for bx in 0..w / 8 {
+                    // Uniform on ±0.035: std 0.02 (5 DN, a heavily compressed stream).
+                    let d = (uniform() - 0.5) * 0.02 * 12f32.sqrt();
+                    for y in by * 8..by * 8 + 8 {
+                        for c in 0..3 {
+                            f.image.channels[c][y * w + bx * 8..y * w + bx * 8 + 8].iter_mut().for_each(|v| *v += d);
+                        }
+                    }
+                }
+            }
+            grids.1 += blind_augment::fit::compression_blocking(&f.image).is_some() as usize;
+        },
+        |_, e| match e {
+            Event::Degraded { reason, .. } if reason.contains("block codec") => refused += 1,
+            Event::Published(u) => {
+                published += u.model.noise.present as usize;
+                from_reference += u.model.noise.diagnostics.method.starts_with("accurate") as usize;
+            }
+            _ => {}
+        },
+    );
+    eprintln!("grid on {} rendered / {} edited frames; {refused} references refused; noise published {published} times, {from_reference} from the reference", grids.0, grids.1);
+    assert_eq!(grids, (0, spec.frames), "the grid is the edit's");
+    assert!(refused >= 5, "refused references: {refused}");
+    assert!(published >= 10, "noise publications: {published}");
+    assert_eq!(from_reference, 0);
+}
+
+/// The first frame (and the first after a reset that dropped the held frames) has
+/// no previous frame to align, and its blind noise fit reads the frame alone:
+/// +56% on this sequence, published until the next fit before the wait. Now the
+/// frame-alone fit is held back while an aligned one can come (intrinsics given)
+/// and is superseded by it: every noise the fast tier publishes before the change
+/// is within 15% (the fast tier's 10% target plus a frame's scatter; measured
+/// 1.9–5.7%), the first on the second frame. Without intrinsics no neighbour ever
+/// comes: the frame-alone fits are then published, from `NEIGHBOUR_WAIT_S` (0.3 s)
+/// after the start.
+#[test]
+fn a_frame_alone_noise_fit_waits_for_one_with_an_aligned_neighbour() {
+    let tier = CalibrationTier::Fast;
+    let (published, _, _) = run_with_stages(tier);
+    let noisy: Vec<(f64, f32)> = published
+        .iter()
+        .filter(|p| p.0 < CHANGE_S && p.1.noise.present)
+        .map(|p| (p.0, noise_relative_error(&p.1.noise, &p.2.noise).expect("noise present")))
+        .collect();
+    eprintln!("noise error per publication before the change: {noisy:?}");
+    let first_s = noisy.first().expect("noise published").0;
+    assert!(first_s < 0.05, "first noise at {first_s} s: the second frame has a neighbour");
+    assert!(noisy.iter().all(|&(_, e)| e <= 0.15), "{noisy:?}");
+    assert!(published.iter().all(|p| p.0 < CHANGE_S || p.1.noise.present), "noise on from its first publication");
+
+    let (alone, _, _) = run_configured(tier, |cfg| cfg.intrinsics = None);
+    let first = alone.iter().find(|p| p.1.noise.present).expect("frame-alone noise published without intrinsics");
+    eprintln!("without intrinsics: first noise at {:.3} s ({:?})", first.0, first.1.noise.diagnostics.method);
+    assert!((0.3 - 1e-6..0.4).contains(&first.0), "first frame-alone noise at {} s", first.0);
+    assert_eq!(first.1.noise.diagnostics.method, "fast");
+}
+
+/// The fast tier's blind noise fit on strips of the frame, one per refit in turn
+/// (`CalibratorConfig::noise_strip_px`; at 1280×960 it reads a quarter of the frame
+/// per refit): forced here onto this 320×240 sequence as two strips (128 and 112
+/// rows), its published noise stays within the fast tier's 10% target, like the
+/// whole frame's (measured 4.9% on strips, 5.3% whole).
+#[test]
+fn fast_tier_noise_on_strips_reads_like_the_whole_frame() {
+    let (strips, _, _) = run_configured(CalibrationTier::Fast, |c| c.noise_strip_px = Some(320 * 120));
+    let (whole, _, _) = run_configured(CalibrationTier::Fast, |c| c.noise_strip_px = None);
+    let (e_strips, e_whole) = (noise_error_before_change(&strips), noise_error_before_change(&whole));
+    eprintln!("noise error before the change: strips {:.1}%, whole frame {:.1}%", 100.0 * e_strips, 100.0 * e_whole);
+    assert!(e_strips < 0.10, "noise error on strips {e_strips}");
+    assert!(e_whole < 0.10, "noise error on the whole frame {e_whole}");
+}
