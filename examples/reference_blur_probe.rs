@@ -3,7 +3,8 @@
 //! camera and no motion blur or noise: per 12-px tile, the Gaussian variance (px²
 //! per axis; > 0: the frame is blurrier) that best matches one to the other, against
 //! the thin lens's δ(Z)² − δ(Z_rest)² with and without the reprojection's
-//! magnification. `NODOF=1`: without depth of field (the alignment's own blur).
+//! magnification. `NODOF=1`: without depth of field (the alignment's own blur);
+//! `REACH=px`: only tiles that far from a depth step.
 //! `cargo run --release --example reference_blur_probe [FRAME]` (default 28).
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -50,12 +51,19 @@ fn main() {
         vs.iter().map(|&v| if v == 0.0 { p.clone() } else { blur_separable(p, &discrete_gaussian_kernel(v)) }).collect()
     };
     let (rs, cs) = (stack(&r), stack(&c));
+    // REACH=px: tiles farther than this from a depth step (3% between neighbours)
+    // of the current frame only (default 0: every tile).
+    let reach: usize = std::env::var("REACH").ok().and_then(|s| s.parse().ok()).unwrap_or(0);
+    let mut clear = Plane::new(w, h, 1.0);
+    if reach > 0 {
+        clear_near_depth_steps(&mut clear, &fc.depth_m, reach, 0.03, &|_| true);
+    }
     let t = 12usize;
     let mut rows = vec![];
     for ty in (8..h - 8 - t).step_by(t) {
         for tx in (8..w - 8 - t).step_by(t) {
             let idx: Vec<usize> = (ty..ty + t).flat_map(|y| (tx..tx + t).map(move |x| y * w + x)).collect();
-            if !idx.iter().all(|&i| a.valid[i]) {
+            if !idx.iter().all(|&i| a.valid[i] && clear.data[i] > 0.5) {
                 continue;
             }
             // texture: gradient energy
