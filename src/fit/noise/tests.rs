@@ -190,3 +190,36 @@ mod leakage_tests {
         assert!(fit.diagnostics.reason.contains("image structure"), "{}", fit.diagnostics.reason);
     }
 }
+
+mod blocking_tests {
+    use super::super::*;
+
+    /// The grid detector alone (`compression_blocking`, which the worker calls on
+    /// any frame it is given) answers "no grid" on frames too small to hold one —
+    /// 1×1, 7×5, 31×31 — and on a flat or non-finite frame, without a panic; an
+    /// 8-px grid of 0.03 steps on a 64×64 noise frame is found at its phase.
+    #[test]
+    fn grid_detection_at_the_extremes() {
+        for (w, h) in [(1usize, 1usize), (7, 5), (31, 31)] {
+            assert!(compression_blocking(&Rgb::new(w, h, [0.5; 3])).is_none(), "{w}×{h}");
+        }
+        assert!(compression_blocking(&Rgb::new(64, 64, [0.5; 3])).is_none(), "flat");
+        assert!(compression_blocking(&Rgb::new(64, 64, [f32::NAN; 3])).is_none(), "NaN");
+        // Noise plus a constant offset per 8×8 block starting at column/row 3.
+        let mut img = Rgb::new(64, 64, [0.5; 3]);
+        let mut s = 12345u32;
+        for y in 0..64 {
+            for x in 0..64 {
+                s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+                let n = (s >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+                let block = ((x + 5) / 8 + 3 * ((y + 5) / 8)) % 4;
+                for c in 0..3 {
+                    img.channels[c][y * 64 + x] = 0.5 + 0.01 * n + 0.03 * block as f32;
+                }
+            }
+        }
+        let b = compression_blocking(&img).expect("the grid");
+        assert_eq!(b.period_px, 8);
+        assert_eq!(b.phase_px, [2, 2], "{b:?}");
+    }
+}
