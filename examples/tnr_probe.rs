@@ -1,0 +1,137 @@
+//! Probe: what the worker publishes for noise when the camera's noise is correlated
+//! from frame to frame, as an ISP's motion-compensated temporal noise reduction
+//! makes it: the calibration video rendered without noise, then noise n_t = ρ·n_{t−1}
+//! (aligned into this frame by pose and depth) + √(1 − ρ²)·e_t, e_t the camera's
+//! own (white, signal-dependent) field, fresh where the alignment fails — the same
+//! std per frame, correlation ρ between consecutive frames. Median relative error of
+//! the noise published over the last second, per tier and ρ. Difference-based
+//! fits read σ·√(1 − ρ) for a neighbour one frame back.
+//! With `LAGS=1`, also the blind noise fit against the frame 1 and 3 back (each
+//! aligned): the median ratio of their level-0 stds, the signature a detector of
+//! temporally correlated noise would read (1 for independent noise; √((1 − ρ³)/(1 − ρ))
+//! for ρ per frame).
+//! `cargo run --release --example tnr_probe [FRAMES] [ρ,ρ,…]` (default 45 and 0,0.5,0.8).
+#[path = "../tests/common/mod.rs"]
+mod common;
+use blind_augment::analysis::{temporal, Analysed, DepthMap};
+use blind_augment::model::compare::noise_relative_error;
+use blind_augment::model::DepthUnits;
+use blind_augment::synth::sequence::SequenceSpec;
+use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
+use common::calibration::{drive_edited, scene};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let frames: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(45);
+    let rhos: Vec<f32> =
+        args.get(2).map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect()).unwrap_or(vec![0.0, 0.5, 0.8]);
+    for tier in [CalibrationTier::Fast, CalibrationTier::Accurate] {
+        for &rho in &rhos {
+            let mut spec = SequenceSpec::motorcycle(scene(), 320, 240, frames, None);
+            let truth = spec.truth.noise.clone();
+            spec.truth.noise.present = false;
+            let view = spec.view;
+            let mut cal =
+                Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(view)), Providers::for_tier(tier))
+                    .unwrap();
+            let mut prev: Option<Analysed> = None;
+            let lags = std::env::var_os("LAGS").is_some() && tier == CalibrationTier::Fast;
+            let mut held: std::collections::VecDeque<Analysed> = Default::default();
+            let mut ratios = vec![];
+            let mut errs = vec![];
+            let path = spec.path;
+            drive_edited(
+                &mut cal,
+                &spec,
+                scene(),
+                |f| {
+                    let depth = f.depth.clone().expect("the sequence's depth");
+                    let fresh = blind_augment::synth::noise_field(&f.image.luma(), &truth, 1000 + f.index);
+                    let here = Analysed {
+                        frame: blind_augment::analysis::Frame {
+                            image: fresh.clone(),
+                            depth: None,
+                            flow: None,
+                            ..f.clone()
+                        },
+                        depth: Some(DepthMap { depth: depth.depth.clone(), units: DepthUnits::MetricM }),
+                        world_from_camera: Some(path.world_from_camera(f.t_s)),
+                        sparse_flow: None,
+                    };
+                    let mut noise = fresh.clone();
+                    if let Some(a) = prev.as_ref().and_then(|p| temporal::align(p, &here, &view)) {
+                        let keep = (1.0 - rho * rho).sqrt();
+                        for c in 0..3 {
+                            for (i, v) in noise.channels[c].iter_mut().enumerate() {
+                                if a.valid[i] {
+                                    *v = rho * a.image.channels[c][i] + keep * fresh.channels[c][i];
+                                }
+                            }
+                        }
+                    }
+                    for c in 0..3 {
+                        for (v, n) in f.image.channels[c].iter_mut().zip(&noise.channels[c]) {
+                            *v = ((*v + n).clamp(0.0, 1.0) * 255.0).round() / 255.0;
+                        }
+                    }
+                    let noisy = Analysed {
+                        frame: blind_augment::analysis::Frame { image: f.image.clone(), ..here.frame.clone() },
+                        ..here.clone()
+                    };
+                    if lags {
+                        held.push_back(noisy);
+                        while held.len() > 4 {
+                            held.pop_front();
+                        }
+                        if held.len() == 4 {
+                            let std0 = |lag: usize| -> Option<f32> {
+                                let cur = &held[3];
+                                let a = temporal::align(&held[3 - lag], cur, &view)?;
+                                let valid = blind_augment::image::Plane::from_vec(
+                                    a.image.width,
+                                    a.image.height,
+                                    a.valid.iter().map(|&v| v as u8 as f32).collect(),
+                                );
+                                let nb = blind_augment::fit::Neighbour { image: &a.image, valid: &valid };
+                                let n = blind_augment::fit::fit_noise_fast(&cur.frame.image, Some(&nb), 10_000).0;
+                                n.present.then(|| n.levels[0].std(n.form, 1, n.clamp_luma(0.5)))
+                            };
+                            if let (Some(a), Some(b)) = (std0(1), std0(3)) {
+                                ratios.push(b / a);
+                            }
+                        }
+                    }
+                    prev = Some(Analysed {
+                        frame: blind_augment::analysis::Frame { image: noise, ..here.frame.clone() },
+                        ..here
+                    });
+                },
+                |sf, e| {
+                    if let Event::Published(u) = e {
+                        if sf.t_s >= spec.frame_time_s(frames) - 1.0 {
+                            if let Some(err) = noise_relative_error(&u.model.noise, &truth) {
+                                errs.push(err);
+                            }
+                        }
+                    }
+                },
+            );
+            errs.sort_by(f32::total_cmp);
+            let median = errs.get(errs.len() / 2).copied();
+            println!("{tier:?} ρ {rho}: {} publications in the last second, median noise error {median:?}", errs.len());
+            if !ratios.is_empty() {
+                ratios.sort_by(f32::total_cmp);
+                let q = |p: f32| ratios[((ratios.len() - 1) as f32 * p).round() as usize];
+                println!(
+                    "  level-0 std, lag 3 over lag 1: {} frames, min {:.2}, p10 {:.2}, median {:.2}, p90 {:.2}, max {:.2}",
+                    ratios.len(),
+                    q(0.0),
+                    q(0.1),
+                    q(0.5),
+                    q(0.9),
+                    q(1.0)
+                );
+            }
+        }
+    }
+}
