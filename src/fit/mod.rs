@@ -29,8 +29,8 @@ pub use noise::compression_blocking;
 /// codec's block grid alone); for probes.
 pub use noise::fit_fast as fit_noise_fast;
 pub use noise::{
-    effective_stride as effective_noise_stride, NoisePlotData, FAST_WITH_NEIGHBOUR as NOISE_FAST_WITH_NEIGHBOUR,
-    MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO,
+    effective_stride as effective_noise_stride, NoisePlotData, FAST_ALONE as NOISE_FAST_ALONE,
+    FAST_WITH_NEIGHBOUR as NOISE_FAST_WITH_NEIGHBOUR, MIN_LEAK_RATIO as NOISE_MIN_LEAK_RATIO,
 };
 
 use crate::image::{Flow, Plane, Rgb};
@@ -458,7 +458,9 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
                 // on the DivX clip (tests/data/noise_vtest; 72% of pixels identical
                 // to the next frame's) level 0 read −59…−82% with a neighbour 1–10
                 // frames away, −31% alone (within 20% inside the luma range it
-                // measures). Where the frame shows the codec's grid, it is read alone.
+                // measures). Where the frame shows the codec's grid, it is read alone
+                // (a second fit, on such frames only: the grid is found inside the
+                // fit, and `fit_noise_fast` keeps the raw difference for probes).
                 (Some(_), true) => {
                     let (mut alone, data) = noise::fit_fast(inp.image, None, per_level);
                     alone.diagnostics.fit_time_s += with.diagnostics.fit_time_s;

@@ -209,6 +209,8 @@ struct BinMeasure {
 /// which take the flattest texture for noise (+57% on the calibration video's
 /// first frame, against 2–3% with the neighbour).
 pub const FAST_WITH_NEIGHBOUR: &str = "fast (aligned neighbour)";
+/// The method of a blind noise fit of the frame alone.
+pub const FAST_ALONE: &str = "fast";
 
 /// Fast tier: the frame alone.
 ///
@@ -408,7 +410,7 @@ pub fn fit_fast(
         .collect();
     st.lap("least_squares");
     let samples_used: usize = points.iter().flat_map(|p| p.weights.iter().flatten()).map(|&w| w as usize).sum();
-    let method = if neighbour.is_some() { FAST_WITH_NEIGHBOUR } else { "fast" };
+    let method = if neighbour.is_some() { FAST_WITH_NEIGHBOUR } else { FAST_ALONE };
     let mut noise = finish(method, started, fitted, &samples, range, false);
     noise.diagnostics.samples_used = samples_used as u64;
     noise.diagnostics.stages_s = st.done();

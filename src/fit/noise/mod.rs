@@ -39,7 +39,9 @@ mod blind;
 mod blocking;
 pub use blocking::compression_blocking;
 mod clip;
-pub use blind::{fit_fast, DEFAULT_FAST_SAMPLES_PER_LEVEL, FAST_WITH_NEIGHBOUR, MIN_FAST_SAMPLES_PER_LEVEL};
+pub use blind::{
+    fit_fast, DEFAULT_FAST_SAMPLES_PER_LEVEL, FAST_ALONE, FAST_WITH_NEIGHBOUR, MIN_FAST_SAMPLES_PER_LEVEL,
+};
 use clip::*;
 
 /// Largest sample stride at level 0, halved per level. Measured at 512²

@@ -207,11 +207,9 @@ mod blocking_tests {
         assert!(compression_blocking(&Rgb::new(64, 64, [f32::NAN; 3])).is_none(), "NaN");
         // Noise plus a constant offset per 8×8 block starting at column/row 3.
         let mut img = Rgb::new(64, 64, [0.5; 3]);
-        let mut s = 12345u32;
         for y in 0..64 {
             for x in 0..64 {
-                s = s.wrapping_mul(1664525).wrapping_add(1013904223);
-                let n = (s >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+                let n = 0.3 * crate::synth::gaussian(x as u32, y as u32, 0, 12345);
                 let block = ((x + 5) / 8 + 3 * ((y + 5) / 8)) % 4;
                 for c in 0..3 {
                     img.channels[c][y * 64 + x] = 0.5 + 0.01 * n + 0.03 * block as f32;

@@ -48,7 +48,7 @@ impl Calibrator {
         // the window holds fits with a neighbour, those decide; where it holds none,
         // the frame-alone fits wait `NEIGHBOUR_WAIT_S` from the (re)start for one
         // (without intrinsics, depth or poses none will come, and they are all there is).
-        let alone = |d: &crate::model::Diagnostics| d.method == "fast";
+        let alone = |d: &crate::model::Diagnostics| d.method == fit::NOISE_FAST_ALONE;
         let with_neighbour =
             models.iter().any(|m| m.noise.present && m.noise.diagnostics.method == fit::NOISE_FAST_WITH_NEIGHBOUR);
         if with_neighbour || t_s - self.noise_since_s < NEIGHBOUR_WAIT_S {
