@@ -119,6 +119,10 @@ fn main() {
             errs.sort_by(f32::total_cmp);
             let median = errs.get(errs.len() / 2).copied();
             println!("{tier:?} ρ {rho}: {} publications in the last second, median noise error {median:?}", errs.len());
+            match cal.noise_correlation() {
+                Some(c) => println!("  lag probes: {:?}, ρ {:.3} ({})", c.status, c.rho, c.reason),
+                None => println!("  lag probes: none"),
+            }
             if !ratios.is_empty() {
                 ratios.sort_by(f32::total_cmp);
                 let q = |p: f32| ratios[((ratios.len() - 1) as f32 * p).round() as usize];

@@ -515,18 +515,31 @@ pub fn pose_matrix(p: &super::timing::TimedPose) -> Mat4 {
 /// It reads the rows where `row(y)` (the caller keeps them the same from frame to
 /// frame, so the probes compare like with like).
 pub fn noise_probe(a: &Aligned, current: &Analysed, row: &dyn Fn(usize) -> bool) -> Option<f32> {
+    noise_probe_lags(&[a], current, row).map(|v| v[0])
+}
+
+/// `noise_probe` against several aligned frames at once (other lags), on the same
+/// pixels: those valid in every one, the flattest third of them by this frame's
+/// gradient. Their ratios are free of the scene, the luminance mix and the probe's
+/// steady bias, which is what the noise's frame-to-frame correlation is read from
+/// (`fit::noise_correlation`). None with fewer than 300 such pixels or no frames.
+pub fn noise_probe_lags(aligned: &[&Aligned], current: &Analysed, row: &dyn Fn(usize) -> bool) -> Option<Vec<f32>> {
     let img = &current.frame.image;
     let (w, h) = (img.width, img.height);
+    if aligned.is_empty() || aligned.iter().any(|a| a.valid.len() != w * h || a.image.len() != w * h) {
+        return None;
+    }
     let g = &img.channels[1];
-    let mut cand: Vec<(f32, f32)> = vec![];
+    let valid = |i: usize| aligned.iter().all(|a| a.valid[i]);
+    let mut cand: Vec<(f32, usize)> = vec![];
     for y in (1..h.saturating_sub(1)).step_by(2).filter(|&y| row(y)) {
         for x in (1..w.saturating_sub(1)).step_by(2) {
             let i = y * w + x;
-            if !(a.valid[i] && a.valid[i - 1] && a.valid[i + 1] && a.valid[i - w] && a.valid[i + w]) {
+            if !(valid(i) && valid(i - 1) && valid(i + 1) && valid(i - w) && valid(i + w)) {
                 continue;
             }
             let grad = (g[i + 1] - g[i - 1]).abs() + (g[i + w] - g[i - w]).abs();
-            cand.push((grad, g[i] - a.image.channels[1][i]));
+            cand.push((grad, i));
         }
     }
     if cand.len() < 300 {
@@ -534,15 +547,19 @@ pub fn noise_probe(a: &Aligned, current: &Analysed, row: &dyn Fn(usize) -> bool)
     }
     let third = cand.len() / 3;
     cand.select_nth_unstable_by(third, |p, q| p.0.total_cmp(&q.0));
-    let mut d: Vec<f32> = cand[..third].iter().map(|p| p.1).collect();
-    let mid = d.len() / 2;
-    let median = *d.select_nth_unstable_by(mid, f32::total_cmp).1;
-    let mut dev: Vec<f32> = d.iter().map(|v| (v - median).abs()).collect();
-    dev.sort_by(f32::total_cmp);
-    let inner = &dev[..(dev.len() * 9 / 10).max(1)];
-    let mean = inner.iter().sum::<f32>() / inner.len() as f32;
-    // E|X| = σ·√(2/π) for a Gaussian; trimming the top 10% lowers it by a fixed factor.
-    Some(mean * (std::f32::consts::PI / 2.0).sqrt() / std::f32::consts::SQRT_2)
+    let flat = &cand[..third];
+    let spread = |a: &Aligned| -> f32 {
+        let mut d: Vec<f32> = flat.iter().map(|p| g[p.1] - a.image.channels[1][p.1]).collect();
+        let mid = d.len() / 2;
+        let median = *d.select_nth_unstable_by(mid, f32::total_cmp).1;
+        let mut dev: Vec<f32> = d.iter().map(|v| (v - median).abs()).collect();
+        dev.sort_by(f32::total_cmp);
+        let inner = &dev[..(dev.len() * 9 / 10).max(1)];
+        let mean = inner.iter().sum::<f32>() / inner.len() as f32;
+        // E|X| = σ·√(2/π) for a Gaussian; trimming the top 10% lowers it by a fixed factor.
+        mean * (std::f32::consts::PI / 2.0).sqrt() / std::f32::consts::SQRT_2
+    };
+    Some(aligned.iter().map(|a| spread(a)).collect())
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ mod dof;
 mod isotropy_pool;
 mod motion_blur;
 mod noise;
+pub mod noise_correlation;
 pub mod streak_spectrum;
 
 pub use aggregate::aggregate_models;

@@ -50,6 +50,10 @@ impl Calibrator {
         self.after_change = true;
         self.window.retain(|a| a.frame.t_s >= since_s);
         self.sharp.retain(|a| a.frame.t_s >= since_s);
+        self.lagged.retain(|a| a.frame.t_s >= since_s);
+        // The new camera's noise reduction may differ: its lag ratios start afresh.
+        self.lag_ratios.retain(|p| p.t_s >= since_s);
+        self.noise_correlation = None;
         self.forget_dof_before(since_s);
         self.forget_mb_before(since_s);
     }

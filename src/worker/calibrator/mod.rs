@@ -33,6 +33,7 @@ mod config;
 mod dof_pool;
 mod mb_pool;
 mod report;
+mod tnr;
 
 pub use config::{CalibrationTier, CalibratorConfig, Providers, MIN_STRIP_ROWS, NOISE_STRIP_PX};
 use report::Stages;
@@ -65,6 +66,12 @@ struct Estimate {
     frame: u64,
     t_s: f64,
     model: CameraModel,
+    /// Lags (in frames) of the other frames its noise fit read a difference with:
+    /// one for the blind fit against the previous frame aligned, the sources of a
+    /// temporal mean; empty for a fit on the frame alone or a network's reference.
+    /// The aggregation divides the noise's frame-to-frame correlation out of these
+    /// (`tnr`).
+    noise_lags: Vec<u64>,
 }
 
 /// Variance (px²) of the Gaussian both sides of the temporal motion-blur fit pass
@@ -136,6 +143,14 @@ pub struct Calibrator {
     /// Whether the stream shows a block codec's grid, and when that was last checked
     /// (`codec_grid`).
     codec_grid: Option<(f64, bool)>,
+    /// The newest frames, for the lag probes (`tnr`): the noise's frame-to-frame
+    /// correlation.
+    lagged: VecDeque<Arc<Analysed>>,
+    /// Lag probes of the last `tnr::TNR_WINDOW_S`, how many have run (which lag is
+    /// next), and the correlation they give.
+    lag_ratios: VecDeque<tnr::LagProbe>,
+    lag_probes_run: usize,
+    noise_correlation: Option<fit::noise_correlation::NoiseCorrelation>,
     /// This frame's stage times.
     stages: Stages,
 }
@@ -185,6 +200,10 @@ impl Calibrator {
             dof_pool: VecDeque::new(),
             mb_pool: VecDeque::new(),
             codec_grid: None,
+            lagged: VecDeque::new(),
+            lag_ratios: VecDeque::new(),
+            lag_probes_run: 0,
+            noise_correlation: None,
             stages: Stages::default(),
         })
     }
@@ -196,6 +215,12 @@ impl Calibrator {
     /// The last published model.
     pub fn current(&self) -> Option<&CameraModel> {
         self.published.as_ref()
+    }
+
+    /// The noise's frame-to-frame correlation as the lag probes read it now (None
+    /// before the first lag probe, without intrinsics, or since a change).
+    pub fn noise_correlation(&self) -> Option<&fit::noise_correlation::NoiseCorrelation> {
+        self.noise_correlation.as_ref()
     }
 
     /// Camera poses (`world_from_camera`, OpenCV axes) as they become known, in time
@@ -232,6 +257,7 @@ impl Calibrator {
                     // Frames held from before the jump are in another frame of reference.
                     self.window.clear();
                     self.sharp.clear();
+                    self.lagged.clear();
                 }
             }
             self.poses.push(*p);
@@ -367,13 +393,22 @@ impl Calibrator {
 
         // 3. Blind probe (change detection): the fast tier's own fit serves as the
         //    probe; the slower tiers run the blind estimators every `PROBE_INTERVAL_S`.
-        if t_s - self.last_probe_s >= PROBE_INTERVAL_S - 1e-9 {
+        let probe_due = t_s - self.last_probe_s >= PROBE_INTERVAL_S - 1e-9;
+        if probe_due {
             self.last_probe_s = t_s;
             let (t0, before) = (Instant::now(), self.stages.total());
             let v = self.noise_probe(&analysed);
             // The alignment it made is its own stage.
             self.stages.push("change probe", t0.elapsed().as_secs_f64() - (self.stages.total() - before));
             self.push_probe(t_s, v);
+        }
+        // The noise's frame-to-frame correlation, on the probe's bands (`tnr`): with
+        // every noise probe, and on every frame of a burst until it is first
+        // estimated (the burst's difference-based noise fits wait for it).
+        if self.cfg.intrinsics.is_some() && self.cfg.effects.noise && (probe_due || self.lag_probe_hurried(t_s)) {
+            self.lag_probe(&analysed);
+        }
+        if probe_due {
             if let Some((since, cause)) = self.detect_change() {
                 self.on_change(index, t_s, since, cause, &mut events);
             }
@@ -389,12 +424,12 @@ impl Calibrator {
         if due {
             self.last_fit_s = t_s;
             match self.fit_frame(&analysed, &held, &mut events) {
-                Some(model) => {
+                Some((model, noise_lags)) => {
                     if let Some(cause) = self.check_exposure(&model) {
                         let since = self.estimates.back().map_or(t_s, |e| e.t_s);
                         self.on_change(index, t_s, since, cause, &mut events);
                     }
-                    self.estimates.push_back(Estimate { frame: index, t_s, model });
+                    self.estimates.push_back(Estimate { frame: index, t_s, model, noise_lags });
                     let reason = if in_burst && self.after_change {
                         UpdateReason::Change
                     } else if in_burst {
@@ -411,6 +446,7 @@ impl Calibrator {
         }
 
         // 5. Hold the frame for later references.
+        self.hold_lagged(&analysed);
         if self.cfg.frames_held > 0 {
             self.window.push_back(analysed.clone());
             while self.window.len() > self.cfg.frames_held {
@@ -461,7 +497,7 @@ impl Calibrator {
         current: &Arc<Analysed>,
         held: &[Arc<Analysed>],
         events: &mut Vec<Event>,
-    ) -> Option<CameraModel> {
+    ) -> Option<(CameraModel, Vec<u64>)> {
         let index = current.frame.index;
         // Per-effect cadence (`CalibratorConfig::refit_s`): every update during a
         // burst, else when the effect's interval has passed.
@@ -498,8 +534,14 @@ impl Calibrator {
         // The blind noise fit reads texture off the previous exposure aligned by pose
         // and depth (`fit::Neighbour`): on the calibration video its error falls from
         // ~20% to ~5% (BENCHMARKS.md).
+        // Not where the lag probes found the noise copied between frames otherwise
+        // than a first-order correlation could explain (`tnr`): the frame alone then.
+        let copied = self.noise_copied_otherwise();
         let neighbour =
-            if fx.noise && self.providers.denoise.is_none() { self.aligned_previous(current) } else { None };
+            if fx.noise && self.providers.denoise.is_none() && !copied { self.aligned_previous(current) } else { None };
+        // The frame a neighbour would be: the previous one held (`align_previous`).
+        let neighbour_lag = self.window.back().map(|p| index.saturating_sub(p.frame.index));
+        let mut noise_lags = vec![];
         // Checked before `ctx` borrows the calibrator (see the denoised reference).
         let codec_grid = fx.noise && self.providers.denoise.is_some() && self.codec_grid(current);
         let ctx = FrameContext {
@@ -545,6 +587,15 @@ impl Calibrator {
                         frame: index,
                         reason: "temporal noise reference not used: the frame shows a block codec's grid, and the \
                                  codec copies noise between frames"
+                            .into(),
+                    });
+                    None
+                }
+                Ok(r) if !r.sources.is_empty() && copied => {
+                    events.push(Event::Degraded {
+                        frame: index,
+                        reason: "temporal noise reference not used: the lag probes found the noise copied between \
+                                 frames otherwise than a first-order correlation explains"
                             .into(),
                     });
                     None
@@ -632,7 +683,7 @@ impl Calibrator {
             // A temporal denoiser that failed leaves the fit blind: it still reads
             // the previous frame aligned (`aligned_strip`).
             let neighbour = match neighbour {
-                None if self.providers.denoise.is_some() => self.aligned_strip(current, strip.clone()),
+                None if self.providers.denoise.is_some() && !copied => self.aligned_strip(current, strip.clone()),
                 n => n,
             };
             self.noise_strips_fitted += 1;
@@ -652,7 +703,12 @@ impl Calibrator {
                     };
                     match fit::fit(&inp, &fast_opts(Effects { noise: true, motion_blur: false, depth_of_field: false }))
                     {
-                        Ok(o) => model.noise = o.model.noise,
+                        Ok(o) => {
+                            model.noise = o.model.noise;
+                            if model.noise.diagnostics.method == fit::NOISE_FAST_WITH_NEIGHBOUR {
+                                noise_lags.extend(neighbour_lag);
+                            }
+                        }
                         Err(e) => events.push(Event::Degraded { frame: index, reason: format!("noise fit: {e}") }),
                     }
                 }
@@ -679,6 +735,7 @@ impl Calibrator {
                     // I − mean carries (1 + ratio)·σ².
                     scale_noise(&mut model, 1.0 / (1.0 + r.noise_variance_ratio));
                     model.noise.diagnostics.method = "accurate (temporal reference)".into();
+                    noise_lags = r.sources.iter().map(|&s| index.saturating_sub(s)).collect();
                 }
                 Err(e) => events.push(Event::Degraded { frame: index, reason: format!("noise fit: {e}") }),
             }
@@ -722,7 +779,7 @@ impl Calibrator {
         self.stages.push("fit.depth_of_field", model.depth_of_field.diagnostics.fit_time_s);
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
-        model.validate().ok().map(|_| model)
+        model.validate().ok().map(|_| (model, noise_lags))
     }
 }
 

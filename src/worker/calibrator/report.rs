@@ -25,7 +25,8 @@ pub struct Update {
     pub frames_used: Vec<u64>,
     /// Where `compute_s` went, in order: `analysis` (depth, pose, sparse motion),
     /// `alignment` (the previous frame warped into this one: the noise probe's and
-    /// the blind noise fit's), `change probe`, `flow`, `references` (denoise /
+    /// the blind noise fit's), `change probe`, `lag probe` (the noise's frame-to-frame correlation, its own
+    /// alignment under `alignment`), `flow`, `references` (denoise /
     /// deblur providers), `fit.noise`, `fit.motion_blur`, `fit.depth_of_field`
     /// (each fit's own timer), `aggregation`. Seconds; a stage that did not run this
     /// frame is absent. The three fits run concurrently where the worker's pool has
