@@ -10,6 +10,10 @@
 //! aligned): the median ratio of their level-0 stds, the signature a detector of
 //! temporally correlated noise would read (1 for independent noise; √((1 − ρ³)/(1 − ρ))
 //! for ρ per frame).
+//! With `COPY=p`, a codec's skipped blocks beside ρ: each 8×8 block of the previous
+//! frame's noise (aligned) is copied whole with chance p (the DivX clip copies 72% of
+//! its pixels between frames), the rest follows ρ (`tests/common::CorrelatedNoise`).
+//! `EVENTS=1` prints the worker's events.
 //! `cargo run --release --example tnr_probe [FRAMES] [ρ,ρ,…]` (default 45 and 0,0.5,0.8).
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -18,23 +22,23 @@ use blind_augment::model::compare::noise_relative_error;
 use blind_augment::model::DepthUnits;
 use blind_augment::synth::sequence::SequenceSpec;
 use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
-use common::calibration::{drive_edited, scene};
+use common::calibration::{drive_edited, scene, CorrelatedNoise};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let frames: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(45);
     let rhos: Vec<f32> =
         args.get(2).map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect()).unwrap_or(vec![0.0, 0.5, 0.8]);
+    let copy: Option<f32> = std::env::var("COPY").ok().and_then(|s| s.parse().ok());
     for tier in [CalibrationTier::Fast, CalibrationTier::Accurate] {
         for &rho in &rhos {
             let mut spec = SequenceSpec::motorcycle(scene(), 320, 240, frames, None);
-            let truth = spec.truth.noise.clone();
-            spec.truth.noise.present = false;
+            let mut camera = CorrelatedNoise::new(&mut spec, rho, copy);
+            let truth = camera.truth().clone();
             let view = spec.view;
             let mut cal =
                 Calibrator::new(CalibratorConfig::new(tier, 1.0 / 30.0, Some(view)), Providers::for_tier(tier))
                     .unwrap();
-            let mut prev: Option<Analysed> = None;
             let lags = std::env::var_os("LAGS").is_some() && tier == CalibrationTier::Fast;
             let mut held: std::collections::VecDeque<Analysed> = Default::default();
             let mut ratios = vec![];
@@ -45,41 +49,15 @@ fn main() {
                 &spec,
                 scene(),
                 |f| {
-                    let depth = f.depth.clone().expect("the sequence's depth");
-                    let fresh = blind_augment::synth::noise_field(&f.image.luma(), &truth, 1000 + f.index);
-                    let here = Analysed {
-                        frame: blind_augment::analysis::Frame {
-                            image: fresh.clone(),
-                            depth: None,
-                            flow: None,
-                            ..f.clone()
-                        },
-                        depth: Some(DepthMap { depth: depth.depth.clone(), units: DepthUnits::MetricM }),
-                        world_from_camera: Some(path.world_from_camera(f.t_s)),
-                        sparse_flow: None,
-                    };
-                    let mut noise = fresh.clone();
-                    if let Some(a) = prev.as_ref().and_then(|p| temporal::align(p, &here, &view)) {
-                        let keep = (1.0 - rho * rho).sqrt();
-                        for c in 0..3 {
-                            for (i, v) in noise.channels[c].iter_mut().enumerate() {
-                                if a.valid[i] {
-                                    *v = rho * a.image.channels[c][i] + keep * fresh.channels[c][i];
-                                }
-                            }
-                        }
-                    }
-                    for c in 0..3 {
-                        for (v, n) in f.image.channels[c].iter_mut().zip(&noise.channels[c]) {
-                            *v = ((*v + n).clamp(0.0, 1.0) * 255.0).round() / 255.0;
-                        }
-                    }
-                    let noisy = Analysed {
-                        frame: blind_augment::analysis::Frame { image: f.image.clone(), ..here.frame.clone() },
-                        ..here.clone()
-                    };
+                    camera.apply(f);
                     if lags {
-                        held.push_back(noisy);
+                        let depth = f.depth.clone().expect("the sequence's depth");
+                        held.push_back(Analysed {
+                            frame: blind_augment::analysis::Frame { depth: None, flow: None, ..f.clone() },
+                            depth: Some(DepthMap { depth: depth.depth, units: DepthUnits::MetricM }),
+                            world_from_camera: Some(path.world_from_camera(f.t_s)),
+                            sparse_flow: None,
+                        });
                         while held.len() > 4 {
                             held.pop_front();
                         }
@@ -101,12 +79,11 @@ fn main() {
                             }
                         }
                     }
-                    prev = Some(Analysed {
-                        frame: blind_augment::analysis::Frame { image: noise, ..here.frame.clone() },
-                        ..here
-                    });
                 },
                 |sf, e| {
+                    if std::env::var_os("EVENTS").is_some() && !matches!(e, Event::Published(_)) {
+                        eprintln!("{:.2} s: {e:?}", sf.t_s);
+                    }
                     if let Event::Published(u) = e {
                         if sf.t_s >= spec.frame_time_s(frames) - 1.0 {
                             if let Some(err) = noise_relative_error(&u.model.noise, &truth) {

@@ -138,3 +138,85 @@ pub fn noise_error_before_change(published: &[(f64, CameraModel, CameraModel)]) 
     errs.sort_by(f32::total_cmp);
     errs.get(errs.len() / 2).copied().unwrap_or(f32::INFINITY)
 }
+
+/// A camera whose noise is correlated from frame to frame, as an ISP's
+/// motion-compensated temporal noise reduction (TNR) makes it: each frame's noise is
+/// n_t = ρ·n_{t−1} (the previous frame's noise aligned into this one by pose and
+/// depth) + √(1 − ρ²)·e_t, e_t the camera's own white, signal-dependent field
+/// (`synth::noise_field` of `truth`), fresh where the alignment fails — the same std
+/// every frame, correlation ρ between consecutive ones. With `copy` = Some(p), a
+/// codec's skipped blocks besides: each 8×8 block of the previous noise is copied
+/// whole with chance p (the real DivX clip copies 72% of its pixels between frames).
+pub struct CorrelatedNoise {
+    truth: blind_augment::model::Noise,
+    rho: f32,
+    copy: Option<f32>,
+    view: blind_augment::analysis::Intrinsics,
+    path: blind_augment::synth::sequence::HeadPath,
+    previous: Option<blind_augment::analysis::Analysed>,
+}
+
+impl CorrelatedNoise {
+    /// For `spec`'s frames, whose own noise is then left out (`spec.truth.noise`
+    /// made absent: this adds it).
+    pub fn new(spec: &mut SequenceSpec, rho: f32, copy: Option<f32>) -> Self {
+        let truth = spec.truth.noise.clone();
+        spec.truth.noise.present = false;
+        Self { truth, rho, copy, view: spec.view, path: spec.path, previous: None }
+    }
+
+    /// The camera's noise (the truth the calibrator is scored against).
+    pub fn truth(&self) -> &blind_augment::model::Noise {
+        &self.truth
+    }
+
+    /// Add this frame's noise to `f` (its clean image, with depth), quantised to 8
+    /// bits as a camera's output is.
+    pub fn apply(&mut self, f: &mut Frame) {
+        use blind_augment::analysis::{temporal, Analysed};
+        let depth = f.depth.clone().expect("the sequence's depth");
+        let fresh = blind_augment::synth::noise_field(&f.image.luma(), &self.truth, 1000 + f.index);
+        let here = Analysed {
+            frame: Frame { image: fresh.clone(), depth: None, flow: None, ..f.clone() },
+            depth: Some(DepthMap { depth: depth.depth, units: DepthUnits::MetricM }),
+            world_from_camera: Some(self.path.world_from_camera(f.t_s)),
+            sparse_flow: None,
+        };
+        let mut noise = fresh.clone();
+        if let Some(a) = self.previous.as_ref().and_then(|p| temporal::align(p, &here, &self.view)) {
+            let keep = (1.0 - self.rho * self.rho).sqrt();
+            let w = fresh.width;
+            for c in 0..3 {
+                for (i, v) in noise.channels[c].iter_mut().enumerate() {
+                    if !a.valid[i] {
+                        continue;
+                    }
+                    let (bx, by) = ((i % w / 8) as u32, (i / w / 8) as u32);
+                    // A uniform draw per block and frame: Φ of the project's Gaussian hash.
+                    let copied = self.copy.is_some_and(|p| phi(blind_augment::synth::gaussian(bx, by, 7, f.index)) < p);
+                    *v = if copied {
+                        a.image.channels[c][i]
+                    } else {
+                        self.rho * a.image.channels[c][i] + keep * fresh.channels[c][i]
+                    };
+                }
+            }
+        }
+        for c in 0..3 {
+            for (v, n) in f.image.channels[c].iter_mut().zip(&noise.channels[c]) {
+                *v = ((*v + n).clamp(0.0, 1.0) * 255.0).round() / 255.0;
+            }
+        }
+        self.previous = Some(Analysed { frame: Frame { image: noise, ..here.frame.clone() }, ..here });
+    }
+}
+
+/// The standard normal CDF, by Abramowitz–Stegun 7.1.26 for erf (|error| < 1.5e-7).
+fn phi(x: f32) -> f32 {
+    let z = (x as f64 / std::f64::consts::SQRT_2).abs();
+    let t = 1.0 / (1.0 + 0.327_591_1 * z);
+    let poly =
+        ((((1.061_405_429 * t - 1.453_152_027) * t + 1.421_413_741) * t - 0.284_496_736) * t + 0.254_829_592) * t;
+    let erf = (1.0 - poly * (-z * z).exp()).copysign(x as f64);
+    (0.5 * (1.0 + erf)) as f32
+}

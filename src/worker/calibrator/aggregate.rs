@@ -41,6 +41,11 @@ impl Calibrator {
             self.estimates.pop_front();
         }
         let mut models: Vec<CameraModel> = self.estimates.iter().map(|e| e.model.clone()).collect();
+        // Noise read off frame differences: the noise's frame-to-frame correlation
+        // divided out, or the fit dropped where it is of no first-order form
+        // (`tnr`): then it does not supersede the frame-alone ones below (the frame
+        // alone is what is left).
+        self.correct_for_correlation(&mut models);
         // Blind noise fitted on the frame alone (no aligned neighbour: the first
         // frame, a reset that dropped the held frames, a failed alignment) takes the
         // flattest texture for noise: +57% on the calibration video's first frame,
@@ -51,13 +56,6 @@ impl Calibrator {
         let alone = |d: &crate::model::Diagnostics| d.method == fit::NOISE_FAST_ALONE;
         let with_neighbour =
             models.iter().any(|m| m.noise.present && m.noise.diagnostics.method == fit::NOISE_FAST_WITH_NEIGHBOUR);
-        // Noise read off frame differences: the noise's frame-to-frame correlation
-        // divided out, the fit held back while it is first measured, or dropped
-        // where it is of no first-order form (`tnr`). A fit with a neighbour held
-        // back still supersedes the frame-alone ones (they are no better for it);
-        // one dropped does not (the frame alone is then what is left).
-        self.correct_for_correlation(&mut models, t_s);
-        let with_neighbour = with_neighbour && !self.noise_copied_otherwise();
         if with_neighbour || t_s - self.noise_since_s < NEIGHBOUR_WAIT_S {
             let why = if with_neighbour {
                 "superseded by fits that read an aligned neighbour"

@@ -25,13 +25,6 @@ pub(super) const TNR_LAGS: [u32; 2] = [2, 3];
 /// estimate).
 pub(super) const TNR_WINDOW_S: f64 = 3.0;
 
-/// How long after the start or a reset noise fits on frame differences wait for the
-/// first estimate of the correlation before they are published without it
-/// (`Calibrator::correct_for_correlation`). Lag probes on every frame of the burst
-/// give it after `MIN_RATIOS` per lag, ~13 frames (0.43 s at 30 Hz); where it does
-/// not come (alignment failing, frames dropped) the fits are published as measured.
-pub(super) const TNR_WAIT_S: f64 = 0.6;
-
 /// One lag probe: std of the difference at `lag` over the std at lag 1.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct LagProbe {
@@ -114,24 +107,19 @@ impl Calibrator {
     /// The window's noise estimates that read frame differences, corrected for the
     /// noise's correlation (its estimate now: the whole window takes the latest ρ),
     /// or dropped where the lag probes found a correlation of another form.
-    /// Until the first estimate, such fits wait `TNR_WAIT_S` from the start or the
-    /// last reset, then count as measured (stated in their reason).
-    pub(super) fn correct_for_correlation(&self, models: &mut [CameraModel], t_s: f64) {
+    /// Until the first estimate (lag probes on every frame of a burst: after
+    /// `MIN_RATIOS` per lag, ~13 frames, 0.43 s at 30 Hz) such fits count as
+    /// measured, and say so: low by √(1 − ρ) under a TNR, which is nearer the truth
+    /// than publishing no noise while ρ is measured.
+    pub(super) fn correct_for_correlation(&self, models: &mut [CameraModel]) {
         let c = self.noise_correlation.as_ref().filter(|c| c.rho_fitted.is_some() || c.inconsistent);
-        let waiting = c.is_none() && t_s - self.noise_since_s < TNR_WAIT_S;
         for (m, e) in models.iter_mut().zip(&self.estimates) {
             if !m.noise.present || e.noise_lags.is_empty() {
                 continue;
             }
             let Some(c) = c else {
-                if waiting {
-                    m.noise = crate::model::Noise::absent(crate::model::Diagnostics::not_fitted(
-                        "read a frame difference: waiting for the noise's frame-to-frame correlation",
-                    ));
-                } else {
-                    let d = &mut m.noise.diagnostics;
-                    d.reason = format!("{}; the noise's frame-to-frame correlation not measured", d.reason);
-                }
+                let d = &mut m.noise.diagnostics;
+                d.reason = format!("{}; the noise's frame-to-frame correlation not measured yet", d.reason);
                 continue;
             };
             if c.inconsistent {
