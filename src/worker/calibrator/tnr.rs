@@ -13,11 +13,10 @@
 //! the last `TNR_WINDOW_S` give ρ and whether a first-order correlation explains them.
 
 use super::*;
-use crate::analysis::temporal::{band_stride, in_band};
+use crate::analysis::temporal::{band_stride, in_band, BAND_ROWS};
 use crate::fit::noise_correlation::{self, LagRatios, NoiseCorrelation};
 
-/// Lags probed, in turn (one alignment per probe: a band alignment, ~5 ms of one
-/// core at 1280×960). Two lags test the first-order form; 3 is the most sensitive
+/// Lags probed, in turn (one alignment per probe, on half the noise probe's bands). Two lags test the first-order form; 3 is the most sensitive
 /// to ρ of the two (dr/dρ 0.68 against 0.41 at ρ 0.3).
 pub(super) const TNR_LAGS: [u32; 2] = [2, 3];
 /// Lag ratios pooled: the last this many seconds of video (15 per lag at one
@@ -62,8 +61,14 @@ impl Calibrator {
         let (Some(source), true) = (source, previous_is_lag_1) else { return };
         let Some(a1) = self.aligned_previous(current) else { return };
         let img = &current.frame.image;
+        // The noise probe's bands; where those are a sample of the frame's rows
+        // (frames above `PROBE_PX`) every other one: half the alignment's cost (11–15
+        // ms of one core at 1280×960 for all of them) on a sample still twice the
+        // 320×240 frame's. At 320×240 half the rows read ρ 0.8 as well but
+        // scattered more early on (the fast tier's published error 7.3% → 11.1%;
+        // BENCHMARKS.md "A camera's temporal noise reduction, measured").
         let stride = band_stride(img.width, img.height, change::PROBE_PX);
-        let row = |y: usize| in_band(y, stride);
+        let row = |y: usize| in_band(y, stride) && (stride == 1 || (y / BAND_ROWS / stride) % 2 == 0);
         let t0 = Instant::now();
         let ak = crate::analysis::temporal::align_rows(&source, current, &k, &row);
         self.stages.add("alignment", t0);
