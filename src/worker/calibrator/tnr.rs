@@ -66,7 +66,7 @@ impl Calibrator {
         // ms of one core at 1280×960 for all of them) on a sample still twice the
         // 320×240 frame's. At 320×240 half the rows read ρ 0.8 as well but
         // scattered more early on (the fast tier's published error 7.3% → 11.1%;
-        // BENCHMARKS.md "A camera's temporal noise reduction, measured").
+        // BENCHMARKS.md "A camera's temporal noise reduction, measured and divided out").
         let stride = band_stride(img.width, img.height, change::PROBE_PX);
         let row = |y: usize| in_band(y, stride) && (stride == 1 || (y / BAND_ROWS / stride) % 2 == 0);
         let t0 = Instant::now();
