@@ -13,7 +13,8 @@
 //! With `COPY=p`, a codec's skipped blocks beside ρ: each 8×8 block of the previous
 //! frame's noise (aligned) is copied whole with chance p (the DivX clip copies 72% of
 //! its pixels between frames), the rest follows ρ (`tests/common::CorrelatedNoise`).
-//! `EVENTS=1` prints the worker's events.
+//! `EVENTS=1` prints the worker's events. `W=px` renders the video that wide (4:3;
+//! default 320) and `TIER=fast|accurate` runs one tier only.
 //! `cargo run --release --example tnr_probe [FRAMES] [ρ,ρ,…]` (default 45 and 0,0.5,0.8).
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -30,9 +31,13 @@ fn main() {
     let rhos: Vec<f32> =
         args.get(2).map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect()).unwrap_or(vec![0.0, 0.5, 0.8]);
     let copy: Option<f32> = std::env::var("COPY").ok().and_then(|s| s.parse().ok());
-    for tier in [CalibrationTier::Fast, CalibrationTier::Accurate] {
+    let w: usize = std::env::var("W").ok().and_then(|s| s.parse().ok()).unwrap_or(320);
+    let only = std::env::var("TIER").ok();
+    let tiers = [CalibrationTier::Fast, CalibrationTier::Accurate];
+    for tier in tiers.into_iter().filter(|t| only.as_deref().map_or(true, |o| format!("{t:?}").eq_ignore_ascii_case(o)))
+    {
         for &rho in &rhos {
-            let mut spec = SequenceSpec::motorcycle(scene(), 320, 240, frames, None);
+            let mut spec = SequenceSpec::motorcycle(scene(), w, w * 3 / 4, frames, None);
             let mut camera = CorrelatedNoise::new(&mut spec, rho, copy);
             let truth = camera.truth().clone();
             let view = spec.view;

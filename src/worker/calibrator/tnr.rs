@@ -12,6 +12,7 @@
 //! difference's spread there against the lag-1 one on the same pixels; the ratios of
 //! the last `TNR_WINDOW_S` give ρ and whether a first-order correlation explains them.
 
+use super::noise_fit::scale_noise;
 use super::*;
 use crate::analysis::temporal::{band_stride, in_band, BAND_ROWS};
 use crate::fit::noise_correlation::{self, LagRatios, NoiseCorrelation};
