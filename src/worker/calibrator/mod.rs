@@ -641,7 +641,7 @@ impl Calibrator {
             }
         };
         if blind.noise {
-            self.fit_noise_strip(current, neighbour, copied, neighbour_lag, &mut model, &mut noise_lags, events);
+            self.fit_noise_strip(current, neighbour, neighbour_lag, &mut model, &mut noise_lags, events);
         }
         if let Some(r) = &denoised {
             self.fit_noise_on_reference(&base, r, index, &mut model, &mut noise_lags, events);

@@ -53,12 +53,10 @@ impl Calibrator {
     /// The blind noise fit on this update's strip (`noise_strip`) into `model.noise`,
     /// with `neighbour` (the previous frame aligned) where given, and the lag it read
     /// a difference at into `noise_lags`.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn fit_noise_strip(
         &mut self,
         current: &Analysed,
         neighbour: Option<Arc<Aligned>>,
-        copied: bool,
         neighbour_lag: Option<u64>,
         model: &mut CameraModel,
         noise_lags: &mut Vec<u64>,
@@ -77,7 +75,9 @@ impl Calibrator {
         // A temporal denoiser that failed leaves the fit blind: it still reads
         // the previous frame aligned (`aligned_strip`).
         let neighbour = match neighbour {
-            None if self.providers.denoise.is_some() && !copied => self.aligned_strip(current, strip.clone()),
+            None if self.providers.denoise.is_some() && !self.noise_copied_otherwise() => {
+                self.aligned_strip(current, strip.clone())
+            }
             n => n,
         };
         self.noise_strips_fitted += 1;
