@@ -9,7 +9,11 @@ derivative autocorrelation at lag 0. This probe matches the whole function: with
 B2 = frame * box across the flow (length L), the autocorrelation of ∂_u B2 along u
 against that of ∂_v B2 along v, over lags 0…80 px, for L = 0…60 px, four ways:
 `norm` (each over its lag-0 value, lags ≥ 1), `free` (a free amplitude, lags ≥ 0),
-`free1` (a free amplitude, lags ≥ 1), `normw` (as `norm` over lags < 1.5 L + 10).
+`free1` (a free amplitude, lags ≥ 1), `normw` (as `norm` over lags < 1.5 L + 10),
+`freeN` (as `free`, with white noise's share of both functions subtracted: σ by
+Immerkær's Laplacian estimate on the frame; along u the box-averaged rows' noise
+differenced, along v the box-filtered noise differenced — white in the rotated frame,
+which bilinear rotation at oblique angles is not).
 `iso` is the lag-0 balance alone (the shipped estimator's principle, this
 prototype's sampling: a rotation by OpenCV, not the shipped profiles).
 
@@ -43,7 +47,7 @@ DATA = os.path.join(HERE, "..", "..", "tests", "data")
 sys.path.insert(0, os.path.join(HERE, "..", "streak_gates"))
 from probe import motion_kernel, mirror_tile  # noqa: E402
 
-VARIANTS = ["iso", "norm", "free", "free1", "normw"]
+VARIANTS = ["iso", "norm", "free", "free1", "normw", "freeN"]
 
 
 def load(p):
@@ -76,11 +80,45 @@ def box_rows(img, length):
     return cv2.filter2D(img, -1, (k / k.sum())[None, :], borderType=cv2.BORDER_REFLECT)
 
 
+def immerkaer_sigma(img):
+    """Immerkær's fast noise estimate (σ of white noise, from the mean |Laplacian|)."""
+    k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+    c = cv2.filter2D(img, -1, k, borderType=cv2.BORDER_REFLECT)[1:-1, 1:-1]
+    return float(np.sqrt(np.pi / 2) / 6 * np.mean(np.abs(c)))
+
+
+def box_kernel(length):
+    if length < 1:
+        return np.array([1.0])
+    n = int(np.ceil(length))
+    n += n % 2 == 0
+    k = np.ones(n)
+    k[0] -= (n - length) / 2
+    k[-1] -= (n - length) / 2
+    return k / k.sum()
+
+
+def noise_acfs(length, tmax):
+    """Unit white noise's share of the two functions at candidate `length`."""
+    k = box_kernel(length)
+    s2 = np.sum(k ** 2)
+    ru = np.zeros(tmax + 1)
+    ru[0], ru[1] = 2 * s2, -s2
+    r = np.correlate(k, k, "full")
+    c = len(k) - 1
+
+    def rb(t):
+        return r[c + abs(t)] if abs(t) < len(k) else 0.0
+
+    rv = np.array([2 * rb(t) - rb(t - 1) - rb(t + 1) for t in range(tmax + 1)])
+    return ru, rv
+
+
 def acf_x(d, tmax):
     return np.array([np.mean(d[:, :d.shape[1] - t] * d[:, t:]) for t in range(tmax + 1)])
 
 
-def estimate(r, lengths=np.arange(0, 61, 1.0), tmax=80):
+def estimate(r, sigma, lengths=np.arange(0, 61, 1.0), tmax=80):
     scores = {v: [] for v in VARIANTS}
     for length in lengths:
         b2 = box_rows(r.T, length).T  # across the flow
@@ -95,6 +133,10 @@ def estimate(r, lengths=np.arange(0, 61, 1.0), tmax=80):
         scores["free1"].append(np.sum((ru[1:] - a * rv[1:]) ** 2) / np.dot(ru[1:], ru[1:]))
         tm = int(min(tmax, 1.5 * length + 10))
         scores["normw"].append(np.mean((ru[1:tm] / ru[0] - rv[1:tm] / rv[0]) ** 2))
+        nu, nv = noise_acfs(length, tmax)
+        ru2, rv2 = ru - sigma ** 2 * nu, rv - sigma ** 2 * nv
+        a = np.dot(ru2, rv2) / np.dot(rv2, rv2)
+        scores["freeN"].append(np.sum((ru2 - a * rv2) ** 2) / np.dot(ru2, ru2))
     return {v: float(lengths[int(np.argmin(s))]) for v, s in scores.items()}
 
 
@@ -129,7 +171,7 @@ def main():
                 for noise in [0, 3]:
                     b = cv2.filter2D(im, -1, motion_kernel(angle, length)) if length else im
                     b = np.clip(np.round(b + noise * rng.standard_normal(b.shape)), 0, 255).astype(np.float32)
-                    got = estimate(along_x(b, angle))
+                    got = estimate(along_x(b, angle), immerkaer_sigma(b))
                     if args.bin:
                         px, _ = shipped(args.bin, tmp, b.astype(np.uint8), angle)
                         got["ship"] = 0.0 if px is None else px
@@ -146,7 +188,7 @@ def main():
     for name, path, angle, length in [("text", "motion_text_opencv.jpg", 86, 31),
                                       ("plate", "motion_licenseplate_opencv.jpg", 135, 22)]:
         img = load(os.path.join(DATA, path))
-        got = estimate(along_x(img, angle))
+        got = estimate(along_x(img, angle), immerkaer_sigma(img))
         if args.bin:
             # The photograph as shipped (colour, 8-bit) is what the tests fit; grey here.
             px, _ = shipped(args.bin, tmp, img.astype(np.uint8), angle)
