@@ -13,7 +13,10 @@
 //! 1. at centres on a grid over the frame (flow ≥ 3 px/frame, both lines inside the
 //!    frame and the valid mask) sample luma on a line of `LINE_PX` px along u **and**
 //!    one across it (along v); remove the mean, Hann-window, FFT, normalise each
-//!    line's power to sum 1 (bright or high-contrast lines do not dominate);
+//!    line's power to sum 1 (bright or high-contrast lines do not dominate); leave
+//!    out a pair whose two spectra are both about flat (`FLAT_LINE_TILT`): noise
+//!    over a flat area, which holds nothing a streak could shape but weighed as much
+//!    as a textured line;
 //! 2. put each line's spectrum on the **exposure axis** φ = f·|F| (cycles per frame of
 //!    motion): there the zeros lie at φ = k/λ for every line whatever its speed, so
 //!    lines with different flow magnitudes average without smearing the zeros;
@@ -159,6 +162,31 @@ pub const MIN_ALONG_DIP: f32 = 0.2;
 /// 3.4–5.5 px ± 0.15 (shares 0.66–1.0). Measured as for `MIN_ALONG_DIP`: right
 /// reads' shares up to 0.57 (a brick wall, 16 px at 45°).
 pub const MAX_ACROSS_SHARE: f32 = 0.6;
+
+/// A line pair counts only where at least one of its two lines holds texture: its
+/// mean normalised power over the band's lowest sixteenth (periods ≥ 16 px) at
+/// least this many times its mean over the band's upper half (periods 2–4 px).
+/// White noise gives ~1 there (up to ~2–3 where an oblique line's bilinear
+/// sampling low-passes it, `interpolated_noise_correlation`), a 1/f² texture ~400,
+/// a streak more. With the per-line normalisation a pair of pure-noise lines over a
+/// flat area weighed as much as a textured one. Measured (`benches/streak_gates/
+/// probe.py`, BENCHMARKS.md "Lines with no texture along the flow"): on the ninth
+/// session's held-out set (144 frames with 0 and 2 DN of noise) the wrong
+/// identifications fall from 6 to 2 (the colour wheel at 120° with 12 px and at 30°
+/// with 6 px, the silhouette's two: gone; the moon's sky and the colour wheel with no
+/// streak remain), 47 right reads before and after; on the tuning-like set (300
+/// frames) the same 185 right reads and 2 wrong ones. Stricter tilts (10, 30, 100)
+/// also drop lines with weak texture and traded right reads for new wrong ones;
+/// dropping a pair where only its along-flow line is flat made new wrong reads of
+/// 2.6 px on a 24 px streak.
+const FLAT_LINE_TILT: f32 = 4.0;
+
+/// Whether a normalised spectrum (bins 1 … n/2) is about flat (`FLAT_LINE_TILT`).
+fn flat(p: &[f32]) -> bool {
+    let (low, high) = (&p[..(p.len() / 8).max(1)], &p[p.len() / 2..]);
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len().max(1) as f32;
+    mean(low) < FLAT_LINE_TILT * mean(high)
+}
 
 /// What the spectrum along the flow says about the streak.
 #[derive(Clone, Debug, PartialEq)]
@@ -319,6 +347,9 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
             let (Some((pu, total)), Some((pv, _))) = (spectrum(x0, y0, ux, uy), spectrum(a0, b0, vx, vy)) else {
                 continue;
             };
+            if flat(&pu) && flat(&pv) {
+                continue;
+            }
             // A uniform flow gives every line the same direction and pixel phase
             // (integer centres): one computation serves them all.
             let key = (x0.fract(), y0.fract(), ux, uy);
@@ -726,6 +757,36 @@ fn match_template(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Lines over noise alone carry no streak and are left out; the same noise over
+    /// texture is kept. 400×300 at 20 px/frame along 30°: of white noise of 2 DN
+    /// (8-bit scale) alone at most a fifth of the pairs survive, and over a smooth
+    /// texture (periods 23–61 px, 10× the noise's std) every line that fits the
+    /// frame counts, as without the noise.
+    #[test]
+    fn lines_of_noise_alone_are_left_out() {
+        let (w, h) = (400usize, 300usize);
+        let noise = |x: usize, y: usize| 2.0 / 255.0 * crate::synth::gaussian(x as u32, y as u32, 0, 7);
+        let texture = |x: usize, y: usize| {
+            let (x, y) = (x as f32, y as f32);
+            0.5 + 0.05 * (std::f32::consts::TAU * x / 37.0).sin() * (std::f32::consts::TAU * y / 23.0).cos()
+                + 0.03 * (std::f32::consts::TAU * (x + y) / 61.0).sin()
+        };
+        let plane =
+            |f: &dyn Fn(usize, usize) -> f32| Plane::from_vec(w, h, (0..w * h).map(|i| f(i % w, i / w)).collect());
+        let (c, sn) = (30f32.to_radians().cos(), 30f32.to_radians().sin());
+        let flow = Flow::uniform(w, h, 20.0 * c, 20.0 * sn);
+        let alone = streak_signature(&plane(&|x, y| 0.5 + noise(x, y)), &flow, |_, _| true);
+        let clean = streak_signature(&plane(&texture), &flow, |_, _| true).expect("texture fits the frame");
+        let noisy = streak_signature(&plane(&|x, y| texture(x, y) + noise(x, y)), &flow, |_, _| true).expect("texture");
+        assert!(clean.lines >= 100, "lines over texture: {}", clean.lines);
+        assert_eq!(noisy.lines, clean.lines, "texture under noise keeps its lines");
+        // The bilinear sampling at 30° low-passes the noise (tilt ~2) and a few
+        // pairs' scatter passes `FLAT_LINE_TILT`: measured 26 of the pairs the
+        // texture keeps; without the gate every one.
+        let kept = alone.map_or(0, |s| s.lines);
+        assert!(kept * 5 <= clean.lines, "noise alone kept {kept} of {} lines", clean.lines);
+    }
 
     /// The noise correlation against white noise actually read along the lines:
     /// lags 0–2 of 64 lines at 10° (and an axis-aligned one, which reads whole
