@@ -32,9 +32,7 @@ benches/streak_gates/probe.py): column `ship` (its λ·50 whether from the zeros
 the isotropy fallback; `n/i` where it says not identifiable, scored as 0 px).
 """
 import argparse
-import json
 import os
-import subprocess
 import sys
 import tempfile
 
@@ -45,7 +43,7 @@ from PIL import Image
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.path.join(HERE, "..", "..", "tests", "data")
 sys.path.insert(0, os.path.join(HERE, "..", "streak_gates"))
-from probe import motion_kernel, mirror_tile  # noqa: E402
+from probe import fit, motion_kernel, mirror_tile  # noqa: E402
 
 VARIANTS = ["iso", "norm", "free", "free1", "normw", "freeN"]
 
@@ -140,20 +138,11 @@ def estimate(r, sigma, lengths=np.arange(0, 61, 1.0), tmax=80):
     return {v: float(lengths[int(np.argmin(s))]) for v, s in scores.items()}
 
 
-def shipped(binary, tmp, img8, angle, speed=50.0):
-    """The shipped fast tier's streak in px (None: not identifiable), and its reason."""
-    h, w = img8.shape
-    Image.fromarray(img8).save(f"{tmp}/in.png")
-    flow = np.zeros((h, w, 2), np.float32)
-    flow[..., 0] = speed * np.cos(np.radians(angle))
-    flow[..., 1] = speed * np.sin(np.radians(angle))
-    np.save(f"{tmp}/flow.npy", flow)
-    subprocess.run([binary, "fit", "--image", f"{tmp}/in.png", "--flow", f"{tmp}/flow.npy", "--only",
-                    "motion-blur", "--tier", "fast", "--threads", "2", "--out", f"{tmp}/out.json"],
-                   check=True, capture_output=True)
-    mb = json.load(open(f"{tmp}/out.json"))["motion_blur"]
-    lam = mb.get("exposure")
-    return (None if lam is None else lam * speed), mb["diagnostics"]["reason"]
+def shipped(binary, tmp, img8, angle):
+    """The shipped fast tier's streak in px (None: not identifiable): streak_gates'
+    CLI call, 50 px/frame along the streak."""
+    lam, _ = fit(binary, tmp, img8, angle)
+    return None if lam is None else lam * 50.0
 
 
 def main():
@@ -173,7 +162,7 @@ def main():
                     b = np.clip(np.round(b + noise * rng.standard_normal(b.shape)), 0, 255).astype(np.float32)
                     got = estimate(along_x(b, angle), immerkaer_sigma(b))
                     if args.bin:
-                        px, _ = shipped(args.bin, tmp, b.astype(np.uint8), angle)
+                        px = shipped(args.bin, tmp, b.astype(np.uint8), angle)
                         got["ship"] = 0.0 if px is None else px
                     for v in variants:
                         # Relative to the streak, or to 4 px where there is none.
@@ -191,7 +180,7 @@ def main():
         got = estimate(along_x(img, angle), immerkaer_sigma(img))
         if args.bin:
             # The photograph as shipped (colour, 8-bit) is what the tests fit; grey here.
-            px, _ = shipped(args.bin, tmp, img.astype(np.uint8), angle)
+            px = shipped(args.bin, tmp, img.astype(np.uint8), angle)
             got["ship"] = 0.0 if px is None else px
         print(f"{name} (stated {length} px): " + " ".join(f"{v} {got[v]:.1f}" for v in variants))
 
