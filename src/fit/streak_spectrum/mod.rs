@@ -176,9 +176,9 @@ pub const MAX_ACROSS_SHARE: f32 = 0.6;
 /// with 6 px, the silhouette's two: gone; the moon's sky and the colour wheel with no
 /// streak remain), 47 right reads before and after; on the tuning-like set (300
 /// frames) the same 185 right reads and 2 wrong ones. Stricter tilts (10, 30, 100)
-/// also drop lines with weak texture and traded right reads for new wrong ones;
-/// dropping a pair where only its along-flow line is flat made new wrong reads of
-/// 2.6 px on a 24 px streak.
+/// also drop lines with weak texture, and each made a new wrong read in one set or
+/// the other; dropping a pair where only its along-flow line is flat made new wrong
+/// reads of 2.6 px on a 24 px streak.
 const FLAT_LINE_TILT: f32 = 4.0;
 
 /// Whether a normalised spectrum (bins 1 … n/2) is about flat (`FLAT_LINE_TILT`).
