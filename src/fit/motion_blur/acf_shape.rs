@@ -1,0 +1,596 @@
+//! The blind exposure's second single-frame reading where the streak's zeros are not
+//! identified: the *shape* of the derivative autocorrelation along the flow matched to
+//! the one across it (BENCHMARKS.md "The derivative autocorrelation's shape, shipped").
+//!
+//! Gradient-energy isotropy (`isotropy.rs`) balances one number per direction: blur
+//! the frame across the flow by a candidate box L and take the L at which the
+//! gradient energies along and across agree — the derivative autocorrelation at lag
+//! 0. A sharp scene that is isotropic has the same derivative autocorrelation along
+//! any direction at *every* lag, so after the same box across the flow the whole
+//! function along u = F/|F| must match the one along v up to one amplitude:
+//! ru_L(t) ≈ a·rv_L(t), t = 0…`MAX_LAG_PX`. The L that matches best is the streak.
+//! A texture's anisotropy moves the lag-0 balance (a page of text: −46%); it moves
+//! the shape less (the same page: −16%), and where isotropy and the shape disagree
+//! neither is trusted more than their difference (`fit_fast`).
+//!
+//! Computed exactly, for every L at once, from one 2-D FFT: over a crop of the frame
+//! sampled along (u, v), with du, dv its differences,
+//! ru_L(t) = Σ_s r_L(s)·A_u(t, s) and rv_L(t) = Σ_s r_L(s)·A_v(0, t + s), where A is
+//! the 2-D autocorrelation of du (dv) and r_L the box's own autocorrelation: the box
+//! across commutes with the differences, so no candidate is ever blurred. White
+//! pixel noise's share (σ² by Immerkær's estimate) is subtracted from both: noise is
+//! isotropic, but the box across averages it along u and not along v.
+//!
+//! Assumes one streak length over the crop: the flow's direction within ±10° (axial
+//! spread) and its speed within ±25% of the median over the crop; otherwise not read.
+
+use crate::image::{Flow, Plane};
+use rustfft::num_complex::Complex32;
+use rustfft::FftPlanner;
+
+/// Lags of the two autocorrelations matched (px).
+pub(super) const MAX_LAG_PX: usize = 80;
+/// Longest streak the shape is read for (px): the box's own autocorrelation spans
+/// ±that across the flow, and the lags must hold its whole profile.
+pub(super) const MAX_LENGTH_PX: usize = 60;
+/// The crop's largest side along and across the flow (px): cost, not accuracy — the
+/// FFT is O(N log N) in the crop's area (~3 ms at this size, BENCHMARKS.md).
+const MAX_CROP: (usize, usize) = (640, 480);
+/// The crop's least side: two lag windows must fit in it.
+const MIN_CROP_PX: usize = 2 * MAX_LAG_PX;
+/// Flow below this (px per frame) is not read (as `isotropy.rs`).
+const MIN_SPEED_PX: f32 = 3.0;
+/// Least mean resultant length of the doubled flow angles: a spread of ~±10°.
+const MIN_AXIAL_COHERENCE: f32 = 0.94;
+/// The flow's 10th and 90th speed percentiles within this factor of the median.
+const MAX_SPEED_SPREAD: f32 = 1.25;
+
+/// What the shape reads.
+#[derive(Clone, Debug)]
+pub(super) struct AcfShape {
+    /// Exposure: the streak length over the median flow speed.
+    pub(super) lambda: f32,
+    pub(super) length_px: f32,
+    pub(super) speed_px: f32,
+    /// Relative residual |ru − a·rv|² / |ru|² at the best length, and at L = 0.
+    pub(super) residual: f64,
+    pub(super) residual_sharp: f64,
+    /// The crop's size along × across the flow (px).
+    pub(super) crop: (usize, usize),
+}
+
+/// The streak length from the autocorrelations' shape on `y` under `flow`, or why it
+/// is not read.
+pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
+    let (w, h) = (y.width, y.height);
+    if flow.width != w || flow.height != h {
+        return Err("flow and frame differ in size".into());
+    }
+    let (theta, speed) = coherent_flow(flow)?;
+    let (ux, uy) = (theta.cos(), theta.sin());
+    let (vx, vy) = (-uy, ux);
+    let (cw, ch) = crop_size(w, h, ux.abs(), uy.abs());
+    if cw < MIN_CROP_PX || ch < MIN_CROP_PX {
+        return Err(format!("the frame holds only a {cw}×{ch} px crop along the flow (need {MIN_CROP_PX})"));
+    }
+    // The crop, rows along u, stepping along v, from a whole pixel: a flow along an
+    // axis then samples pixels, not their bilinear means (which low-pass the noise
+    // along one axis only).
+    let (a0, b0) = (-0.5 * (cw - 1) as f32, -0.5 * (ch - 1) as f32);
+    let (cx, cy) = (0.5 * (w - 1) as f32, 0.5 * (h - 1) as f32);
+    let (ox, oy) = ((cx + a0 * ux + b0 * vx).round(), (cy + a0 * uy + b0 * vy).round());
+    let mut crop = vec![0.0f32; cw * ch];
+    for (j, row) in crop.chunks_exact_mut(cw).enumerate() {
+        let b = j as f32;
+        y.sample_line(ox + b * vx, oy + b * vy, ux, uy, row);
+    }
+    let sigma = immerkaer_sigma(y);
+    let noise = NoiseTable::new((ox, oy), (ux, uy), (cw, ch));
+    let l_max = (MAX_LENGTH_PX as f32).min(speed).floor() as usize;
+    if l_max < 2 {
+        return Err(format!("flow of {speed:.1} px/frame: no streak length to read"));
+    }
+    let (au, av) = autocorrelations(&crop, cw, ch);
+    // Per candidate length: the relative residual of the best amplitude.
+    let (a_len, b_len) = (cw - 1, ch - 1);
+    let residual_at = |len: usize| -> f64 {
+        let k = box_kernel(len as f64);
+        let rk = kernel_autocorrelation(&k);
+        let c = (rk.len() - 1) / 2;
+        let rb = |s: isize| -> f64 {
+            let i = s + c as isize;
+            if i >= 0 && (i as usize) < rk.len() {
+                rk[i as usize]
+            } else {
+                0.0
+            }
+        };
+        let mut ru = [0.0f64; MAX_LAG_PX + 1];
+        let mut rv = [0.0f64; MAX_LAG_PX + 1];
+        for t in 0..=MAX_LAG_PX {
+            let mut su = 0.0;
+            let mut sv = 0.0;
+            for s in -(c as isize)..=(c as isize) {
+                let r = rb(s);
+                su += r * au.at(t, s);
+                sv += r * av[(t as isize + s + AV_OFFSET as isize) as usize];
+            }
+            // Means over the pairs each lag has (the crop is finite).
+            ru[t] = su / (b_len * (a_len - t)) as f64;
+            rv[t] = sv / (a_len * (b_len - t)) as f64;
+            // White pixel noise's share, through the crop's bilinear sampling (for a
+            // flow along an axis: 2s₂σ², −s₂σ² at lag 1 along u, the box's
+            // autocorrelation differenced twice along v).
+            let (mut nu, mut nv) = (0.0, 0.0);
+            for s in -NoiseTable::REACH..=NoiseTable::REACH {
+                nu += rb(s) * noise.du(t as isize, s);
+            }
+            for s in -(c as isize)..=(c as isize) {
+                nv += rb(s) * noise.dv(t as isize + s);
+            }
+            ru[t] -= sigma * sigma * nu;
+            rv[t] -= sigma * sigma * nv;
+        }
+        let uv: f64 = ru.iter().zip(&rv).map(|(a, b)| a * b).sum();
+        let vv: f64 = rv.iter().map(|v| v * v).sum();
+        let uu: f64 = ru.iter().map(|v| v * v).sum();
+        if vv <= 0.0 || uu <= 0.0 || !uv.is_finite() {
+            return 1.0;
+        }
+        let amp = uv / vv;
+        ru.iter().zip(&rv).map(|(a, b)| (a - amp * b).powi(2)).sum::<f64>() / uu
+    };
+    let residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
+    let best = (0..residuals.len()).min_by(|&a, &b| residuals[a].total_cmp(&residuals[b])).unwrap_or(0);
+    if best == l_max && l_max == MAX_LENGTH_PX {
+        return Err(format!("the best length lies at the {MAX_LENGTH_PX} px the lags can hold"));
+    }
+    // Parabola through the best and its neighbours.
+    let mut length = best as f64;
+    if best > 0 && best < l_max {
+        let (a, b, c) = (residuals[best - 1], residuals[best], residuals[best + 1]);
+        let den = a - 2.0 * b + c;
+        if den > 0.0 {
+            length += (0.5 * (a - c) / den).clamp(-0.5, 0.5);
+        }
+    }
+    let length_px = length as f32;
+    Ok(AcfShape {
+        lambda: (length_px / speed).clamp(0.0, 1.0),
+        length_px,
+        speed_px: speed,
+        residual: residuals[best],
+        residual_sharp: residuals[0],
+        crop: (cw, ch),
+    })
+}
+
+/// The flow's axial mean direction (radians, image axes) and median speed, where the
+/// flow is coherent enough to hold one streak length.
+fn coherent_flow(flow: &Flow) -> Result<(f32, f32), String> {
+    let (w, h) = (flow.width, flow.height);
+    let step = ((w * h) as f64 / 4096.0).sqrt().max(1.0) as usize;
+    let (mut c2, mut s2) = (0.0f64, 0.0f64);
+    let mut speeds = vec![];
+    for y in (step / 2..h).step_by(step) {
+        for x in (step / 2..w).step_by(step) {
+            let (fx, fy) = (flow.dx[y * w + x], flow.dy[y * w + x]);
+            let sp = (fx * fx + fy * fy).sqrt();
+            if !sp.is_finite() || sp < MIN_SPEED_PX {
+                continue;
+            }
+            // The doubled angle: a streak has an axis, not a sign.
+            let (c, s) = (fx / sp, fy / sp);
+            c2 += (c * c - s * s) as f64;
+            s2 += (2.0 * c * s) as f64;
+            speeds.push(sp);
+        }
+    }
+    let n = speeds.len();
+    if n < 64 {
+        return Err(format!("only {n} flow samples ≥ {MIN_SPEED_PX} px/frame"));
+    }
+    let coherence = ((c2 * c2 + s2 * s2).sqrt() / n as f64) as f32;
+    if coherence < MIN_AXIAL_COHERENCE {
+        return Err(format!("the flow's direction varies (axial coherence {coherence:.2} < {MIN_AXIAL_COHERENCE})"));
+    }
+    speeds.sort_by(f32::total_cmp);
+    let med = speeds[n / 2];
+    let (p10, p90) = (speeds[n / 10], speeds[(9 * n) / 10]);
+    if p90 > MAX_SPEED_SPREAD * med || p10 * MAX_SPEED_SPREAD < med {
+        return Err(format!("the flow's speed varies ({p10:.1}–{p90:.1} px/frame around {med:.1})"));
+    }
+    Ok((0.5 * (s2.atan2(c2) as f32), med))
+}
+
+/// The largest crop (along × across the flow, px) centred in a `w`×`h` frame whose
+/// corners stay a pixel inside it (bilinear taps), for |cos θ| = `c`, |sin θ| = `s`:
+/// the best of the frame's aspect both ways and a square, then capped at `MAX_CROP`.
+fn crop_size(w: usize, h: usize, c: f32, s: f32) -> (usize, usize) {
+    let (hw, hh) = (0.5 * w as f32 - 2.0, 0.5 * h as f32 - 2.0);
+    let mut best = (0usize, 0usize);
+    for aspect in [w as f32 / h as f32, h as f32 / w as f32, 1.0] {
+        // Half-extents along x and y of a crop `aspect·q` × `q`.
+        let q = (hw / (0.5 * (c * aspect + s))).min(hh / (0.5 * (s * aspect + c)));
+        let (cw, ch) = ((aspect * q).floor().max(0.0) as usize, q.floor().max(0.0) as usize);
+        let (cw, ch) = (cw.min(MAX_CROP.0), ch.min(MAX_CROP.1));
+        if cw * ch > best.0 * best.1 {
+            best = (cw, ch);
+        }
+    }
+    best
+}
+
+/// Immerkær's white-noise σ on the frame's pixels (every fourth row triple: an
+/// estimate, at a quarter of the pass): the mean |Laplacian difference| · √(π/2)/6.
+fn immerkaer_sigma(p: &Plane) -> f64 {
+    let (w, h) = (p.width, p.height);
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for y in (1..h - 1).step_by(4) {
+        let (a, b, c) = (&p.data[(y - 1) * w..y * w], &p.data[y * w..(y + 1) * w], &p.data[(y + 1) * w..(y + 2) * w]);
+        for x in 1..w - 1 {
+            let v = a[x - 1] - 2.0 * a[x] + a[x + 1] - 2.0 * (b[x - 1] - 2.0 * b[x] + b[x + 1])
+                + c[x - 1]
+                - 2.0 * c[x]
+                + c[x + 1];
+            sum += v.abs() as f64;
+        }
+        count += w - 2;
+    }
+    if count == 0 {
+        return 0.0;
+    }
+    (std::f64::consts::FRAC_PI_2).sqrt() / 6.0 * sum / count as f64
+}
+
+/// Unit white pixel noise's covariance between crop samples (t, s) apart (along u,
+/// across), averaged over the crop: bilinear sampling mixes up to four pixels per
+/// sample, so at an oblique flow the crop's noise is correlated (an axis-aligned
+/// crop: 1 at (0, 0), 0 elsewhere).
+struct NoiseTable {
+    cov: [[f64; 2 * NoiseTable::SPAN as usize + 1]; 2 * NoiseTable::SPAN as usize + 1],
+}
+
+impl NoiseTable {
+    /// Offsets with a covariance: two bilinear footprints overlap within 2 px.
+    const SPAN: isize = 2;
+    /// Lags of the differences' covariance that can be non-zero.
+    const REACH: isize = NoiseTable::SPAN + 1;
+
+    fn new(origin: (f32, f32), u: (f32, f32), size: (usize, usize)) -> Self {
+        let v = (-u.1, u.0);
+        let taps = |x: f32, y: f32| -> [((i64, i64), f64); 4] {
+            let (xf, yf) = (x.floor(), y.floor());
+            let (fx, fy) = ((x - xf) as f64, (y - yf) as f64);
+            let (xi, yi) = (xf as i64, yf as i64);
+            [
+                ((xi, yi), (1.0 - fx) * (1.0 - fy)),
+                ((xi + 1, yi), fx * (1.0 - fy)),
+                ((xi, yi + 1), (1.0 - fx) * fy),
+                ((xi + 1, yi + 1), fx * fy),
+            ]
+        };
+        let n = 2 * Self::SPAN as usize + 1;
+        let mut cov = [[0.0f64; 2 * Self::SPAN as usize + 1]; 2 * Self::SPAN as usize + 1];
+        // A 16×16 grid of crop positions: the fractional phases a rotation visits.
+        let mut count = 0usize;
+        for gj in 0..16 {
+            for gi in 0..16 {
+                let (i, j) = ((gi * size.0 / 16) as f32, (gj * size.1 / 16) as f32);
+                let p = taps(origin.0 + i * u.0 + j * v.0, origin.1 + i * u.1 + j * v.1);
+                for (ti, row) in cov.iter_mut().enumerate() {
+                    for (si, c) in row.iter_mut().enumerate() {
+                        let (t, s) = (ti as f32 - Self::SPAN as f32, si as f32 - Self::SPAN as f32);
+                        let (ii, jj) = (i + t, j + s);
+                        let q = taps(origin.0 + ii * u.0 + jj * v.0, origin.1 + ii * u.1 + jj * v.1);
+                        for (pp, wp) in p {
+                            for (qq, wq) in q {
+                                if pp == qq {
+                                    *c += wp * wq;
+                                }
+                            }
+                        }
+                    }
+                }
+                count += 1;
+            }
+        }
+        for row in cov.iter_mut().take(n) {
+            for c in row.iter_mut() {
+                *c /= count as f64;
+            }
+        }
+        Self { cov }
+    }
+
+    fn at(&self, t: isize, s: isize) -> f64 {
+        if t.abs() > Self::SPAN || s.abs() > Self::SPAN {
+            return 0.0;
+        }
+        self.cov[(t + Self::SPAN) as usize][(s + Self::SPAN) as usize]
+    }
+
+    /// Covariance of du at lag (t along u, s across).
+    fn du(&self, t: isize, s: isize) -> f64 {
+        2.0 * self.at(t, s) - self.at(t + 1, s) - self.at(t - 1, s)
+    }
+
+    /// Covariance of dv at lag t along v.
+    fn dv(&self, t: isize) -> f64 {
+        2.0 * self.at(0, t) - self.at(0, t + 1) - self.at(0, t - 1)
+    }
+}
+
+/// A box of `length` px (fractional ends: the outer taps carry the fraction), odd
+/// length, unit sum — as OpenCV's `motion_kernel` and the probe draw it.
+fn box_kernel(length: f64) -> Vec<f64> {
+    if length < 1.0 {
+        return vec![1.0];
+    }
+    let mut n = length.ceil() as usize;
+    n += usize::from(n % 2 == 0);
+    let mut k = vec![1.0; n];
+    let cut = (n as f64 - length) / 2.0;
+    k[0] -= cut;
+    k[n - 1] -= cut;
+    let sum: f64 = k.iter().sum();
+    k.iter().map(|v| v / sum).collect()
+}
+
+/// r(s) = Σ_j k_j k_{j+s}, s = −(n−1)…n−1 (index s + n − 1).
+fn kernel_autocorrelation(k: &[f64]) -> Vec<f64> {
+    let n = k.len();
+    (0..2 * n - 1)
+        .map(|i| {
+            let s = i as isize - (n as isize - 1);
+            (0..n)
+                .filter_map(|j| {
+                    let jj = j as isize + s;
+                    (jj >= 0 && (jj as usize) < n).then(|| k[j] * k[jj as usize])
+                })
+                .sum()
+        })
+        .collect()
+}
+
+/// Index offset of lag 0 in `autocorrelations`' second result.
+const AV_OFFSET: usize = MAX_LAG_PX + MAX_LENGTH_PX;
+
+/// A_u(t, s), t = 0…`MAX_LAG_PX`, s = −`MAX_LENGTH_PX`…`MAX_LENGTH_PX`, raw sums.
+struct LagTable {
+    data: Vec<f64>,
+}
+
+impl LagTable {
+    const ROW: usize = 2 * MAX_LENGTH_PX + 1;
+    fn at(&self, t: usize, s: isize) -> f64 {
+        self.data[t * Self::ROW + (s + MAX_LENGTH_PX as isize) as usize]
+    }
+}
+
+/// The smallest m ≥ n of the form 2^a·3^b·5^c (fast FFT sizes).
+fn fft_size(n: usize) -> usize {
+    (n..).find(|&m| {
+        let mut r = m;
+        for p in [2, 3, 5] {
+            while r % p == 0 {
+                r /= p;
+            }
+        }
+        r == 1
+    })
+    .unwrap_or(n)
+}
+
+/// The raw autocorrelation sums of du (along u at lags 0…`MAX_LAG_PX`, across at
+/// ±`MAX_LENGTH_PX`) and of dv along v (lags ±`AV_OFFSET`, index + `AV_OFFSET`), by
+/// one zero-padded 2-D FFT of du + i·dv (two real transforms in one complex one).
+fn autocorrelations(crop: &[f32], cw: usize, ch: usize) -> (LagTable, Vec<f64>) {
+    let (a, b) = (cw - 1, ch - 1);
+    // Zero padding wide enough that no lag read wraps around.
+    let nu = fft_size(a + MAX_LAG_PX + 1);
+    let nv = fft_size(b + AV_OFFSET + 1);
+    let mut planner = FftPlanner::<f32>::new();
+    let (fu, fv) = (planner.plan_fft_forward(nu), planner.plan_fft_forward(nv));
+    let (iu, iv) = (planner.plan_fft_inverse(nu), planner.plan_fft_inverse(nv));
+    let mut z = vec![Complex32::new(0.0, 0.0); nu * nv];
+    for y in 0..b {
+        let (r0, r1) = (&crop[y * cw..(y + 1) * cw], &crop[(y + 1) * cw..(y + 2) * cw]);
+        let row = &mut z[y * nu..y * nu + nu];
+        for x in 0..a {
+            row[x] = Complex32::new(r0[x + 1] - r0[x], r1[x] - r0[x]);
+        }
+        fu.process(row);
+    }
+    let mut col = vec![Complex32::new(0.0, 0.0); nv];
+    for x in 0..nu {
+        for (yy, c) in col.iter_mut().enumerate() {
+            *c = z[yy * nu + x];
+        }
+        fv.process(&mut col);
+        for (yy, c) in col.iter().enumerate() {
+            z[yy * nu + x] = *c;
+        }
+    }
+    // Split the two spectra: Du(k) = (Z(k) + Z*(−k))/2, Dv(k) = (Z(k) − Z*(−k))/(2i).
+    let mut pu = vec![0.0f32; nu * nv];
+    let mut pv_marginal = vec![0.0f64; nv];
+    for ky in 0..nv {
+        let my = (nv - ky) % nv;
+        for kx in 0..nu {
+            let mx = (nu - kx) % nu;
+            let (p, q) = (z[ky * nu + kx], z[my * nu + mx].conj());
+            pu[ky * nu + kx] = 0.25 * (p + q).norm_sqr();
+            pv_marginal[ky] += 0.25 * (p - q).norm_sqr() as f64;
+        }
+    }
+    // A_u: inverse along v per column (keeping lags ±MAX_LENGTH_PX), then along u.
+    let row_len = LagTable::ROW;
+    let mut g = vec![Complex32::new(0.0, 0.0); row_len * nu];
+    for x in 0..nu {
+        for (yy, c) in col.iter_mut().enumerate() {
+            *c = Complex32::new(pu[yy * nu + x], 0.0);
+        }
+        iv.process(&mut col);
+        for (r, s) in (-(MAX_LENGTH_PX as isize)..=MAX_LENGTH_PX as isize).enumerate() {
+            g[r * nu + x] = col[s.rem_euclid(nv as isize) as usize];
+        }
+    }
+    let norm = 1.0 / (nu * nv) as f64;
+    let mut data = vec![0.0f64; (MAX_LAG_PX + 1) * row_len];
+    for r in 0..row_len {
+        let line = &mut g[r * nu..(r + 1) * nu];
+        iu.process(line);
+        for t in 0..=MAX_LAG_PX {
+            data[t * row_len + r] = line[t].re as f64 * norm;
+        }
+    }
+    // A_v(0, t'): the marginal over the u frequencies, inverse along v.
+    let mut m: Vec<Complex32> = pv_marginal.iter().map(|&v| Complex32::new(v as f32, 0.0)).collect();
+    iv.process(&mut m);
+    let av = (-(AV_OFFSET as isize)..=AV_OFFSET as isize)
+        .map(|t| m[t.rem_euclid(nv as isize) as usize].re as f64 * norm)
+        .collect();
+    (LagTable { data }, av)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A smooth random texture (sum of random Gaussian blobs), isotropic on average.
+    fn texture(w: usize, h: usize, seed: u64) -> Plane {
+        let mut s = seed;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 33) as f64 / (1u64 << 31) as f64) as f32
+        };
+        let mut p = Plane::new(w, h, 0.5);
+        for _ in 0..(w * h / 40) {
+            let (x0, y0) = (rnd() * w as f32, rnd() * h as f32);
+            let r = 1.0 + 4.0 * rnd();
+            let a = 0.3 * (rnd() - 0.5);
+            let (xa, xb) = ((x0 - 3.0 * r).max(0.0) as usize, ((x0 + 3.0 * r) as usize).min(w - 1));
+            let (ya, yb) = ((y0 - 3.0 * r).max(0.0) as usize, ((y0 + 3.0 * r) as usize).min(h - 1));
+            for y in ya..=yb {
+                for x in xa..=xb {
+                    let d2 = (x as f32 - x0).powi(2) + (y as f32 - y0).powi(2);
+                    p.data[y * w + x] += a * (-d2 / (2.0 * r * r)).exp();
+                }
+            }
+        }
+        p
+    }
+
+    /// A box streak of `len` px along (cos, sin) `deg`, sampled every 0.25 px.
+    fn streak(p: &Plane, len: f32, deg: f32) -> Plane {
+        if len <= 0.0 {
+            return p.clone();
+        }
+        let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
+        let n = (len * 4.0).ceil() as usize;
+        let mut out = Plane::new(p.width, p.height, 0.0);
+        for y in 0..p.height {
+            for x in 0..p.width {
+                let mut acc = 0.0;
+                for i in 0..n {
+                    let t = ((i as f32 + 0.5) / n as f32 - 0.5) * len;
+                    acc += p.sample_bilinear(x as f32 + t * c, y as f32 + t * s);
+                }
+                out.data[y * p.width + x] = acc / n as f32;
+            }
+        }
+        out
+    }
+
+    fn uniform(w: usize, h: usize, deg: f32, speed: f32) -> Flow {
+        let a = deg.to_radians();
+        Flow::uniform(w, h, speed * a.cos(), speed * a.sin())
+    }
+
+    /// Box streaks of 0, 8 and 20 px at 0°, 90° and 30° on an isotropic texture read
+    /// within 1.5 px (the candidate grid is 1 px, parabola-refined; the streak is
+    /// drawn by a different sampler than the box the shape assumes).
+    #[test]
+    fn streaks_on_an_isotropic_texture_read_their_length() {
+        let base = texture(400, 320, 7);
+        for deg in [0.0f32, 90.0, 30.0] {
+            for len in [0.0f32, 8.0, 20.0] {
+                let img = streak(&base, len, deg);
+                let got = acf_shape(&img, &uniform(400, 320, deg, 40.0)).expect("read");
+                assert!((got.length_px - len).abs() <= 1.5, "{deg}° {len} px: read {:?}", got);
+                assert!((got.lambda - got.length_px / 40.0).abs() < 1e-6);
+            }
+        }
+    }
+
+    /// White noise (σ 0.02 on a texture of contrast ~0.1) is subtracted, as the
+    /// crop's bilinear sampling correlates it at 30°: a 12 px streak still reads
+    /// within 1.5 px, and no streak reads below 2 px. (Measured without the
+    /// subtraction at 0°: no streak read 2.5 px.)
+    #[test]
+    fn white_noise_is_subtracted() {
+        let base = texture(400, 320, 11);
+        let mut s = 3u64;
+        for (len, deg) in [(0.0f32, 0.0f32), (12.0, 0.0), (0.0, 30.0), (12.0, 30.0)] {
+            let mut img = streak(&base, len, deg);
+            for v in &mut img.data {
+                // Sum of 4 uniforms: near-Gaussian, σ = 0.02.
+                let mut u = 0.0;
+                for _ in 0..4 {
+                    s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    u += (s >> 33) as f32 / (1u64 << 31) as f32 - 0.5;
+                }
+                *v += u * 0.02 * 3.0f32.sqrt();
+            }
+            let got = acf_shape(&img, &uniform(400, 320, deg, 40.0)).expect("read");
+            if len == 0.0 {
+                assert!(got.length_px < 2.0, "{got:?}");
+            } else {
+                assert!((got.length_px - len).abs() <= 1.5, "{got:?}");
+            }
+        }
+    }
+
+    /// One streak length is assumed: a flow turning through 90° across the frame, or
+    /// doubling its speed, is not read; nor a frame too small for the lags.
+    #[test]
+    fn incoherent_flow_and_small_frames_are_refused() {
+        let img = texture(400, 320, 5);
+        let mut turning = uniform(400, 320, 0.0, 20.0);
+        for y in 0..320 {
+            for x in 0..400 {
+                let a = (x as f32 / 400.0) * std::f32::consts::FRAC_PI_2;
+                turning.dx[y * 400 + x] = 20.0 * a.cos();
+                turning.dy[y * 400 + x] = 20.0 * a.sin();
+            }
+        }
+        let e = acf_shape(&img, &turning).unwrap_err();
+        assert!(e.contains("direction"), "{e}");
+        let mut faster = uniform(400, 320, 0.0, 20.0);
+        for x in 0..400 {
+            for y in 0..320 {
+                faster.dx[y * 400 + x] = 10.0 + 20.0 * x as f32 / 400.0;
+            }
+        }
+        let e = acf_shape(&img, &faster).unwrap_err();
+        assert!(e.contains("speed"), "{e}");
+        let small = texture(200, 150, 5);
+        let e = acf_shape(&small, &uniform(200, 150, 0.0, 20.0)).unwrap_err();
+        assert!(e.contains("crop"), "{e}");
+    }
+
+    #[test]
+    fn kernels_and_sizes() {
+        let k = box_kernel(4.0);
+        assert_eq!(k.len(), 5);
+        assert!((k.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        assert!((k[0] - 0.125).abs() < 1e-12 && (k[2] - 0.25).abs() < 1e-12);
+        let r = kernel_autocorrelation(&k);
+        assert_eq!(r.len(), 9);
+        assert!((r.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        assert_eq!(fft_size(721), 729);
+        assert_eq!(fft_size(720), 720);
+        assert_eq!(fft_size(7), 8);
+    }
+}
