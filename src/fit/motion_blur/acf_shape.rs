@@ -35,7 +35,7 @@ pub(super) const MAX_LAG_PX: usize = 80;
 pub(super) const MAX_LENGTH_PX: usize = 60;
 /// The crop's largest side along and across the flow (px): cost, not accuracy — the
 /// FFT is O(N log N) in the crop's area (~3 ms at this size, BENCHMARKS.md).
-const MAX_CROP: (usize, usize) = (640, 480);
+const MAX_CROP: (usize, usize) = (512, 384);
 /// The crop's least side: two lag windows must fit in it.
 const MIN_CROP_PX: usize = 2 * MAX_LAG_PX;
 /// Flow below this (px per frame) is not read (as `isotropy.rs`).
@@ -107,27 +107,22 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         };
         let mut ru = [0.0f64; MAX_LAG_PX + 1];
         let mut rv = [0.0f64; MAX_LAG_PX + 1];
+        let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
         for t in 0..=MAX_LAG_PX {
-            let mut su = 0.0;
-            let mut sv = 0.0;
-            for s in -(c as isize)..=(c as isize) {
-                let r = rb(s);
-                su += r * au.at(t, s);
-                sv += r * av[(t as isize + s + AV_OFFSET as isize) as usize];
-            }
+            // Σ_s r(s)·A_u(t, s) and Σ_s r(s)·A_v(t + s), s = −c…c: contiguous dots.
+            let su = dot(&rk, &au.row(t)[MAX_LENGTH_PX - c..=MAX_LENGTH_PX + c]);
+            let sv = dot(&rk, &av[t + AV_OFFSET - c..=t + AV_OFFSET + c]);
             // Means over the pairs each lag has (the crop is finite).
             ru[t] = su / (b_len * (a_len - t)) as f64;
             rv[t] = sv / (a_len * (b_len - t)) as f64;
             // White pixel noise's share, through the crop's bilinear sampling (for a
             // flow along an axis: 2s₂σ², −s₂σ² at lag 1 along u, the box's
-            // autocorrelation differenced twice along v).
-            let (mut nu, mut nv) = (0.0, 0.0);
-            for s in -NoiseTable::REACH..=NoiseTable::REACH {
-                nu += rb(s) * noise.du(t as isize, s);
-            }
-            for s in -(c as isize)..=(c as isize) {
-                nv += rb(s) * noise.dv(t as isize + s);
-            }
+            // autocorrelation differenced twice along v): non-zero within
+            // `NoiseTable::REACH` of lag 0 only.
+            let tt = t as isize;
+            let reach = NoiseTable::REACH;
+            let nu: f64 = (-reach..=reach).map(|s| rb(s) * noise.du(tt, s)).sum();
+            let nv: f64 = (-tt - reach..=-tt + reach).map(|s| rb(s) * noise.dv(tt + s)).sum();
             ru[t] -= sigma * sigma * nu;
             rv[t] -= sigma * sigma * nv;
         }
@@ -142,8 +137,11 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     };
     let residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
     let best = (0..residuals.len()).min_by(|&a, &b| residuals[a].total_cmp(&residuals[b])).unwrap_or(0);
-    if best == l_max && l_max == MAX_LENGTH_PX {
-        return Err(format!("the best length lies at the {MAX_LENGTH_PX} px the lags can hold"));
+    // A minimum at the search's top end is no balance: the match may improve past
+    // it (the lags' `MAX_LENGTH_PX`, or a full-frame streak). Measured: a colour
+    // wheel with no streak read 50 px (λ 1) at 50 px/frame.
+    if best == l_max {
+        return Err(format!("the best length lies at the search's end ({l_max} px)"));
     }
     // Parabola through the best and its neighbours.
     let mut length = best as f64;
@@ -221,17 +219,15 @@ fn crop_size(w: usize, h: usize, c: f32, s: f32) -> (usize, usize) {
     best
 }
 
-/// Immerkær's white-noise σ on the frame's pixels (every fourth row triple: an
-/// estimate, at a quarter of the pass): the mean |Laplacian difference| · √(π/2)/6.
+/// Immerkær's white-noise σ on the frame's pixels (every eighth row triple: an
+/// estimate, at an eighth of the pass): the mean |Laplacian difference| · √(π/2)/6.
 fn immerkaer_sigma(p: &Plane) -> f64 {
     let (w, h) = (p.width, p.height);
     let (mut sum, mut count) = (0.0f64, 0usize);
-    for y in (1..h - 1).step_by(4) {
+    for y in (1..h - 1).step_by(8) {
         let (a, b, c) = (&p.data[(y - 1) * w..y * w], &p.data[y * w..(y + 1) * w], &p.data[(y + 1) * w..(y + 2) * w]);
         for x in 1..w - 1 {
-            let v = a[x - 1] - 2.0 * a[x] + a[x + 1] - 2.0 * (b[x - 1] - 2.0 * b[x] + b[x + 1])
-                + c[x - 1]
-                - 2.0 * c[x]
+            let v = a[x - 1] - 2.0 * a[x] + a[x + 1] - 2.0 * (b[x - 1] - 2.0 * b[x] + b[x + 1]) + c[x - 1] - 2.0 * c[x]
                 + c[x + 1];
             sum += v.abs() as f64;
         }
@@ -363,23 +359,25 @@ struct LagTable {
 
 impl LagTable {
     const ROW: usize = 2 * MAX_LENGTH_PX + 1;
-    fn at(&self, t: usize, s: isize) -> f64 {
-        self.data[t * Self::ROW + (s + MAX_LENGTH_PX as isize) as usize]
+    /// A_u(t, s) for s = −`MAX_LENGTH_PX`…`MAX_LENGTH_PX` (index s + `MAX_LENGTH_PX`).
+    fn row(&self, t: usize) -> &[f64] {
+        &self.data[t * Self::ROW..(t + 1) * Self::ROW]
     }
 }
 
 /// The smallest m ≥ n of the form 2^a·3^b·5^c (fast FFT sizes).
 fn fft_size(n: usize) -> usize {
-    (n..).find(|&m| {
-        let mut r = m;
-        for p in [2, 3, 5] {
-            while r % p == 0 {
-                r /= p;
+    (n..)
+        .find(|&m| {
+            let mut r = m;
+            for p in [2, 3, 5] {
+                while r % p == 0 {
+                    r /= p;
+                }
             }
-        }
-        r == 1
-    })
-    .unwrap_or(n)
+            r == 1
+        })
+        .unwrap_or(n)
 }
 
 /// The raw autocorrelation sums of du (along u at lags 0…`MAX_LAG_PX`, across at
@@ -393,61 +391,88 @@ fn autocorrelations(crop: &[f32], cw: usize, ch: usize) -> (LagTable, Vec<f64>) 
     let mut planner = FftPlanner::<f32>::new();
     let (fu, fv) = (planner.plan_fft_forward(nu), planner.plan_fft_forward(nv));
     let (iu, iv) = (planner.plan_fft_inverse(nu), planner.plan_fft_inverse(nv));
-    let mut z = vec![Complex32::new(0.0, 0.0); nu * nv];
-    for y in 0..b {
-        let (r0, r1) = (&crop[y * cw..(y + 1) * cw], &crop[(y + 1) * cw..(y + 2) * cw]);
-        let row = &mut z[y * nu..y * nu + nu];
-        for x in 0..a {
-            row[x] = Complex32::new(r0[x + 1] - r0[x], r1[x] - r0[x]);
+    let zero = Complex32::new(0.0, 0.0);
+    // One scratch for every transform; each `process_with_scratch` call transforms
+    // every row of its buffer (rustfft's batching).
+    let scratch_len = [&fu, &fv, &iu, &iv].iter().map(|f| f.get_inplace_scratch_len()).max().unwrap_or(0);
+    let mut scratch = vec![zero; scratch_len];
+    // The b data rows along u (the padding rows are zero and stay zero), `BLOCK` at
+    // a time: transformed, then written transposed (rows: u frequency, along v) so
+    // that the v transforms run on contiguous rows (a strided column gather cost
+    // more than the FFTs, `defocus_spectrum::fft2`) — one frame-sized buffer, not two.
+    const BLOCK: usize = 16;
+    let mut zt = vec![zero; nu * nv];
+    let mut rows = vec![zero; BLOCK * nu];
+    for y0 in (0..b).step_by(BLOCK) {
+        let n = BLOCK.min(b - y0);
+        let block = &mut rows[..n * nu];
+        for (j, row) in block.chunks_exact_mut(nu).enumerate() {
+            let y = y0 + j;
+            let (r0, r1) = (&crop[y * cw..(y + 1) * cw], &crop[(y + 1) * cw..(y + 2) * cw]);
+            for x in 0..a {
+                row[x] = Complex32::new(r0[x + 1] - r0[x], r1[x] - r0[x]);
+            }
+            row[a..].fill(zero);
         }
-        fu.process(row);
+        fu.process_with_scratch(block, &mut scratch);
+        for bx in (0..nu).step_by(BLOCK) {
+            for j in 0..n {
+                for x in bx..(bx + BLOCK).min(nu) {
+                    zt[x * nv + y0 + j] = block[j * nu + x];
+                }
+            }
+        }
     }
-    let mut col = vec![Complex32::new(0.0, 0.0); nv];
-    for x in 0..nu {
-        for (yy, c) in col.iter_mut().enumerate() {
-            *c = z[yy * nu + x];
-        }
-        fv.process(&mut col);
-        for (yy, c) in col.iter().enumerate() {
-            z[yy * nu + x] = *c;
-        }
-    }
-    // Split the two spectra: Du(k) = (Z(k) + Z*(−k))/2, Dv(k) = (Z(k) − Z*(−k))/(2i).
-    let mut pu = vec![0.0f32; nu * nv];
+    drop(rows);
+    fv.process_with_scratch(&mut zt, &mut scratch);
+    // Split the two spectra in place, each pair k, −k once: Du(k) = (Z(k) + Z*(−k))/2,
+    // Dv(k) = (Z(k) − Z*(−k))/(2i); |Du|² stays (as a real number) for the inverse,
+    // |Dv|² is summed over the u frequencies (`pv_marginal`).
     let mut pv_marginal = vec![0.0f64; nv];
-    for ky in 0..nv {
-        let my = (nv - ky) % nv;
-        for kx in 0..nu {
-            let mx = (nu - kx) % nu;
-            let (p, q) = (z[ky * nu + kx], z[my * nu + mx].conj());
-            pu[ky * nu + kx] = 0.25 * (p + q).norm_sqr();
-            pv_marginal[ky] += 0.25 * (p - q).norm_sqr() as f64;
+    for ku in 0..nu {
+        let mu = (nu - ku) % nu;
+        for kv in 0..nv {
+            let mv = (nv - kv) % nv;
+            let (i, m) = (ku * nv + kv, mu * nv + mv);
+            if i > m {
+                continue;
+            }
+            let (p, q) = (zt[i], zt[m]);
+            let qc = q.conj();
+            // At −k the same pair, conjugated: |Du(−k)|² = |Du(k)|², |Dv(−k)|² = |Dv(k)|².
+            let (du_k, dv_k) = (0.25 * (p + qc).norm_sqr(), 0.25 * (p - qc).norm_sqr());
+            zt[i] = Complex32::new(du_k, 0.0);
+            pv_marginal[kv] += dv_k as f64;
+            if m != i {
+                zt[m] = Complex32::new(du_k, 0.0);
+                pv_marginal[mv] += dv_k as f64;
+            }
         }
     }
-    // A_u: inverse along v per column (keeping lags ±MAX_LENGTH_PX), then along u.
+    let mut pu = zt;
+    // A_u: inverse along v (every u frequency's row), the lags ±MAX_LENGTH_PX kept,
+    // then inverse along u.
+    iv.process_with_scratch(&mut pu, &mut scratch);
     let row_len = LagTable::ROW;
-    let mut g = vec![Complex32::new(0.0, 0.0); row_len * nu];
-    for x in 0..nu {
-        for (yy, c) in col.iter_mut().enumerate() {
-            *c = Complex32::new(pu[yy * nu + x], 0.0);
-        }
-        iv.process(&mut col);
+    let mut g = vec![zero; row_len * nu];
+    for ku in 0..nu {
+        let row = &pu[ku * nv..(ku + 1) * nv];
         for (r, s) in (-(MAX_LENGTH_PX as isize)..=MAX_LENGTH_PX as isize).enumerate() {
-            g[r * nu + x] = col[s.rem_euclid(nv as isize) as usize];
+            g[r * nu + ku] = row[s.rem_euclid(nv as isize) as usize];
         }
     }
+    drop(pu);
+    iu.process_with_scratch(&mut g, &mut scratch);
     let norm = 1.0 / (nu * nv) as f64;
     let mut data = vec![0.0f64; (MAX_LAG_PX + 1) * row_len];
-    for r in 0..row_len {
-        let line = &mut g[r * nu..(r + 1) * nu];
-        iu.process(line);
+    for (r, line) in g.chunks_exact(nu).enumerate() {
         for t in 0..=MAX_LAG_PX {
             data[t * row_len + r] = line[t].re as f64 * norm;
         }
     }
     // A_v(0, t'): the marginal over the u frequencies, inverse along v.
     let mut m: Vec<Complex32> = pv_marginal.iter().map(|&v| Complex32::new(v as f32, 0.0)).collect();
-    iv.process(&mut m);
+    iv.process_with_scratch(&mut m, &mut scratch);
     let av = (-(AV_OFFSET as isize)..=AV_OFFSET as isize)
         .map(|t| m[t.rem_euclid(nv as isize) as usize].re as f64 * norm)
         .collect();

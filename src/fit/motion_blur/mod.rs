@@ -16,7 +16,8 @@
 //!
 //! Blind (`fit_fast`): the streak's spectral zeros along the flow where they are
 //! identified, else gradient-energy isotropy with its bias risk in the standard
-//! error — see its documentation.
+//! error, refined by the derivative autocorrelation's shape where the flow holds one
+//! streak length — see its documentation.
 
 mod acf_shape;
 mod isotropy;
@@ -478,7 +479,8 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
     cum
 }
 
-/// Fast tier: frame and flow only. Two estimators, the first that can answer wins:
+/// Fast tier: frame and flow only. The first of two estimators that can answer wins;
+/// the second is then refined by a third:
 ///
 /// 1. **Streak zeros** (`streak_spectrum`): the box streak's spectral zeros along the
 ///    flow, read against the across-flow spectrum. Neither texture anisotropy nor
@@ -507,6 +509,16 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    identifiable*. The bias
 ///    term is added in quadrature to the spread of the root over `FAST_SUBSETS`
 ///    interleaved subsets / √subsets.
+/// 3. **The derivative autocorrelation's shape** (`acf_shape`), where isotropy
+///    answers and the flow holds one streak length (direction within ~±10°, speed
+///    within ±25%): the same box across the flow, but the whole autocorrelation of
+///    the derivative along u matched to the one along v (lags 0–80 px, one free
+///    amplitude, white noise's share subtracted), not their lag-0 values. Its λ is
+///    reported; half its difference from the isotropy root enters the standard error
+///    in quadrature with isotropy's. Measured on the frames this path answers
+///    (`benches/streak_acf/fallback.py`, BENCHMARKS.md): median error 10% / 7%
+///    where isotropy alone had 36% / 22% (probe / held-out sets); the real text page
+///    25.7 px for 31 (isotropy: 16.8).
 ///
 /// Every isotropy answer (and with `evidence_always` a zeros answer too) returns
 /// the frame's along/across balance per flow direction (`MbPlotData::isotropy`):
