@@ -1,6 +1,8 @@
-"""Blind motion blur from the shape of the derivative autocorrelation, a measured
-candidate not shipped (BENCHMARKS.md "A third single-frame signal measured and not
-kept").
+"""Blind motion blur from the shape of the derivative autocorrelation: the prototype
+(BENCHMARKS.md "A third single-frame signal measured and not kept"), since shipped as
+`src/fit/motion_blur/acf_shape.rs` (one FFT for every length, the noise through the
+crop's bilinear sampling; measured against isotropy by `fallback.py` beside this
+file: BENCHMARKS.md "The derivative autocorrelation's shape, shipped").
 
 The isotropy estimator (`src/fit/motion_blur/isotropy.rs`) blurs the frame across
 the flow by a candidate box of length L and takes the L at which the gradient
