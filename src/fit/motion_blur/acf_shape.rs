@@ -42,6 +42,11 @@ const MIN_CROP_PX: usize = 2 * MAX_LAG_PX;
 const MIN_SPEED_PX: f32 = 3.0;
 /// Least mean resultant length of the doubled flow angles: a spread of ~±10°.
 const MIN_AXIAL_COHERENCE: f32 = 0.94;
+/// Least ratio of the crop's across-flow derivative energy to white noise's: noise
+/// alone gives ~1 (Immerkær's σ is exact on it, and texture only raises it); a
+/// texture at 1.2× under σ 0.02 still reads a 12 px streak at 30°
+/// (`white_noise_is_subtracted`; its along-flow energy was 1.07× the noise's).
+const MIN_ENERGY_OVER_NOISE: f64 = 1.1;
 /// The flow's 10th and 90th speed percentiles within this factor of the median.
 const MAX_SPEED_SPREAD: f32 = 1.25;
 
@@ -93,6 +98,18 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     let (au, av) = autocorrelations(&crop, cw, ch);
     // Per candidate length: the relative residual of the best amplitude.
     let (a_len, b_len) = (cw - 1, ch - 1);
+    // Texture above the noise: the across-flow derivative's mean energy (a streak
+    // lowers the along-flow one, not this) at least `MIN_ENERGY_OVER_NOISE` × white
+    // noise's. Without it every residual is noise's and the shape says nothing.
+    let energy_u = au.row(0)[MAX_LENGTH_PX] / (a_len * b_len) as f64;
+    let energy_v = av[AV_OFFSET] / (a_len * b_len) as f64;
+    let (noise_u, noise_v) = (sigma * sigma * noise.du(0, 0), sigma * sigma * noise.dv(0));
+    if energy_v <= MIN_ENERGY_OVER_NOISE * noise_v || !(energy_u > 0.0 && energy_v > 0.0) {
+        return Err(format!(
+            "no texture above the noise in the crop (derivative energy {energy_u:.2e} / {energy_v:.2e} along / \
+             across, noise's {noise_u:.2e} / {noise_v:.2e})"
+        ));
+    }
     let residual_at = |len: usize| -> f64 {
         let k = box_kernel(len as f64);
         let rk = kernel_autocorrelation(&k);
@@ -603,6 +620,23 @@ mod tests {
         let small = texture(200, 150, 5);
         let e = acf_shape(&small, &uniform(200, 150, 0.0, 20.0)).unwrap_err();
         assert!(e.contains("crop"), "{e}");
+    }
+
+    /// A frame of noise alone (no texture), or flat: not read, never a streak of 0.
+    #[test]
+    fn noise_alone_is_not_read() {
+        let mut img = Plane::new(400, 320, 0.5);
+        let flow = uniform(400, 320, 30.0, 40.0);
+        let e = acf_shape(&img, &flow).unwrap_err();
+        assert!(e.contains("no texture"), "{e}");
+        let mut s = 9u64;
+        for v in &mut img.data {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            *v += 0.02 * ((s >> 33) as f32 / (1u64 << 31) as f32 - 0.5);
+        }
+        let e = acf_shape(&img, &flow).unwrap_err();
+        println!("{e}");
+        assert!(e.contains("no texture"), "{e}");
     }
 
     #[test]
