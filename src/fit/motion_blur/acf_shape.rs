@@ -22,7 +22,8 @@
 //! isotropic, but the box across averages it along u and not along v.
 //!
 //! Assumes one streak length over the crop: the flow's direction within ±10° (axial
-//! spread) and its speed within ±25% of the median over the crop; otherwise not read.
+//! spread) and its speed within ±25% of the median over the crop — the largest
+//! centred one that holds it (`CROP_SCALES`); otherwise not read.
 
 use crate::image::{Flow, Plane};
 use rustfft::num_complex::Complex32;
@@ -71,13 +72,9 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     if flow.width != w || flow.height != h {
         return Err("flow and frame differ in size".into());
     }
-    let (theta, speed) = coherent_flow(flow)?;
+    let (theta, speed, (cw, ch)) = coherent_crop(flow)?;
     let (ux, uy) = (theta.cos(), theta.sin());
     let (vx, vy) = (-uy, ux);
-    let (cw, ch) = crop_size(w, h, ux.abs(), uy.abs());
-    if cw < MIN_CROP_PX || ch < MIN_CROP_PX {
-        return Err(format!("the frame holds only a {cw}×{ch} px crop along the flow (need {MIN_CROP_PX})"));
-    }
     // The crop, rows along u, stepping along v, from a whole pixel: a flow along an
     // axis then samples pixels, not their bilinear means (which low-pass the noise
     // along one axis only).
@@ -180,42 +177,120 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     })
 }
 
-/// The flow's axial mean direction (radians, image axes) and median speed, where the
-/// flow is coherent enough to hold one streak length.
-fn coherent_flow(flow: &Flow) -> Result<(f32, f32), String> {
-    let (w, h) = (flow.width, flow.height);
-    let step = ((w * h) as f64 / 4096.0).sqrt().max(1.0) as usize;
-    let (mut c2, mut s2) = (0.0f64, 0.0f64);
-    let mut speeds = vec![];
-    for y in (step / 2..h).step_by(step) {
-        for x in (step / 2..w).step_by(step) {
-            let (fx, fy) = (flow.dx[y * w + x], flow.dy[y * w + x]);
+/// What the flow holds over a set of positions.
+struct FlowStats {
+    /// Axial mean direction (radians, image axes) and mean resultant length of the
+    /// doubled angles (a streak has an axis, not a sign).
+    theta: f32,
+    coherence: f32,
+    /// 10th, 50th and 90th speed percentiles (px/frame).
+    speeds: [f32; 3],
+}
+
+impl FlowStats {
+    /// The flow at the pixels nearest to `positions` (frame coordinates), where it
+    /// is finite and at least `MIN_SPEED_PX`.
+    fn over(flow: &Flow, positions: impl Iterator<Item = (f32, f32)>) -> Result<Self, String> {
+        let (w, h) = (flow.width, flow.height);
+        let (mut c2, mut s2) = (0.0f64, 0.0f64);
+        let mut speeds = vec![];
+        for (x, y) in positions {
+            let (xi, yi) = (x.round(), y.round());
+            if !(xi >= 0.0 && yi >= 0.0 && (xi as usize) < w && (yi as usize) < h) {
+                continue;
+            }
+            let i = yi as usize * w + xi as usize;
+            let (fx, fy) = (flow.dx[i], flow.dy[i]);
             let sp = (fx * fx + fy * fy).sqrt();
             if !sp.is_finite() || sp < MIN_SPEED_PX {
                 continue;
             }
-            // The doubled angle: a streak has an axis, not a sign.
             let (c, s) = (fx / sp, fy / sp);
             c2 += (c * c - s * s) as f64;
             s2 += (2.0 * c * s) as f64;
             speeds.push(sp);
         }
+        let n = speeds.len();
+        if n < 64 {
+            return Err(format!("only {n} flow samples ≥ {MIN_SPEED_PX} px/frame"));
+        }
+        speeds.sort_by(f32::total_cmp);
+        Ok(Self {
+            theta: 0.5 * (s2.atan2(c2) as f32),
+            coherence: ((c2 * c2 + s2 * s2).sqrt() / n as f64) as f32,
+            speeds: [speeds[n / 10], speeds[n / 2], speeds[(9 * n) / 10]],
+        })
     }
-    let n = speeds.len();
-    if n < 64 {
-        return Err(format!("only {n} flow samples ≥ {MIN_SPEED_PX} px/frame"));
+
+    /// The median speed where the flow holds one streak length, else why not.
+    fn one_length(&self) -> Result<f32, String> {
+        if self.coherence < MIN_AXIAL_COHERENCE {
+            return Err(format!(
+                "the flow's direction varies (axial coherence {:.2} < {MIN_AXIAL_COHERENCE})",
+                self.coherence
+            ));
+        }
+        let [p10, med, p90] = self.speeds;
+        if p90 > MAX_SPEED_SPREAD * med || p10 * MAX_SPEED_SPREAD < med {
+            return Err(format!("the flow's speed varies ({p10:.1}–{p90:.1} px/frame around {med:.1})"));
+        }
+        Ok(med)
     }
-    let coherence = ((c2 * c2 + s2 * s2).sqrt() / n as f64) as f32;
-    if coherence < MIN_AXIAL_COHERENCE {
-        return Err(format!("the flow's direction varies (axial coherence {coherence:.2} < {MIN_AXIAL_COHERENCE})"));
+}
+
+/// Crop scales tried, largest first: a flow that turns or speeds up toward the
+/// frame's edges (a wide-angle head turn: ~2× the centre's speed at a 90° field of
+/// view's corners) may hold one length over the centre.
+const CROP_SCALES: [f32; 3] = [1.0, 0.75, 0.5];
+
+/// The flow's direction and median speed over the largest centred crop (along ×
+/// across it, px) that holds one streak length, or why none does.
+fn coherent_crop(flow: &Flow) -> Result<(f32, f32, (usize, usize)), String> {
+    let (w, h) = (flow.width, flow.height);
+    let step = ((w * h) as f64 / 4096.0).sqrt().max(1.0) as usize;
+    let grid = (step / 2..h).step_by(step).flat_map(|y| (step / 2..w).step_by(step).map(move |x| (x as f32, y as f32)));
+    // The whole frame's direction orients the first crop.
+    let mut theta = FlowStats::over(flow, grid)?.theta;
+    let (cx, cy) = (0.5 * (w - 1) as f32, 0.5 * (h - 1) as f32);
+    // 32 × 24 positions over a crop's footprint.
+    let footprint = |theta: f32, (cw, ch): (usize, usize)| {
+        let (ux, uy) = (theta.cos(), theta.sin());
+        (0..24).flat_map(move |j| {
+            (0..32).map(move |i| {
+                let a = (i as f32 / 31.0 - 0.5) * cw as f32;
+                let b = (j as f32 / 23.0 - 0.5) * ch as f32;
+                (cx + a * ux - b * uy, cy + a * uy + b * ux)
+            })
+        })
+    };
+    let mut why = String::new();
+    for scale in CROP_SCALES {
+        let size = |theta: f32| {
+            let (cw, ch) = crop_size(w, h, theta.cos().abs(), theta.sin().abs());
+            ((cw as f32 * scale) as usize, (ch as f32 * scale) as usize)
+        };
+        let mut dims = size(theta);
+        if dims.0 < MIN_CROP_PX || dims.1 < MIN_CROP_PX {
+            if why.is_empty() {
+                why =
+                    format!("the frame holds only a {}×{} px crop along the flow (need {MIN_CROP_PX})", dims.0, dims.1);
+            }
+            break;
+        }
+        let mut stats = FlowStats::over(flow, footprint(theta, dims))?;
+        // Orient the crop along its own flow (once: the footprint barely moves).
+        let turn = (stats.theta - theta).sin().abs();
+        if turn > 2f32.to_radians().sin() {
+            theta = stats.theta;
+            dims = size(theta);
+            stats = FlowStats::over(flow, footprint(theta, dims))?;
+        }
+        match stats.one_length() {
+            Ok(speed) => return Ok((theta, speed, dims)),
+            Err(e) => why = format!("{e} over a {}×{} px crop", dims.0, dims.1),
+        }
     }
-    speeds.sort_by(f32::total_cmp);
-    let med = speeds[n / 2];
-    let (p10, p90) = (speeds[n / 10], speeds[(9 * n) / 10]);
-    if p90 > MAX_SPEED_SPREAD * med || p10 * MAX_SPEED_SPREAD < med {
-        return Err(format!("the flow's speed varies ({p10:.1}–{p90:.1} px/frame around {med:.1})"));
-    }
-    Ok((0.5 * (s2.atan2(c2) as f32), med))
+    Err(why)
 }
 
 /// The largest crop (along × across the flow, px) centred in a `w`×`h` frame whose
@@ -594,8 +669,28 @@ mod tests {
         }
     }
 
+    /// A flow whose speed varies ±40% across the frame (a wide-angle head turn's
+    /// centre against its edges) is read over a central crop where it holds one
+    /// length: a 16 px streak within 1.5 px, the crop's median speed within 5%.
+    #[test]
+    fn a_central_crop_holds_one_length_where_the_frame_does_not() {
+        let (w, h) = (480usize, 360usize);
+        let img = streak(&texture(w, h, 13), 16.0, 0.0);
+        let mut flow = uniform(w, h, 0.0, 40.0);
+        for y in 0..h {
+            for x in 0..w {
+                flow.dx[y * w + x] = 40.0 * (0.6 + 0.8 * x as f32 / w as f32);
+            }
+        }
+        let got = acf_shape(&img, &flow).expect("read over the centre");
+        assert!((got.length_px - 16.0).abs() <= 1.5, "{got:?}");
+        assert!((got.speed_px / 40.0 - 1.0).abs() <= 0.05, "{got:?}");
+        assert!(got.crop.0 < 440, "{got:?}");
+    }
+
     /// One streak length is assumed: a flow turning through 90° across the frame, or
-    /// doubling its speed, is not read; nor a frame too small for the lags.
+    /// speeding up 9× across it, is not read even over the centre; nor a frame too
+    /// small for the lags.
     #[test]
     fn incoherent_flow_and_small_frames_are_refused() {
         let img = texture(400, 320, 5);
@@ -609,10 +704,11 @@ mod tests {
         }
         let e = acf_shape(&img, &turning).unwrap_err();
         assert!(e.contains("direction"), "{e}");
+        // 5–45 px/frame across the frame: 15–35 over its central half.
         let mut faster = uniform(400, 320, 0.0, 20.0);
         for x in 0..400 {
             for y in 0..320 {
-                faster.dx[y * 400 + x] = 10.0 + 20.0 * x as f32 / 400.0;
+                faster.dx[y * 400 + x] = 5.0 + 40.0 * x as f32 / 400.0;
             }
         }
         let e = acf_shape(&img, &faster).unwrap_err();

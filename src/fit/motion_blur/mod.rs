@@ -511,7 +511,7 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    interleaved subsets / √subsets.
 /// 3. **The derivative autocorrelation's shape** (`acf_shape`), where isotropy
 ///    answers and the flow holds one streak length (direction within ~±10°, speed
-///    within ±25%): the same box across the flow, but the whole autocorrelation of
+///    within ±25%) over a centred crop of the frame: the same box across the flow, but the whole autocorrelation of
 ///    the derivative along u matched to the one along v (lags 0–80 px, one free
 ///    amplitude, white noise's share subtracted), not their lag-0 values. Its λ is
 ///    reported; half its difference from the isotropy root enters the standard error
