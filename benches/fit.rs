@@ -122,6 +122,8 @@ fn fast_stages(_: &mut Criterion) {
     };
     let total = median(&mut totals);
     println!("\n### fast tier, 1280×960, all three effects, 1 thread: median {total:.1} ms of 11 fits\n");
+    let mb = single.install(|| fit(&inp, &opts).expect("fit")).model.motion_blur;
+    println!("motion blur (truth λ 0.5): {}…\n", mb.diagnostics.reason.chars().take(160).collect::<String>());
     println!("| effect | stage | median | share of the total |\n|---|---|---|---|");
     for ((e, k), v) in stages.iter_mut() {
         let ms = median(v);
@@ -130,5 +132,48 @@ fn fast_stages(_: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench, fast_stages);
+/// The fast tier's blind exposure at 1280×960 where it falls back past the streak's
+/// zeros under a uniform flow, so the derivative autocorrelation's shape runs
+/// (`fit::motion_blur::acf_shape`): astronaut, a 20 px streak at 30° (40 px/frame, λ
+/// 0.5), 3 DN of noise, 8-bit; one thread, median stage times of 11 fits and the
+/// reason's first words (which path answered).
+fn fast_mb_uniform_flow(_: &mut Criterion) {
+    blind_augment::alloc::keep_freed_blocks();
+    let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");
+    let (w, h) = (1280, 960);
+    let clean = common::mirror_tile(&common::photo("astronaut.png"), w, h);
+    let a = 30f32.to_radians();
+    let flow = Flow::uniform(w, h, 40.0 * a.cos(), 40.0 * a.sin());
+    let noise = synth::white_sensor_noise([1.4e-4; 3], [0.0; 3], [0.0, 1.0]);
+    let frame = synth::add_noise(&synth::add_motion_blur(&clean, &flow, 0.5), &noise, 3)
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);
+    let inp = FitInputs { flow: Some(&flow), ..FitInputs::new(&frame) };
+    let opts = only(false, true, false, Tier::Fast);
+    let mut totals = vec![];
+    let mut stages: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+    let mut reason = String::new();
+    for _ in 0..11 {
+        let t = std::time::Instant::now();
+        let m = single.install(|| fit(&inp, &opts).expect("fit")).model;
+        totals.push(t.elapsed().as_secs_f64() * 1e3);
+        for (k, v) in &m.motion_blur.diagnostics.stages_s {
+            stages.entry(k.clone()).or_default().push(v * 1e3);
+        }
+        reason = m.motion_blur.diagnostics.reason.chars().take(110).collect();
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    println!(
+        "\n### fast blind exposure, 1280×960, uniform flow, 1 thread: median {:.1} ms of 11 fits",
+        median(&mut totals)
+    );
+    println!("{reason}…\n\n| stage | median |\n|---|---|");
+    for (k, v) in stages.iter_mut() {
+        println!("| {k} | {:.2} ms |", median(v));
+    }
+}
+
+criterion_group!(benches, bench, fast_stages, fast_mb_uniform_flow);
 criterion_main!(benches);

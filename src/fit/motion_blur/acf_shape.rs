@@ -73,6 +73,16 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         return Err("flow and frame differ in size".into());
     }
     let (theta, speed, (cw, ch)) = coherent_crop(flow)?;
+    let l_max = (MAX_LENGTH_PX as f32).min(speed).floor() as usize;
+    if l_max < 2 {
+        return Err(format!("flow of {speed:.1} px/frame: no streak length to read"));
+    }
+    // A slow flow's streaks are short: lags to twice the longest candidate (and a
+    // texture's scale) hold the streak's signature, and a crop proportioned to them
+    // costs a fraction (the FFT is O(N log N) in its area): 6.4 × 4.8 lag windows,
+    // 512×384 at the full 80 px.
+    let max_lag = (2 * l_max + 24).min(MAX_LAG_PX);
+    let (cw, ch) = (cw.min(32 * max_lag / 5), ch.min(24 * max_lag / 5));
     let (ux, uy) = (theta.cos(), theta.sin());
     let (vx, vy) = (-uy, ux);
     // The crop, rows along u, stepping along v, from a whole pixel: a flow along an
@@ -88,11 +98,7 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     }
     let sigma = immerkaer_sigma(y);
     let noise = NoiseTable::new((ox, oy), (ux, uy), (cw, ch));
-    let l_max = (MAX_LENGTH_PX as f32).min(speed).floor() as usize;
-    if l_max < 2 {
-        return Err(format!("flow of {speed:.1} px/frame: no streak length to read"));
-    }
-    let (au, av) = autocorrelations(&crop, cw, ch);
+    let (au, av) = autocorrelations(&crop, cw, ch, max_lag, l_max);
     // Per candidate length: the relative residual of the best amplitude.
     let (a_len, b_len) = (cw - 1, ch - 1);
     // Texture above the noise: the across-flow derivative's mean energy (a streak
@@ -122,7 +128,7 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         let mut ru = [0.0f64; MAX_LAG_PX + 1];
         let mut rv = [0.0f64; MAX_LAG_PX + 1];
         let dot = |a: &[f64], b: &[f64]| -> f64 { a.iter().zip(b).map(|(x, y)| x * y).sum() };
-        for t in 0..=MAX_LAG_PX {
+        for t in 0..=max_lag {
             // Σ_s r(s)·A_u(t, s) and Σ_s r(s)·A_v(t + s), s = −c…c: contiguous dots.
             let su = dot(&rk, &au.row(t)[MAX_LENGTH_PX - c..=MAX_LENGTH_PX + c]);
             let sv = dot(&rk, &av[t + AV_OFFSET - c..=t + AV_OFFSET + c]);
@@ -475,11 +481,13 @@ fn fft_size(n: usize) -> usize {
 /// The raw autocorrelation sums of du (along u at lags 0…`MAX_LAG_PX`, across at
 /// ±`MAX_LENGTH_PX`) and of dv along v (lags ±`AV_OFFSET`, index + `AV_OFFSET`), by
 /// one zero-padded 2-D FFT of du + i·dv (two real transforms in one complex one).
-fn autocorrelations(crop: &[f32], cw: usize, ch: usize) -> (LagTable, Vec<f64>) {
+fn autocorrelations(crop: &[f32], cw: usize, ch: usize, max_lag: usize, l_max: usize) -> (LagTable, Vec<f64>) {
     let (a, b) = (cw - 1, ch - 1);
-    // Zero padding wide enough that no lag read wraps around.
-    let nu = fft_size(a + MAX_LAG_PX + 1);
-    let nv = fft_size(b + AV_OFFSET + 1);
+    // Zero padding wide enough that no lag read wraps around: u lags to `max_lag`,
+    // v lags to `max_lag` + the box's reach `l_max` (entries past those are read
+    // by no candidate).
+    let nu = fft_size(a + max_lag + 1);
+    let nv = fft_size(b + max_lag + l_max + 1);
     let mut planner = FftPlanner::<f32>::new();
     let (fu, fv) = (planner.plan_fft_forward(nu), planner.plan_fft_forward(nv));
     let (iu, iv) = (planner.plan_fft_inverse(nu), planner.plan_fft_inverse(nv));
