@@ -511,14 +511,15 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    interleaved subsets / √subsets.
 /// 3. **The derivative autocorrelation's shape** (`acf_shape`), where isotropy
 ///    answers and the flow holds one streak length (direction within ~±10°, speed
-///    within ±25%) over a centred crop of the frame: the same box across the flow, but the whole autocorrelation of
-///    the derivative along u matched to the one along v (lags 0–80 px, one free
-///    amplitude, white noise's share subtracted), not their lag-0 values. Its λ is
+///    within ±25%) over a centred crop of the frame: the same box across the flow,
+///    but the whole autocorrelation of the derivative along u matched to the one
+///    along v (lags 0–80 px, one free amplitude, white noise's share subtracted),
+///    not their lag-0 values. Its λ is
 ///    reported; half its difference from the isotropy root enters the standard error
 ///    in quadrature with isotropy's. Measured on the frames this path answers
 ///    (`benches/streak_acf/fallback.py`, BENCHMARKS.md): median error 10% / 7%
 ///    where isotropy alone had 36% / 22% (probe / held-out sets); the real text page
-///    25.7 px for 31 (isotropy: 16.8).
+///    25.8 px for 31 (isotropy: 16.8).
 ///
 /// Every isotropy answer (and with `evidence_always` a zeros answer too) returns
 /// the frame's along/across balance per flow direction (`MbPlotData::isotropy`):
@@ -671,10 +672,11 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         "from {n} pixels (subset spread {spread:.4}, two-scale disagreement {bias:.4}; {prior}: the bias risk of \
          anisotropic texture)"
     );
-    // The autocorrelations' shape: on 125 probe frames this path answers, median
-    // error 12.5–17% against isotropy's 22–36% (BENCHMARKS.md). It has biases of its
-    // own (smooth shading read as a streak), so the two readings' difference enters
-    // the standard error: half of it, in quadrature with isotropy's bias risk.
+    // The autocorrelations' shape: on the 51 + 73 probe and held-out frames this path
+    // answers, median error 10% / 6% against isotropy's 36% / 22% (BENCHMARKS.md). It
+    // has biases of its own (smooth shading read as no streak, a text page's line
+    // pitch), so the two readings' difference enters the standard error: half of it,
+    // in quadrature with isotropy's bias risk.
     let shape = acf_shape::acf_shape(y, flow);
     st.lap("search.acf_shape");
     let (lambda, stderr, how) = match shape {
