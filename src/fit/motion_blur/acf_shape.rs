@@ -86,7 +86,7 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     // 512×384 at the full 80 px.
     let max_lag = (2 * l_max + 24).min(MAX_LAG_PX);
     let (cw, ch) = (cw.min(32 * max_lag / 5), ch.min(24 * max_lag / 5));
-    let (ux, uy) = (theta.cos(), theta.sin());
+    let (ux, uy) = axis(theta);
     let (vx, vy) = (-uy, ux);
     // The crop, rows along u, stepping along v, from a whole pixel: a flow along an
     // axis then samples pixels, not their bilinear means (which low-pass the noise
@@ -186,6 +186,13 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     })
 }
 
+/// (cos θ, sin θ), through f64: LLVM fuses an f32 pair into `sincosf`, which the
+/// Quest build's API 29 libm does not export (`cargo xtask apk` fails to link).
+fn axis(theta: f32) -> (f32, f32) {
+    let (s, c) = (theta as f64).sin_cos();
+    (c as f32, s as f32)
+}
+
 /// What the flow holds over a set of positions.
 struct FlowStats {
     /// Axial mean direction (radians, image axes) and mean resultant length of the
@@ -263,7 +270,7 @@ fn coherent_crop(flow: &Flow) -> Result<(f32, f32, (usize, usize)), String> {
     let (cx, cy) = (0.5 * (w - 1) as f32, 0.5 * (h - 1) as f32);
     // 32 × 24 positions over a crop's footprint.
     let footprint = |theta: f32, (cw, ch): (usize, usize)| {
-        let (ux, uy) = (theta.cos(), theta.sin());
+        let (ux, uy) = axis(theta);
         (0..24).flat_map(move |j| {
             (0..32).map(move |i| {
                 let a = (i as f32 / 31.0 - 0.5) * cw as f32;
@@ -275,7 +282,8 @@ fn coherent_crop(flow: &Flow) -> Result<(f32, f32, (usize, usize)), String> {
     let mut why = String::new();
     for scale in CROP_SCALES {
         let size = |theta: f32| {
-            let (cw, ch) = crop_size(w, h, theta.cos().abs(), theta.sin().abs());
+            let (c, s) = axis(theta);
+            let (cw, ch) = crop_size(w, h, c.abs(), s.abs());
             ((cw as f32 * scale) as usize, (ch as f32 * scale) as usize)
         };
         let mut dims = size(theta);
