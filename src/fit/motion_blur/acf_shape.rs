@@ -31,10 +31,10 @@ use rustfft::num_complex::Complex32;
 use rustfft::FftPlanner;
 
 /// Lags of the two autocorrelations matched (px).
-pub(super) const MAX_LAG_PX: usize = 80;
+const MAX_LAG_PX: usize = 80;
 /// Longest streak the shape is read for (px): the box's own autocorrelation spans
 /// ±that across the flow, and the lags must hold its whole profile.
-pub(super) const MAX_LENGTH_PX: usize = 60;
+const MAX_LENGTH_PX: usize = 60;
 /// The crop's largest side along and across the flow (px), a speed/accuracy setting:
 /// the FFT is O(N log N) in the crop's area. Measured (BENCHMARKS.md): 640×480 read
 /// 36 / 48 probe / held-out frames within 15% in 9–14 ms at 1280×960, this size 35 /
