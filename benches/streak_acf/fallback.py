@@ -82,9 +82,15 @@ def main():
             continue
         se = float(re.match(r"λ = [\d.]+ ± ([\d.]+)", reason).group(1)) * 50.0
         got, got_iso, se_iso = (lam or 0.0) * 50.0, float(iso.group(1)) * 50.0, float(iso.group(2)) * 50.0
-        s = stats.setdefault(part, {"shape": 0, "new": [], "iso": [], "covered_new": 0, "covered_iso": 0,
-                                    "missed_new": 0, "missed_iso": 0})
+        by_shape = re.search(r"streak ([\d.]+) px by the shape", reason)
+        got_shape = float(by_shape.group(1)) if by_shape else got
+        dip = re.search(r"dip along the flow at [\d.]+ px \(([-\d.]+) against ([-\d.]+) across\)", reason)
+        dip_depth = f", dip {float(dip.group(1)):+.2f} vs {float(dip.group(2)):+.2f}" if dip else ""
+        s = stats.setdefault(part, {"shape": 0, "dip": 0, "new": [], "iso": [], "lag": [], "covered_new": 0,
+                                    "covered_iso": 0, "missed_new": 0, "missed_iso": 0})
         s["shape"] += shape
+        s["dip"] += dip is not None
+        s["lag"].append(abs(got_shape - length) / max(length, 4))
         s["new"].append(abs(got - length) / max(length, 4))
         s["iso"].append(abs(got_iso - length) / max(length, 4))
         s["covered_new"] += abs(got - length) <= 2 * se
@@ -93,15 +99,18 @@ def main():
         s["missed_new"] += length > 0 and reason.endswith("absent")
         s["missed_iso"] += length > 0 and not got_iso > 3 * se_iso
         print(f"{part:5s} {name:28s} {angle:3d}° L {length:2d}: reported {got:5.1f} ± {se:4.1f} px "
-              f"({'shape' if shape else 'isotropy'}), isotropy {got_iso:5.1f}", flush=True)
+              f"({'dip' if dip else 'shape' if shape else 'isotropy'}), shape's length {got_shape:5.1f}, isotropy "
+              f"{got_iso:5.1f}{dip_depth}", flush=True)
     for part, s in stats.items():
         n = len(s["new"])
-        for k in ["iso", "new"]:
+        for k in ["iso", "lag", "new"]:
             e = np.array(s[k])
-            print(f"{part}: {n} fallback frames ({s['shape']} read by the shape); "
-                  f"{'isotropy alone' if k == 'iso' else 'reported     '}: median {np.median(e):.3f}, "
-                  f"within 15% {np.sum(e <= 0.15)}, beyond 30% {np.sum(e > 0.3)}; truth within 2 standard "
-                  f"errors {s['covered_' + k]}; a streak called absent {s['missed_' + k]}")
+            label = {"iso": "isotropy alone", "lag": "shape's length", "new": "reported     "}[k]
+            cover = f"; truth within 2 standard errors {s['covered_' + k]}; a streak called absent " \
+                f"{s['missed_' + k]}" if k != "lag" else ""
+            print(f"{part}: {n} fallback frames ({s['shape']} read by the shape, {s['dip']} by its dip); "
+                  f"{label}: median {np.median(e):.3f}, within 15% {np.sum(e <= 0.15)}, beyond 30% "
+                  f"{np.sum(e > 0.3)}{cover}")
 
 
 if __name__ == "__main__":

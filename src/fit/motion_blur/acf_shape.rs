@@ -66,6 +66,8 @@ pub(super) struct AcfShape {
     pub(super) residual_sharp: f64,
     /// The crop's size along × across the flow (px).
     pub(super) crop: (usize, usize),
+    /// The along-flow dip near the shape's length, where one is read.
+    pub(super) dip: Option<Dip>,
 }
 
 /// The streak length from the autocorrelations' shape on `y` under `flow`, or why it
@@ -116,7 +118,8 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
              across, noise's {noise_u:.2e} / {noise_v:.2e})"
         ));
     }
-    let residual_at = |len: usize| -> f64 {
+    // The two autocorrelations after a box of `len` across the flow, noise removed.
+    let curves = |len: usize| -> ([f64; MAX_LAG_PX + 1], [f64; MAX_LAG_PX + 1]) {
         let k = box_kernel(len as f64);
         let rk = kernel_autocorrelation(&k);
         let c = (rk.len() - 1) / 2;
@@ -149,6 +152,10 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
             ru[t] -= sigma * sigma * nu;
             rv[t] -= sigma * sigma * nv;
         }
+        (ru, rv)
+    };
+    let residual_at = |len: usize| -> f64 {
+        let (ru, rv) = curves(len);
         let uv: f64 = ru.iter().zip(&rv).map(|(a, b)| a * b).sum();
         let vv: f64 = rv.iter().map(|v| v * v).sum();
         let uu: f64 = ru.iter().map(|v| v * v).sum();
@@ -176,6 +183,7 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         }
     }
     let length_px = length as f32;
+    let (ru0, rv0) = curves(0);
     Ok(AcfShape {
         lambda: (length_px / speed).clamp(0.0, 1.0),
         length_px,
@@ -183,7 +191,61 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         residual: residuals[best],
         residual_sharp: residuals[0],
         crop: (cw, ch),
+        dip: along_dip(&ru0[..=max_lag], &rv0[..=max_lag], length),
     })
+}
+
+/// The dip's search window around the shape's length: [L / w, L·w].
+const DIP_WINDOW: f64 = 1.4;
+/// The shortest shape length whose dip is read. Below it the sharp texture's own
+/// autocorrelation is not narrow against L and drags the dip long (the 2R(t) term
+/// falls across it): measured on the probe and held-out frames (`fallback.py`), dips
+/// read 12 px streaks at 12.3–16.3 px where the shape read 11.0–14.0, and one 16 px
+/// streak at 21.7 (shape 16.3); from shape lengths of 20 px every dip read as close
+/// as the shape or closer (24 px streaks 24.0–26.1, 31 px 30.8–32.9).
+const MIN_DIP_LENGTH_PX: f64 = 20.0;
+/// Shorter lags hold a sharp texture's own negative lobe (a stroke's two edges).
+const MIN_DIP_LAG: usize = 4;
+/// How far the along-flow autocorrelation (normalised) must dip below the across-flow
+/// one at the same lag: the dip is the streak's, not the texture's.
+const MIN_DIP_EXCESS: f64 = 0.05;
+
+/// Where a streak's along-flow derivative autocorrelation dips (Yitzhaky & Kopeika
+/// 1997). After a box of L along the flow the derivative is (s(x) − s(x − L))/L, so
+/// its autocorrelation is (2R(t) − R(t − L) − R(t + L))/L² with R the sharp frame's
+/// own: a minimum at t = L wherever R is narrower than L, whatever the texture's
+/// anisotropy (which moves the shape's amplitude match, not this lag). Read within
+/// [L/`DIP_WINDOW`, L·`DIP_WINDOW`] of the shape's length, as an interior minimum
+/// below the across-flow autocorrelation at the same lag by `MIN_DIP_EXCESS`, for
+/// shape lengths from `MIN_DIP_LENGTH_PX`.
+fn along_dip(ru: &[f64], rv: &[f64], length: f64) -> Option<Dip> {
+    let max_lag = ru.len().min(rv.len()).checked_sub(1)?;
+    if !(ru[0] > 0.0 && rv[0] > 0.0 && length >= MIN_DIP_LENGTH_PX) {
+        return None;
+    }
+    let lo = ((length / DIP_WINDOW).floor() as usize).max(MIN_DIP_LAG);
+    let hi = ((length * DIP_WINDOW).ceil() as usize).min(max_lag);
+    if lo + 2 > hi {
+        return None;
+    }
+    let nu = |t: usize| ru[t] / ru[0];
+    let nv = |t: usize| rv[t] / rv[0];
+    let t = (lo..=hi).min_by(|&a, &b| nu(a).total_cmp(&nu(b)))?;
+    if t == lo || t == hi || !(nu(t) < nv(t) - MIN_DIP_EXCESS) {
+        return None;
+    }
+    let (a, b, c) = (nu(t - 1), nu(t), nu(t + 1));
+    let den = a - 2.0 * b + c;
+    let shift = if den > 0.0 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
+    Some(Dip { lag_px: (t as f64 + shift) as f32, along: nu(t), across: nv(t) })
+}
+
+/// The along-flow derivative autocorrelation's dip (normalised to lag 0).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Dip {
+    pub(super) lag_px: f32,
+    pub(super) along: f64,
+    pub(super) across: f64,
 }
 
 /// (cos θ, sin θ), through f64: LLVM fuses an f32 pair into `sincosf`, which the
@@ -639,6 +701,31 @@ mod tests {
         out
     }
 
+    /// Strokes: `texture`'s blobs stretched `k`× along y (k < 1: along x).
+    fn strokes(w: usize, h: usize, seed: u64, k: f32) -> Plane {
+        let mut s = seed;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 33) as f64 / (1u64 << 31) as f64) as f32
+        };
+        let mut p = Plane::new(w, h, 0.5);
+        for _ in 0..(w * h / 60) {
+            let (x0, y0) = (rnd() * w as f32, rnd() * h as f32);
+            let r = 1.0 + 2.0 * rnd();
+            let (rx, ry) = (r, r * k);
+            let a = 0.3 * (rnd() - 0.5);
+            let (xa, xb) = ((x0 - 3.0 * rx).max(0.0) as usize, ((x0 + 3.0 * rx) as usize).min(w - 1));
+            let (ya, yb) = ((y0 - 3.0 * ry).max(0.0) as usize, ((y0 + 3.0 * ry) as usize).min(h - 1));
+            for y in ya..=yb {
+                for x in xa..=xb {
+                    let d2 = ((x as f32 - x0) / rx).powi(2) + ((y as f32 - y0) / ry).powi(2);
+                    p.data[y * w + x] += a * (-0.5 * d2).exp();
+                }
+            }
+        }
+        p
+    }
+
     fn uniform(w: usize, h: usize, deg: f32, speed: f32) -> Flow {
         let a = deg.to_radians();
         Flow::uniform(w, h, speed * a.cos(), speed * a.sin())
@@ -658,6 +745,46 @@ mod tests {
                 assert!((got.lambda - got.length_px / 40.0).abs() < 1e-6);
             }
         }
+    }
+
+    /// Strokes across the flow (blobs 3× longer across than along, like a text
+    /// page's letters under a vertical streak) bias the shape: a 32 px streak read
+    /// 28.9 px at 0°. The along-flow dip, read near it, sits within 1 px of the
+    /// streak at 0° and 90° (the dip's lag is the box's length for a texture this much
+    /// narrower than it; 1 px: the streak's own 0.25 px sampling and the parabola).
+    /// Under 20 px (`MIN_DIP_LENGTH_PX`) no dip is read.
+    #[test]
+    fn the_dip_reads_a_long_streak_over_strokes_across_it() {
+        for (deg, k) in [(0.0f32, 3.0f32), (90.0, 1.0 / 3.0)] {
+            let base = strokes(480, 400, 5, k);
+            let img = streak(&base, 32.0, deg);
+            let got = acf_shape(&img, &uniform(480, 400, deg, 50.0)).expect("read");
+            let dip = got.dip.unwrap_or_else(|| panic!("{deg}°: no dip in {got:?}"));
+            assert!((dip.lag_px - 32.0).abs() <= 1.0, "{deg}°: {got:?}");
+            assert!(dip.along < dip.across - MIN_DIP_EXCESS, "{dip:?}");
+            let short = acf_shape(&streak(&base, 12.0, deg), &uniform(480, 400, deg, 50.0)).expect("read");
+            assert!(short.dip.is_none(), "{deg}°: {short:?}");
+        }
+    }
+
+    /// `along_dip` on curves of a known form: a box of 30 px over a sharp texture of
+    /// R(t) = exp(−t²/8) reads 30 px (the form's exact minimum, to the parabola's
+    /// 0.05 px); the same dip across the flow as along (a texture's period, not a
+    /// streak) reads none; nor does a length under `MIN_DIP_LENGTH_PX`, nor a
+    /// window whose minimum sits on its edge.
+    #[test]
+    fn along_dip_on_known_curves() {
+        let r = |t: f64| (-t * t / 8.0).exp();
+        let streak =
+            |l: f64| -> Vec<f64> { (0..=80).map(|t| 2.0 * r(t as f64) - r(t as f64 - l) - r(t as f64 + l)).collect() };
+        let across: Vec<f64> = (0..=80).map(|t| r(t as f64)).collect();
+        let d = along_dip(&streak(30.0), &across, 27.0).expect("dip");
+        assert!((d.lag_px - 30.0).abs() < 0.05, "{d:?}");
+        assert!((d.along + 0.5).abs() < 0.01, "{d:?}");
+        assert!(along_dip(&streak(30.0), &streak(30.0), 27.0).is_none());
+        assert!(along_dip(&streak(15.0), &across, 15.0).is_none());
+        // The window [20/1.4, 28] ends below a 40 px dip: its minimum is the edge.
+        assert!(along_dip(&streak(40.0), &across, 20.0).is_none());
     }
 
     /// White noise (σ 0.02 on a texture of contrast ~0.1) is subtracted, as the
