@@ -231,7 +231,9 @@ fn along_dip(ru: &[f64], rv: &[f64], length: f64) -> Option<Dip> {
     let nu = |t: usize| ru[t] / ru[0];
     let nv = |t: usize| rv[t] / rv[0];
     let t = (lo..=hi).min_by(|&a, &b| nu(a).total_cmp(&nu(b)))?;
-    if t == lo || t == hi || !(nu(t) < nv(t) - MIN_DIP_EXCESS) {
+    // Below the across-flow curve by the margin (false for NaN too).
+    let below = nv(t) - MIN_DIP_EXCESS - nu(t) > 0.0;
+    if t == lo || t == hi || !below {
         return None;
     }
     let (a, b, c) = (nu(t - 1), nu(t), nu(t + 1));
