@@ -519,7 +519,9 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    in quadrature with isotropy's. Measured on the frames this path answers
 ///    (`benches/streak_acf/fallback.py`, BENCHMARKS.md): median error 10% / 7%
 ///    where isotropy alone had 36% / 22% (probe / held-out sets); the real text page
-///    25.8 px for 31 (isotropy: 16.8).
+///    25.8 px for 31 (isotropy: 16.8). From a shape length of 20 px the along-flow
+///    curve's dip near it (`acf_shape::along_dip`) is reported instead, its error
+///    half its difference from the shape's: medians 2.3% / 3.7%, the text page 31.0.
 ///
 /// Every isotropy answer (and with `evidence_always` a zeros answer too) returns
 /// the frame's along/across balance per flow direction (`MbPlotData::isotropy`):
