@@ -76,7 +76,27 @@ pub(super) struct AcfShape {
 
 /// The streak length from the autocorrelations' shape on `y` under `flow`, or why it
 /// is not read.
+#[cfg(test)]
 pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
+    acf_read(y, flow).shape
+}
+
+/// What one look at the autocorrelations gives: the shape's reading (or why not),
+/// and the frame's own (L = 0) derivative autocorrelations along and across the
+/// flow, noise removed, lags 0…max_lag, wherever they were computed — also where
+/// the shape's minimum is refused (the zeros' check in `fit_fast` reads them).
+pub(super) struct AcfRead {
+    pub(super) shape: Result<AcfShape, String>,
+    pub(super) sharp: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+pub(super) fn acf_read(y: &Plane, flow: &Flow) -> AcfRead {
+    let mut sharp = None;
+    let shape = read(y, flow, &mut sharp);
+    AcfRead { shape, sharp }
+}
+
+fn read(y: &Plane, flow: &Flow, sharp: &mut Option<(Vec<f64>, Vec<f64>)>) -> Result<AcfShape, String> {
     let (w, h) = (y.width, y.height);
     if flow.width != w || flow.height != h {
         return Err("flow and frame differ in size".into());
@@ -110,18 +130,6 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     let (au, av) = autocorrelations(&crop, cw, ch, max_lag, l_max);
     // Per candidate length: the relative residual of the best amplitude.
     let (a_len, b_len) = (cw - 1, ch - 1);
-    // Texture above the noise: the across-flow derivative's mean energy (a streak
-    // lowers the along-flow one, not this) at least `MIN_ENERGY_OVER_NOISE` × white
-    // noise's. Without it every residual is noise's and the shape says nothing.
-    let energy_u = au.row(0)[MAX_LENGTH_PX] / (a_len * b_len) as f64;
-    let energy_v = av[AV_OFFSET] / (a_len * b_len) as f64;
-    let (noise_u, noise_v) = (sigma * sigma * noise.du(0, 0), sigma * sigma * noise.dv(0));
-    if energy_v <= MIN_ENERGY_OVER_NOISE * noise_v || !(energy_u > 0.0 && energy_v > 0.0) {
-        return Err(format!(
-            "no texture above the noise in the crop (derivative energy {energy_u:.2e} / {energy_v:.2e} along / \
-             across, noise's {noise_u:.2e} / {noise_v:.2e})"
-        ));
-    }
     // The two autocorrelations after a box of `len` across the flow, noise removed.
     let curves = |len: usize| -> ([f64; MAX_LAG_PX + 1], [f64; MAX_LAG_PX + 1]) {
         let k = box_kernel(len as f64);
@@ -169,6 +177,22 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         let amp = uv / vv;
         ru.iter().zip(&rv).map(|(a, b)| (a - amp * b).powi(2)).sum::<f64>() / uu
     };
+    // The frame's own curves are kept before the texture test: a frame with no
+    // texture above the noise shows no streak's dip either (the zeros' check).
+    let (ru0, rv0) = curves(0);
+    *sharp = Some((ru0[..=max_lag].to_vec(), rv0[..=max_lag].to_vec()));
+    // Texture above the noise: the across-flow derivative's mean energy (a streak
+    // lowers the along-flow one, not this) at least `MIN_ENERGY_OVER_NOISE` × white
+    // noise's. Without it every residual is noise's and the shape says nothing.
+    let energy_u = au.row(0)[MAX_LENGTH_PX] / (a_len * b_len) as f64;
+    let energy_v = av[AV_OFFSET] / (a_len * b_len) as f64;
+    let (noise_u, noise_v) = (sigma * sigma * noise.du(0, 0), sigma * sigma * noise.dv(0));
+    if energy_v <= MIN_ENERGY_OVER_NOISE * noise_v || !(energy_u > 0.0 && energy_v > 0.0) {
+        return Err(format!(
+            "no texture above the noise in the crop (derivative energy {energy_u:.2e} / {energy_v:.2e} along / \
+             across, noise's {noise_u:.2e} / {noise_v:.2e})"
+        ));
+    }
     let residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
     let best = (0..residuals.len()).min_by(|&a, &b| residuals[a].total_cmp(&residuals[b])).unwrap_or(0);
     // A minimum at the search's top end is no balance: the match may improve past
@@ -187,7 +211,6 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         }
     }
     let length_px = length as f32;
-    let (ru0, rv0) = curves(0);
     Ok(AcfShape {
         lambda: (length_px / speed).clamp(0.0, 1.0),
         length_px,
@@ -195,7 +218,7 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
         residual: residuals[best],
         residual_sharp: residuals[0],
         crop: (cw, ch),
-        dip: along_dip(&ru0[..=max_lag], &rv0[..=max_lag], length),
+        dip: along_dip(&ru0[..=max_lag], &rv0[..=max_lag], length, MIN_DIP_LENGTH_PX),
     })
 }
 
@@ -220,11 +243,12 @@ const MIN_DIP_EXCESS: f64 = 0.05;
 /// own: a minimum at t = L wherever R is narrower than L, whatever the texture's
 /// anisotropy (which moves the shape's amplitude match, not this lag). Read within
 /// [L/`DIP_WINDOW`, L·`DIP_WINDOW`] of the shape's length, as an interior minimum
-/// below the across-flow autocorrelation at the same lag by `MIN_DIP_EXCESS`, for
-/// shape lengths from `MIN_DIP_LENGTH_PX`.
-fn along_dip(ru: &[f64], rv: &[f64], length: f64) -> Option<Dip> {
+/// below zero and below the across-flow autocorrelation at the same lag by
+/// `MIN_DIP_EXCESS`, for lengths from `min_length` (the shape's refinement:
+/// `MIN_DIP_LENGTH_PX`).
+pub(super) fn along_dip(ru: &[f64], rv: &[f64], length: f64, min_length: f64) -> Option<Dip> {
     let max_lag = ru.len().min(rv.len()).checked_sub(1)?;
-    if !(ru[0] > 0.0 && rv[0] > 0.0 && length >= MIN_DIP_LENGTH_PX) {
+    if !(ru[0] > 0.0 && rv[0] > 0.0 && length >= min_length) {
         return None;
     }
     let lo = ((length / DIP_WINDOW).floor() as usize).max(MIN_DIP_LAG);
@@ -235,8 +259,11 @@ fn along_dip(ru: &[f64], rv: &[f64], length: f64) -> Option<Dip> {
     let nu = |t: usize| ru[t] / ru[0];
     let nv = |t: usize| rv[t] / rv[0];
     let t = (lo..=hi).min_by(|&a, &b| nu(a).total_cmp(&nu(b)))?;
-    // Below the across-flow curve by the margin (false for NaN too).
-    let below = nv(t) - MIN_DIP_EXCESS - nu(t) > 0.0;
+    // Below zero — a streak's dip is (2R(L) − R(0) − R(2L))/L², negative for any
+    // R narrower than L; curves of noise alone, normalised by a lag 0 that the
+    // noise's subtraction left near 0, read anything — and below the across-flow
+    // curve by the margin (both false for NaN too).
+    let below = nu(t) < 0.0 && nv(t) - MIN_DIP_EXCESS - nu(t) > 0.0;
     if t == lo || t == hi || !below {
         return None;
     }
@@ -329,6 +356,12 @@ const CROP_SCALES: [f32; 3] = [1.0, 0.75, 0.5];
 
 /// The flow's direction and median speed over the largest centred crop (along ×
 /// across it, px) that holds one streak length, or why none does.
+/// The median flow speed over the crop the shape would read (px/frame), or why the
+/// shape is not read there: a cheap first look (the flow alone) before the FFT.
+pub(super) fn crop_speed(flow: &Flow) -> Result<f32, String> {
+    coherent_crop(flow).map(|(_, speed, _)| speed)
+}
+
 fn coherent_crop(flow: &Flow) -> Result<(f32, f32, (usize, usize)), String> {
     let (w, h) = (flow.width, flow.height);
     let step = ((w * h) as f64 / 4096.0).sqrt().max(1.0) as usize;
@@ -784,13 +817,13 @@ mod tests {
         let streak =
             |l: f64| -> Vec<f64> { (0..=80).map(|t| 2.0 * r(t as f64) - r(t as f64 - l) - r(t as f64 + l)).collect() };
         let across: Vec<f64> = (0..=80).map(|t| r(t as f64)).collect();
-        let d = along_dip(&streak(30.0), &across, 27.0).expect("dip");
+        let d = along_dip(&streak(30.0), &across, 27.0, MIN_DIP_LENGTH_PX).expect("dip");
         assert!((d.lag_px - 30.0).abs() < 0.05, "{d:?}");
         assert!((d.along + 0.5).abs() < 0.01, "{d:?}");
-        assert!(along_dip(&streak(30.0), &streak(30.0), 27.0).is_none());
-        assert!(along_dip(&streak(15.0), &across, 15.0).is_none());
+        assert!(along_dip(&streak(30.0), &streak(30.0), 27.0, MIN_DIP_LENGTH_PX).is_none());
+        assert!(along_dip(&streak(15.0), &across, 15.0, MIN_DIP_LENGTH_PX).is_none());
         // The window [20/1.4, 28] ends below a 40 px dip: its minimum is the edge.
-        assert!(along_dip(&streak(40.0), &across, 20.0).is_none());
+        assert!(along_dip(&streak(40.0), &across, 20.0, MIN_DIP_LENGTH_PX).is_none());
     }
 
     /// White noise (σ 0.02 on a texture of contrast ~0.1) is subtracted, as the
