@@ -92,25 +92,47 @@ pub(super) struct AcfRead {
 
 pub(super) fn acf_read(y: &Plane, flow: &Flow) -> AcfRead {
     let mut sharp = None;
-    let shape = read(y, flow, &mut sharp);
+    let shape = read(y, flow, &mut sharp, None);
     AcfRead { shape, sharp }
 }
 
-fn read(y: &Plane, flow: &Flow, sharp: &mut Option<(Vec<f64>, Vec<f64>)>) -> Result<AcfShape, String> {
+/// The fewest lags `sharp_curves` computes: its crop (6.4 × 4.8 lag windows) is then
+/// at least 256×192 px, ~50 000 pairs per lag.
+const MIN_CHECK_LAGS: usize = 40;
+
+/// Only the frame's own (L = 0) derivative autocorrelations along and across the
+/// flow, noise removed, to the lags a dip near `length_px` needs (and at least
+/// `MIN_CHECK_LAGS`), over a crop proportioned to them: the zeros' check at a
+/// fraction of the shape's cost (a 20 px streak: a 256×192 crop, not 512×384).
+pub(super) fn sharp_curves(y: &Plane, flow: &Flow, length_px: f32) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let lags = ((length_px as f64 * DIP_WINDOW).ceil() as usize + 2).max(MIN_CHECK_LAGS);
+    let mut sharp = None;
+    let why = read(y, flow, &mut sharp, Some(lags)).err();
+    sharp.ok_or_else(|| why.unwrap_or_default())
+}
+
+/// The shape's reading; with `curves_only` = Some(lags) only the L = 0 curves to
+/// that many lags (into `sharp`), and no shape.
+fn read(
+    y: &Plane,
+    flow: &Flow,
+    sharp: &mut Option<(Vec<f64>, Vec<f64>)>,
+    curves_only: Option<usize>,
+) -> Result<AcfShape, String> {
     let (w, h) = (y.width, y.height);
     if flow.width != w || flow.height != h {
         return Err("flow and frame differ in size".into());
     }
     let (theta, speed, (cw, ch)) = coherent_crop(flow)?;
-    let l_max = (MAX_LENGTH_PX as f32).min(speed).floor() as usize;
-    if l_max < 2 {
+    let l_max = if curves_only.is_some() { 0 } else { (MAX_LENGTH_PX as f32).min(speed).floor() as usize };
+    if l_max < 2 && curves_only.is_none() {
         return Err(format!("flow of {speed:.1} px/frame: no streak length to read"));
     }
     // A slow flow's streaks are short: lags to twice the longest candidate (and a
     // texture's scale) hold the streak's signature, and a crop proportioned to them
     // costs a fraction (the FFT is O(N log N) in its area): 6.4 × 4.8 lag windows,
     // 512×384 at the full 80 px.
-    let max_lag = (2 * l_max + 24).min(MAX_LAG_PX);
+    let max_lag = curves_only.unwrap_or(2 * l_max + 24).min(MAX_LAG_PX);
     let (cw, ch) = (cw.min(32 * max_lag / 5), ch.min(24 * max_lag / 5));
     let (ux, uy) = axis(theta);
     let (vx, vy) = (-uy, ux);
@@ -181,6 +203,9 @@ fn read(y: &Plane, flow: &Flow, sharp: &mut Option<(Vec<f64>, Vec<f64>)>) -> Res
     // texture above the noise shows no streak's dip either (the zeros' check).
     let (ru0, rv0) = curves(0);
     *sharp = Some((ru0[..=max_lag].to_vec(), rv0[..=max_lag].to_vec()));
+    if curves_only.is_some() {
+        return Err("the frame's own curves only".into());
+    }
     // Texture above the noise: the across-flow derivative's mean energy (a streak
     // lowers the along-flow one, not this) at least `MIN_ENERGY_OVER_NOISE` × white
     // noise's. Without it every residual is noise's and the shape says nothing.
