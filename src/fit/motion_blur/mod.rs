@@ -487,7 +487,10 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    defocus moves them, so where they are identified (correlation ≥
 ///    `streak_spectrum::MIN_SCORE`, interleaved subsets agreeing within 10%) λ is
 ///    theirs. Streaks under ~3 px (first zero past Nyquist), heavy defocus or noise
-///    that fills the zeros leave them unidentified.
+///    that fills the zeros leave them unidentified. From `CONFIRM_MIN_LENGTH_PX`
+///    they must also be supported by the derivative autocorrelation (a dip along
+///    the flow near the length, or a shape above half of it): noise on flat
+///    content had its zeros read as 19–21 px streaks that were not there.
 /// 2. **Gradient-energy isotropy** otherwise. Assume the sharp scene is
 ///    statistically isotropic around the sampled pixels. A box streak of length
 ///    L* = λ*|F| along u = F/|F| leaves the frame I. Blur I once more, by a box of
@@ -768,11 +771,16 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
                 None => (sh.lambda, lambda, String::new()),
             };
             let stderr = iso_stderr.hypot(0.5 * (got - other) as f64);
+            let gauge = if sh.dip.is_some() {
+                "half the dip's difference from the shape's length is in the error"
+            } else {
+                "half the two readings' difference is in the error"
+            };
             let how = format!(
                 "λ = {got:.4} ± {stderr:.4} from the shape of the derivative autocorrelation along the flow against \
                  across it{dip} (streak {:.1} px by the shape at {:.1} px/frame over a {}×{} px crop, residual {:.3} \
                  against {:.3} sharp); gradient-energy isotropy reads λ = {lambda:.4} ± {iso_stderr:.4} \
-                 {iso_detail}: half the two readings' difference is in the error",
+                 {iso_detail}; {gauge}",
                 sh.length_px, sh.speed_px, sh.crop.0, sh.crop.1, sh.residual, sh.residual_sharp
             );
             (got, stderr, how)
