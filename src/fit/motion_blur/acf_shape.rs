@@ -255,7 +255,7 @@ const DIP_WINDOW: f64 = 1.4;
 /// read 12 px streaks at 12.3–16.3 px where the shape read 11.0–14.0, and one 16 px
 /// streak at 21.7 (shape 16.3); from shape lengths of 20 px every dip read as close
 /// as the shape or closer (24 px streaks 24.0–26.1, 31 px 30.8–32.9).
-const MIN_DIP_LENGTH_PX: f64 = 20.0;
+pub(super) const MIN_DIP_LENGTH_PX: f64 = 20.0;
 /// Shorter lags hold a sharp texture's own negative lobe (a stroke's two edges).
 const MIN_DIP_LAG: usize = 4;
 /// How far the along-flow autocorrelation (normalised) must dip below the across-flow

@@ -546,6 +546,8 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
     let mut shape_read: Option<Result<acf_shape::AcfShape, String>> = None;
     let mut contradiction: Option<String> = None;
     let mut check_note = String::new();
+    // The dip's lag and the flow's speed where the check read one (for the error).
+    let mut check_dip: Option<(f32, f32)> = None;
     if let Some(sig) = streak.as_ref().filter(|s| s.identified) {
         let lambda = sig.lambda.clamp(0.0, 1.0);
         // A streak of L ≥ `CONFIRM_MIN_LENGTH_PX` leaves the along-flow derivative
@@ -574,6 +576,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
                 };
                 if let Some(d) = quick {
                     check_note = dip_note(&d);
+                    check_dip = Some((d.lag_px, speed));
                 } else {
                     let read = acf_shape::acf_read(y, flow);
                     st.lap("search.acf_shape");
@@ -584,6 +587,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
                             Ok(sh) => format!("its shape reads {:.1} px", sh.length_px),
                             Err(why) => format!("its shape is not read ({why})"),
                         };
+                        check_dip = dip.map(|d| (d.lag_px, speed));
                         check_note = match &dip {
                             Some(d) => format!("{}, {shape_note}", dip_note(d)),
                             None => format!(
@@ -605,12 +609,24 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
     }
     if let Some(sig) = streak.as_ref().filter(|s| s.identified && contradiction.is_none()) {
         let lambda = sig.lambda.clamp(0.0, 1.0);
-        let mut mb = decide("fast", lambda, sig.stderr as f64, None, sig.lines, started);
+        // Long streaks read short by their zeros (31 px box streaks: 27.7–30.7 px, 24
+        // px: 21.2–23.5, at a stated ± 0.1–0.8 px — the truth outside two standard
+        // errors on most; BENCHMARKS.md "The zeros' error at long streaks"), where the
+        // dip read 30.8–31.9 / 23.9–24.4: from `acf_shape::MIN_DIP_LENGTH_PX` half
+        // the two lengths' difference joins the zeros' standard error.
+        let (stderr, widened) = match check_dip {
+            Some((dip_px, speed)) if lambda * speed >= acf_shape::MIN_DIP_LENGTH_PX as f32 => (
+                (sig.stderr as f64).hypot(0.5 * ((dip_px / speed) - lambda).abs() as f64),
+                format!(" (the zeros alone ± {:.4}, half their difference from the dip's in quadrature)", sig.stderr),
+            ),
+            _ => (sig.stderr as f64, String::new()),
+        };
+        let mut mb = decide("fast", lambda, stderr, None, sig.lines, started);
         mb.diagnostics.reason = format!(
-            "λ = {lambda:.4} ± {:.4} from the streak's spectral zeros along the flow ({} lines, correlation {:.2}, \
+            "λ = {lambda:.4} ± {stderr:.4}{widened} from the streak's spectral zeros along the flow ({} lines, \
+             correlation {:.2}, \
              next best {:.2}, first side lobe e^{:.2} × the noise floor, along-flow dip {:.2} (ln) at the zero, \
              {:.0}% of the ratio's dip across-flow texture{check_note}); {}",
-            sig.stderr,
             sig.lines,
             sig.score,
             sig.runner_up,
