@@ -256,6 +256,9 @@ const DIP_WINDOW: f64 = 1.4;
 /// streak at 21.7 (shape 16.3); from shape lengths of 20 px every dip read as close
 /// as the shape or closer (24 px streaks 24.0–26.1, 31 px 30.8–32.9).
 pub(super) const MIN_DIP_LENGTH_PX: f64 = 20.0;
+/// The longest streak whose dip the lags can show: its window ends at
+/// ⌈`DIP_WINDOW`·L⌉, within the `MAX_LAG_PX` (tested).
+pub(super) const MAX_DIP_LENGTH_PX: f32 = 57.0;
 /// Shorter lags hold a sharp texture's own negative lobe (a stroke's two edges).
 const MIN_DIP_LAG: usize = 4;
 /// How far the along-flow autocorrelation (normalised) must dip below the across-flow
@@ -829,6 +832,14 @@ mod tests {
             let short = acf_shape(&streak(&base, 12.0, deg), &uniform(480, 400, deg, 50.0)).expect("read");
             assert!(short.dip.is_none(), "{deg}°: {short:?}");
         }
+    }
+
+    /// `MAX_DIP_LENGTH_PX` is the longest length whose window fits the lags.
+    #[test]
+    fn the_longest_checked_length_fits_the_lags() {
+        let l = MAX_DIP_LENGTH_PX as f64;
+        assert!((l * DIP_WINDOW).ceil() as usize <= MAX_LAG_PX);
+        assert!(((l + 1.0) * DIP_WINDOW).ceil() as usize > MAX_LAG_PX);
     }
 
     /// `along_dip` on curves of a known form: a box of 30 px over a sharp texture of

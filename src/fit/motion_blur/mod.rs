@@ -561,7 +561,10 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         // a colour wheel's 24 px streak read 20.8 px, now not identifiable).
         if let Ok(speed) = acf_shape::crop_speed(flow) {
             let len = lambda * speed;
-            if len >= CONFIRM_MIN_LENGTH_PX {
+            // Past `acf_shape::MAX_DIP_LENGTH_PX` no dip can show within the lags (and
+            // the shape's candidates end at 60 px): such zeros go unchecked. (Synth's
+            // 57–90 px streaks on two photographs were not identified by the zeros.)
+            if (CONFIRM_MIN_LENGTH_PX..=acf_shape::MAX_DIP_LENGTH_PX).contains(&len) {
                 // First the frame's own curves over a crop sized to the dip (1–2 ms);
                 // only where they show none, the full look (its dip and its shape).
                 let dip_of = |(along, across): &(Vec<f64>, Vec<f64>)| {
