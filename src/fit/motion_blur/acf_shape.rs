@@ -725,22 +725,34 @@ mod tests {
 
     /// A smooth random texture (sum of random Gaussian blobs), isotropic on average.
     fn texture(w: usize, h: usize, seed: u64) -> Plane {
+        blobs(w, h, seed, 40, 4.0, 1.0)
+    }
+
+    /// Strokes: smaller blobs stretched `k`× along y (k < 1: along x).
+    fn strokes(w: usize, h: usize, seed: u64, k: f32) -> Plane {
+        blobs(w, h, seed, 60, 2.0, k)
+    }
+
+    /// One Gaussian blob per `px_per_blob` pixels, radius 1…1 + `r_span` px along x
+    /// and `k`× that along y, contrast ±0.15 on 0.5.
+    fn blobs(w: usize, h: usize, seed: u64, px_per_blob: usize, r_span: f32, k: f32) -> Plane {
         let mut s = seed;
         let mut rnd = || {
             s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((s >> 33) as f64 / (1u64 << 31) as f64) as f32
         };
         let mut p = Plane::new(w, h, 0.5);
-        for _ in 0..(w * h / 40) {
+        for _ in 0..(w * h / px_per_blob) {
             let (x0, y0) = (rnd() * w as f32, rnd() * h as f32);
-            let r = 1.0 + 4.0 * rnd();
+            let r = 1.0 + r_span * rnd();
+            let (rx, ry) = (r, r * k);
             let a = 0.3 * (rnd() - 0.5);
-            let (xa, xb) = ((x0 - 3.0 * r).max(0.0) as usize, ((x0 + 3.0 * r) as usize).min(w - 1));
-            let (ya, yb) = ((y0 - 3.0 * r).max(0.0) as usize, ((y0 + 3.0 * r) as usize).min(h - 1));
+            let (xa, xb) = ((x0 - 3.0 * rx).max(0.0) as usize, ((x0 + 3.0 * rx) as usize).min(w - 1));
+            let (ya, yb) = ((y0 - 3.0 * ry).max(0.0) as usize, ((y0 + 3.0 * ry) as usize).min(h - 1));
             for y in ya..=yb {
                 for x in xa..=xb {
-                    let d2 = (x as f32 - x0).powi(2) + (y as f32 - y0).powi(2);
-                    p.data[y * w + x] += a * (-d2 / (2.0 * r * r)).exp();
+                    let d2 = ((x as f32 - x0) / rx).powi(2) + ((y as f32 - y0) / ry).powi(2);
+                    p.data[y * w + x] += a * (-0.5 * d2).exp();
                 }
             }
         }
@@ -766,31 +778,6 @@ mod tests {
             }
         }
         out
-    }
-
-    /// Strokes: `texture`'s blobs stretched `k`× along y (k < 1: along x).
-    fn strokes(w: usize, h: usize, seed: u64, k: f32) -> Plane {
-        let mut s = seed;
-        let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((s >> 33) as f64 / (1u64 << 31) as f64) as f32
-        };
-        let mut p = Plane::new(w, h, 0.5);
-        for _ in 0..(w * h / 60) {
-            let (x0, y0) = (rnd() * w as f32, rnd() * h as f32);
-            let r = 1.0 + 2.0 * rnd();
-            let (rx, ry) = (r, r * k);
-            let a = 0.3 * (rnd() - 0.5);
-            let (xa, xb) = ((x0 - 3.0 * rx).max(0.0) as usize, ((x0 + 3.0 * rx) as usize).min(w - 1));
-            let (ya, yb) = ((y0 - 3.0 * ry).max(0.0) as usize, ((y0 + 3.0 * ry) as usize).min(h - 1));
-            for y in ya..=yb {
-                for x in xa..=xb {
-                    let d2 = ((x as f32 - x0) / rx).powi(2) + ((y as f32 - y0) / ry).powi(2);
-                    p.data[y * w + x] += a * (-0.5 * d2).exp();
-                }
-            }
-        }
-        p
     }
 
     fn uniform(w: usize, h: usize, deg: f32, speed: f32) -> Flow {
