@@ -1,6 +1,6 @@
 """Blind motion blur from the shape of the derivative autocorrelation: the prototype
 (BENCHMARKS.md "A third single-frame signal measured and not kept"), since shipped as
-`src/fit/motion_blur/acf_shape.rs` (one FFT for every length, the noise through the
+`src/fit/motion_blur/acf_shape/` (one FFT for every length, the noise through the
 crop's bilinear sampling; measured against isotropy by `fallback.py` beside this
 file: BENCHMARKS.md "The derivative autocorrelation's shape, shipped").
 
