@@ -565,49 +565,17 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
             // the shape's candidates end at 60 px): such zeros go unchecked. (Synth's
             // 57–90 px streaks on two photographs were not identified by the zeros.)
             if (CONFIRM_MIN_LENGTH_PX..=acf_shape::MAX_DIP_LENGTH_PX).contains(&len) {
-                // First the frame's own curves over a crop sized to the dip (1–2 ms);
-                // only where they show none, the full look (its dip and its shape).
-                let dip_of = |(along, across): &(Vec<f64>, Vec<f64>)| {
-                    acf_shape::along_dip(along, across, len as f64, CONFIRM_MIN_LENGTH_PX as f64)
-                };
-                let quick = acf_shape::sharp_curves(y, flow, len).ok().and_then(|c| dip_of(&c));
-                st.lap("search.acf_check");
-                let dip_note = |d: &acf_shape::Dip| {
+                let check = acf_shape::check_length(y, flow, len, CONFIRM_MIN_LENGTH_PX, &mut st);
+                check_note = check.note;
+                check_dip = check.dip.map(|d| (d.lag_px, speed));
+                contradiction = check.contradiction.map(|why| {
                     format!(
-                        "; the derivative autocorrelation dips along the flow at {:.1} px ({:.3} against {:.3} across)",
-                        d.lag_px, d.along, d.across
+                        "identified at {len:.1} px (correlation {:.2}) but contradicted by the derivative \
+                         autocorrelation: {why}",
+                        sig.score
                     )
-                };
-                if let Some(d) = quick {
-                    check_note = dip_note(&d);
-                    check_dip = Some((d.lag_px, speed));
-                } else {
-                    let read = acf_shape::acf_read(y, flow);
-                    st.lap("search.acf_shape");
-                    if let Some(curves) = &read.sharp {
-                        let dip = dip_of(curves);
-                        let shape_px = read.shape.as_ref().map_or(0.0, |sh| sh.length_px);
-                        let shape_note = match &read.shape {
-                            Ok(sh) => format!("its shape reads {:.1} px", sh.length_px),
-                            Err(why) => format!("its shape is not read ({why})"),
-                        };
-                        check_dip = dip.map(|d| (d.lag_px, speed));
-                        check_note = match &dip {
-                            Some(d) => format!("{}, {shape_note}", dip_note(d)),
-                            None => format!(
-                                "; the derivative autocorrelation has no dip along the flow near it, {shape_note}"
-                            ),
-                        };
-                        if dip.is_none() && shape_px < 0.5 * len {
-                            contradiction = Some(format!(
-                                "identified at {len:.1} px (correlation {:.2}) but contradicted by the derivative \
-                                 autocorrelation: no dip along the flow near it, and {shape_note}",
-                                sig.score
-                            ));
-                        }
-                    }
-                    shape_read = Some(read.shape);
-                }
+                });
+                shape_read = check.shape;
             }
         }
     }

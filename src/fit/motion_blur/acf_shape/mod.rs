@@ -111,6 +111,66 @@ pub(super) fn sharp_curves(y: &Plane, flow: &Flow, length_px: f32) -> Result<(Ve
     sharp.ok_or_else(|| why.unwrap_or_default())
 }
 
+/// What the autocorrelations say about a streak of a given length (`check_length`).
+pub(super) struct LengthCheck {
+    /// A dip near the length, where read.
+    pub(super) dip: Option<Dip>,
+    /// Why the length is not a streak's — no dip near it and no shape above half
+    /// of it — or `None`.
+    pub(super) contradiction: Option<String>,
+    /// The full look, where it ran (the fallback reads its shape).
+    pub(super) shape: Option<Result<AcfShape, String>>,
+    /// For the fit's reason: "; the derivative autocorrelation …".
+    pub(super) note: String,
+}
+
+/// Whether the autocorrelations support a streak of `length_px` (from
+/// `min_length` px; the zeros' check in `fit_fast`): a dip near it (`along_dip`),
+/// or else a shape length above half of it. The frame's own curves come first over
+/// a crop sized to the dip (`sharp_curves`, 1–2 ms); only where they show no dip
+/// does the full look run (its dip and its shape). Stage times go to `st`.
+pub(super) fn check_length(
+    y: &Plane,
+    flow: &Flow,
+    length_px: f32,
+    min_length: f32,
+    st: &mut crate::fit::Stages,
+) -> LengthCheck {
+    let dip_of = |(along, across): &(Vec<f64>, Vec<f64>)| along_dip(along, across, length_px as f64, min_length as f64);
+    let dip_note = |d: &Dip| {
+        format!(
+            "; the derivative autocorrelation dips along the flow at {:.1} px ({:.3} against {:.3} across)",
+            d.lag_px, d.along, d.across
+        )
+    };
+    let quick = sharp_curves(y, flow, length_px).ok().and_then(|c| dip_of(&c));
+    st.lap("search.acf_check");
+    if let Some(d) = quick {
+        return LengthCheck { dip: Some(d), contradiction: None, shape: None, note: dip_note(&d) };
+    }
+    let read = acf_read(y, flow);
+    st.lap("search.acf_shape");
+    let mut check = LengthCheck { dip: None, contradiction: None, shape: None, note: String::new() };
+    if let Some(curves) = &read.sharp {
+        let dip = dip_of(curves);
+        let shape_px = read.shape.as_ref().map_or(0.0, |sh| sh.length_px);
+        let shape_note = match &read.shape {
+            Ok(sh) => format!("its shape reads {:.1} px", sh.length_px),
+            Err(why) => format!("its shape is not read ({why})"),
+        };
+        check.note = match &dip {
+            Some(d) => format!("{}, {shape_note}", dip_note(d)),
+            None => format!("; the derivative autocorrelation has no dip along the flow near it, {shape_note}"),
+        };
+        if dip.is_none() && shape_px < 0.5 * length_px {
+            check.contradiction = Some(format!("no dip along the flow near it, and {shape_note}"));
+        }
+        check.dip = dip;
+    }
+    check.shape = Some(read.shape);
+    check
+}
+
 /// The shape's reading; with `curves_only` = Some(lags) only the L = 0 curves to
 /// that many lags (into `sharp`), and no shape.
 fn read(
