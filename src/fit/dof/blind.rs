@@ -350,9 +350,23 @@ pub fn fit_fast(
     let min_sq = EDGE_MIN_GRAD * EDGE_MIN_GRAD;
     // A row's scanned positions over the threshold (at most every position).
     let mut above = vec![0usize; w / step + 1];
+    // The frame row each of `m2`'s buffers holds: rows py − 1 … py + 1 overlap the
+    // previous scanned row's (one row at step 2, two at step 1), and a row held is
+    // moved into place instead of computed again.
+    let mut held = [usize::MAX; 3];
     for py in (2..h.saturating_sub(2)).step_by(step) {
-        for (k, row) in m2.iter_mut().enumerate() {
-            grad_sq_row(py + k - 1, row);
+        for k in 0..3 {
+            let want = py + k - 1;
+            match (k..3).find(|&j| held[j] == want) {
+                Some(j) => {
+                    m2.swap(k, j);
+                    held.swap(k, j);
+                }
+                None => {
+                    grad_sq_row(want, &mut m2[k]);
+                    held[k] = want;
+                }
+            }
         }
         // The row's positions over the threshold, gathered without a branch per
         // position (~28% pass on the bench frame: an unpredictable branch).

@@ -69,3 +69,43 @@ fn interpolated_noise_correlation_matches_sampled_noise() {
         }
     }
 }
+
+/// The one walk over the samples (positions j, j + 1, j + 2 shared by the three
+/// lags) adds, per lag, the terms one loop per lag adds, in the same order: the
+/// same bits, against that loop written out here, for line lengths around the
+/// stride and the shipped one, axis-aligned, oblique and backward lines.
+#[test]
+fn noise_correlation_walk_is_the_per_lag_sum() {
+    let per_lag = |x0: f32, y0: f32, dx: f32, dy: f32, n: usize| -> [f64; 3] {
+        let ov = |a: f64, b: f64| -> f64 {
+            let (ia, ib) = (a as i64, b as i64);
+            let (ta, tb) = (a - ia as f64, b - ib as f64);
+            match ib - ia {
+                0 => (1.0 - ta) * (1.0 - tb) + ta * tb,
+                1 => ta * (1.0 - tb),
+                -1 => (1.0 - ta) * tb,
+                _ => 0.0,
+            }
+        };
+        let pos = |j: usize| (x0 as f64 + j as f64 * dx as f64, y0 as f64 + j as f64 * dy as f64);
+        std::array::from_fn(|m| {
+            let (mut sum, mut count) = (0.0, 0usize);
+            for j in (0..n - m).step_by(NOISE_R_STRIDE) {
+                let ((xa, ya), (xb, yb)) = (pos(j), pos(j + m));
+                sum += ov(xa, xb) * ov(ya, yb);
+                count += 1;
+            }
+            sum / count.max(1) as f64
+        })
+    };
+    for n in [2usize, 3, 4, 5, 6, 7, 8, 9, 127, LINE_PX, 129] {
+        for (x0, y0, deg) in
+            [(200.0f32, 150.0f32, 0.0f32), (150.3, 100.7, 10.0), (300.9, 250.2, 200.0), (50.5, 40.25, 95.0)]
+        {
+            let (dx, dy) = (deg.to_radians().cos(), deg.to_radians().sin());
+            let got = interpolated_noise_correlation(x0, y0, dx, dy, n);
+            let want = per_lag(x0, y0, dx, dy, n);
+            assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "n {n}, {deg}° from ({x0}, {y0})");
+        }
+    }
+}
