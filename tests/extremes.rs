@@ -291,3 +291,117 @@ proptest! {
         }
     }
 }
+
+/// The blind exposure's single-frame paths at the extremes, on frames large enough
+/// to reach all of them (the proptest's ≤ 40 px frames reach none): the streak
+/// zeros' 128-px lines, the derivative autocorrelation's crop (from 160 px), the
+/// along-flow dip and the zeros' check (streaks of 20–57 px). Frames: constant
+/// black, grey and white, clipped white noise of std 0.3, 1-px stripes across and
+/// along the flow (Nyquist), one step edge, and a photograph streaked by the flow
+/// itself at λ 1 (streaks of 3–60 px). Flows: uniform at speeds just under and
+/// over the estimators' 3 px/frame floor, at the check's 57 px bound and past it,
+/// 400 px (longer than the crop's lags) and 1e5 px/frame, at 0°, 33° and 90°; the
+/// frame's diagonal and just past it; a swirl (no streak length to read). What
+/// must hold: no panic, a model that validates, an exposure in [0, 1] or none, a
+/// finite standard error wherever an exposure is reported, and "present" only with
+/// an exposure; a flow past the frame's diagonal is not identifiable (its streak
+/// cannot be in the frame), and says so. (Non-finite flow is refused by `fit` with
+/// an error naming it: `non_finite_pixels_are_named`.) Before the profiles' node
+/// cap, a 1e5 px/frame flow took the fit 100 s per 160×160 frame.
+#[test]
+fn blind_exposure_paths_at_extreme_frames_and_flows() {
+    let sizes = [(160usize, 160usize), (512, 384), (700, 130)];
+    let photo = photo("astronaut.png");
+    for (w, h) in sizes {
+        let textured = mirror_tile(&photo, w, h);
+        let stripes = |across: bool| {
+            let mut img = Rgb::new(w, h, [0.0; 3]);
+            for y in 0..h {
+                for x in 0..w {
+                    let v = if (if across { x } else { y }) % 2 == 0 { 0.9 } else { 0.1 };
+                    for c in 0..3 {
+                        img.channels[c][y * w + x] = v;
+                    }
+                }
+            }
+            img
+        };
+        let mut edge = Rgb::new(w, h, [0.2; 3]);
+        for y in 0..h {
+            for x in w / 2..w {
+                for c in 0..3 {
+                    edge.channels[c][y * w + x] = 0.8;
+                }
+            }
+        }
+        let mut noise = Rgb::new(w, h, [0.5; 3]);
+        for c in 0..3 {
+            for (i, v) in noise.channels[c].iter_mut().enumerate() {
+                let e = synth::gaussian((i % w) as u32, (i / w) as u32, c as u32, 11);
+                *v = (*v + 0.3 * e).clamp(0.0, 1.0);
+            }
+        }
+        let frames: Vec<(&str, Rgb)> = vec![
+            ("black", Rgb::new(w, h, [0.0; 3])),
+            ("grey", Rgb::new(w, h, [0.5; 3])),
+            ("white", Rgb::new(w, h, [1.0; 3])),
+            ("noise", noise),
+            ("stripes across x", stripes(true)),
+            ("stripes across y", stripes(false)),
+            ("edge", edge),
+        ];
+        let mut flows: Vec<(String, Flow)> = vec![];
+        for speed in [2.99f32, 3.01, 21.0, 57.0, 58.0, 400.0, 1e5] {
+            for deg in [0.0f32, 33.0, 90.0] {
+                let (dx, dy) = (speed * deg.to_radians().cos(), speed * deg.to_radians().sin());
+                flows.push((format!("{speed} px at {deg}°"), Flow::uniform(w, h, dx, dy)));
+            }
+        }
+        // A flow of the frame's diagonal and one just past it (not sampled).
+        let diagonal = ((w * w + h * h) as f32).sqrt();
+        for k in [1.0f32, 1.01] {
+            flows.push((format!("{k} × the diagonal"), Flow::uniform(w, h, 0.6 * k * diagonal, 0.8 * k * diagonal)));
+        }
+        let mut swirl = Flow::uniform(w, h, 0.0, 0.0);
+        for y in 0..h {
+            for x in 0..w {
+                let (rx, ry) = (x as f32 - w as f32 / 2.0, y as f32 - h as f32 / 2.0);
+                swirl.dx[y * w + x] = -0.2 * ry;
+                swirl.dy[y * w + x] = 0.2 * rx;
+            }
+        }
+        flows.push(("swirl".into(), swirl));
+        for (flow_name, flow) in &flows {
+            // The photograph streaked by this flow where synth's streak is short
+            // enough to make (a 1e5 px streak is not a frame anyone sees).
+            let speed = (flow.dx[w * h - 1].powi(2) + flow.dy[w * h - 1].powi(2)).sqrt();
+            let streaked = (speed <= 60.0).then(|| add_motion_blur(&textured, flow, 1.0));
+            let cases = frames.iter().map(|(n, f)| (*n, f)).chain(streaked.as_ref().map(|s| ("streaked photo", s)));
+            for (frame_name, frame) in cases {
+                for evidence in [false, true] {
+                    let opts = FitOptions {
+                        tier: Some(Tier::Fast),
+                        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+                        mb_isotropy_evidence: evidence,
+                        ..Default::default()
+                    };
+                    let what = format!("{w}×{h}, {frame_name}, flow {flow_name}, evidence {evidence}");
+                    let out = fit(&FitInputs { flow: Some(flow), ..FitInputs::new(frame) }, &opts)
+                        .unwrap_or_else(|e| panic!("{what}: {e}"));
+                    let mb = &out.model.motion_blur;
+                    out.model.validate().unwrap_or_else(|e| panic!("{what}: invalid model: {e}"));
+                    if let Some(l) = mb.exposure {
+                        assert!((0.0..=1.0).contains(&l), "{what}: λ {l}");
+                        let se = mb.diagnostics.stderr.unwrap_or_else(|| panic!("{what}: λ {l} without an error"));
+                        assert!(se.is_finite() && se >= 0.0, "{what}: λ {l} ± {se}");
+                    }
+                    assert!(!mb.present || mb.exposure.is_some(), "{what}: present without an exposure");
+                    if flow.dx[0].hypot(flow.dy[0]) > 1.001 * ((w * w + h * h) as f32).sqrt() {
+                        assert_eq!(mb.diagnostics.status, Status::NotIdentifiable, "{what}");
+                        assert!(mb.diagnostics.reason.contains("diagonal"), "{what}: {}", mb.diagnostics.reason);
+                    }
+                }
+            }
+        }
+    }
+}

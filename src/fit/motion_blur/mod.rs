@@ -31,6 +31,23 @@ use isotropy::{isotropy_root, IsotropyRoot};
 use std::time::Instant;
 
 const PROFILE_SPACING_PX: f32 = 0.2;
+/// Most intervals in one profile, accurate and blind: past it the nodes spread
+/// wider than `PROFILE_SPACING_PX` (accurate, from 204.8 px/frame) or 0.5 px
+/// (blind, from 128 px/frame). Without a cap a profile's nodes, and so the fit's
+/// time and memory, grew with the flow's speed: a flow of 1e5 px/frame (a flow
+/// estimator's failure) took the blind fit 100 s on a 160×160 frame
+/// (`tests/extremes.rs`). A streak's box mean over hundreds of pixels is read as
+/// well from nodes a pixel apart.
+const MAX_PROFILE_INTERVALS: [usize; 2] = [1024, 256];
+
+/// Whether a flow vector displaces content by at most the frame's diagonal: a
+/// longer one matches nothing that is still in the frame (a flow estimator's
+/// failure, or a flow map of another size's frame), and its streak could not be
+/// read from the frame. Pixels flowing farther are not sampled (NaN flow is not
+/// either: the comparison is false).
+fn within_frame(fx: f32, fy: f32, w: usize, h: usize) -> bool {
+    fx * fx + fy * fy <= (w * w + h * h) as f32
+}
 /// Least flow (px per frame) of a pixel the accurate fit reads: a 0.1 px streak at
 /// most, below anything λ could be read from.
 pub const MIN_FLOW_PX: f32 = 0.05;
@@ -216,7 +233,7 @@ fn build_profiles(
         for x in (0..w).step_by(2) {
             let i = y * w + x;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
-            if fx * fx + fy * fy < min_flow_px * min_flow_px {
+            if fx * fx + fy * fy < min_flow_px * min_flow_px || !within_frame(fx, fy, w, h) {
                 continue;
             }
             // The reference must hold along the whole streak (its ends and middle).
@@ -245,7 +262,7 @@ fn build_profiles(
         let i = y * w + x;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
         let speed = (fx * fx + fy * fy).sqrt();
-        let m = ((speed / PROFILE_SPACING_PX).ceil() as usize).max(8);
+        let m = ((speed / PROFILE_SPACING_PX).ceil() as usize).clamp(8, MAX_PROFILE_INTERVALS[0]);
         let start = p.f.len();
         let (xf, yf) = (x as f32, y as f32);
         let cum = append_profile(&mut p.f, &mut p.c, sharp, xf, yf, (fx, fy), m);
@@ -336,7 +353,7 @@ pub fn fit_accurate(
     let n = prof.len();
     if n < MIN_SAMPLES {
         let reason = format!(
-            "only {n} pixels have flow ≥ {min_flow_px} px and texture along it (need {MIN_SAMPLES}): exposure not \
+            "only {n} pixels have flow ≥ {min_flow_px} px (and within the frame's diagonal) and texture along it (need {MIN_SAMPLES}): exposure not \
              identifiable"
         );
         let mut d = super::not_identifiable("accurate", reason, started);
@@ -374,7 +391,7 @@ pub fn fit_accurate(
 /// Append the cumulative profile of `p` from (x, y) along `dir` (t ∈ [−½, ½]).
 fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32)) {
     let len = (dir.0 * dir.0 + dir.1 * dir.1).sqrt();
-    let m = ((len / 0.5).ceil() as usize).max(4);
+    let m = ((len / 0.5).ceil() as usize).clamp(4, MAX_PROFILE_INTERVALS[1]);
     append_profile(&mut prof.f, &mut prof.c, p, x, y, dir, m);
     prof.offsets.push(prof.f.len());
 }
@@ -633,7 +650,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         Ok(root) => root,
         Err(n) => {
             let reason = format!(
-                "only {n} textured pixels with flow ≥ 3 px/frame (need {MIN_SAMPLES}), and no streak zeros along the \
+                "only {n} textured pixels with flow ≥ 3 px/frame and within the frame's diagonal (need {MIN_SAMPLES}), and no streak zeros along the \
              flow: exposure not identifiable blindly"
             );
             let mut d = super::not_identifiable("fast", reason, started);

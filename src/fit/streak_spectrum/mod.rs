@@ -327,7 +327,10 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
             let i = cy * w + cx;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
             let speed = (fx * fx + fy * fy).sqrt();
-            if !speed.is_finite() || speed < MIN_SPEED_PX || !valid(cx, cy) {
+            // A flow past the frame's diagonal displaces nothing still in the frame
+            // (as `motion_blur::within_frame`).
+            let too_far = fx * fx + fy * fy > (w * w + h * h) as f32;
+            if !speed.is_finite() || speed < MIN_SPEED_PX || too_far || !valid(cx, cy) {
                 continue;
             }
             // A line of n samples through the centre along (dx, dy): its start, when
