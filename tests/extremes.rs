@@ -292,7 +292,8 @@ proptest! {
     }
 }
 
-/// The blind exposure's single-frame paths at the extremes, on frames large enough
+/// The exposure fits at the extremes (the blind tier's single-frame paths, and the
+/// accurate tier on the same flows), on frames large enough
 /// to reach all of them (the proptest's ≤ 40 px frames reach none): the streak
 /// zeros' 128-px lines, the derivative autocorrelation's crop (from 160 px), the
 /// along-flow dip and the zeros' check (streaks of 20–57 px). Frames: constant
@@ -309,7 +310,7 @@ proptest! {
 /// an error naming it: `non_finite_pixels_are_named`.) Before the profiles' node
 /// cap, a 1e5 px/frame flow took the fit 100 s per 160×160 frame.
 #[test]
-fn blind_exposure_paths_at_extreme_frames_and_flows() {
+fn exposure_paths_at_extreme_frames_and_flows() {
     let sizes = [(160usize, 160usize), (512, 384), (700, 130)];
     let photo = photo("astronaut.png");
     for (w, h) in sizes {
@@ -377,6 +378,23 @@ fn blind_exposure_paths_at_extreme_frames_and_flows() {
             let speed = (flow.dx[w * h - 1].powi(2) + flow.dy[w * h - 1].powi(2)).sqrt();
             let streaked = (speed <= 60.0).then(|| add_motion_blur(&textured, flow, 1.0));
             let cases = frames.iter().map(|(n, f)| (*n, f)).chain(streaked.as_ref().map(|s| ("streaked photo", s)));
+            // The accurate tier on the same flows (the frame its own sharp
+            // reference): bounded by the same cap, refusing the same flows.
+            let accurate = fit(
+                &FitInputs { flow: Some(flow), motion_deblurred: Some(&textured), ..FitInputs::new(&textured) },
+                &FitOptions {
+                    tier: Some(Tier::Accurate),
+                    effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+                    ..Default::default()
+                },
+            )
+            .unwrap_or_else(|e| panic!("{w}×{h}, accurate, flow {flow_name}: {e}"));
+            accurate.model.validate().unwrap_or_else(|e| panic!("{w}×{h}, accurate, flow {flow_name}: {e}"));
+            if flow.dx[0].hypot(flow.dy[0]) > 1.001 * ((w * w + h * h) as f32).sqrt() {
+                let d = &accurate.model.motion_blur.diagnostics;
+                assert_eq!(d.status, Status::NotIdentifiable, "{w}×{h}, accurate, flow {flow_name}");
+                assert!(d.reason.contains("diagonal"), "{w}×{h}, accurate, flow {flow_name}: {}", d.reason);
+            }
             for (frame_name, frame) in cases {
                 for evidence in [false, true] {
                     let opts = FitOptions {
