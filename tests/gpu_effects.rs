@@ -218,6 +218,15 @@ fn bad_input_never_reaches_the_gpu() {
     flow[3] = f32::NAN;
     assert!(pass.run(4, 4, &rgb, &flow, 0.5).expect_err("NaN flow").to_string().contains("flow"));
     assert!(pass.run(5, 4, &rgb, &flow, 0.5).expect_err("size").to_string().contains("5×4"));
+    // A flow past the frame's diagonal (5.66 px on 4×4) would hold an invocation
+    // for a tap every 0.1 px of it: Middlebury's 1e9 marker, 1e10 taps.
+    flow[3] = 1.0;
+    flow[6] = 1e9;
+    let err = pass.run(4, 4, &rgb, &flow, 0.5).expect_err("flow past the diagonal").to_string();
+    assert!(err.contains("flow") && err.contains("pixel 3") && err.contains("diagonal"), "{err}");
+    flow[6] = 4.0;
+    flow[7] = 3.9;
+    pass.run(4, 4, &rgb, &flow, 0.5).expect("a flow within the diagonal");
     assert!(ctx.take_messages().is_empty());
 }
 

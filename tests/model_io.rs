@@ -177,6 +177,16 @@ fn bad_files_are_named_with_the_problem() {
     io::save_flow(&p, &nan_flow).expect("write");
     let err = io::load_flow(&p).expect_err("nan");
     assert!(err.to_string().contains("non-finite flow at x=1, y=1"), "{err}");
+    // Middlebury's unknown-flow marker (> 1e9): longer than any frame's diagonal.
+    let mut unknown = Flow::uniform(4, 3, 0.5, 0.0);
+    unknown.dy[6] = 1e10;
+    let p = tmp("unknown.flo");
+    io::save_flow(&p, &unknown).expect("write");
+    let err = io::load_flow(&p).expect_err("unknown flow").to_string();
+    assert!(err.contains("unknown.flo") && err.contains("x=2, y=1") && err.contains("diagonal"), "{err}");
+    unknown.dy[6] = 4.9; // within the 5 px diagonal of a 4×3 frame
+    io::save_flow(&p, &unknown).expect("write");
+    assert_eq!(io::load_flow(&p).expect("within the diagonal"), unknown);
     let ext = tmp("depth.txt");
     std::fs::write(&ext, "1").expect("write");
     assert!(io::load_depth(&ext, 1.0).expect_err("ext").to_string().contains("unsupported depth format"));

@@ -61,6 +61,20 @@ impl<'a> MotionBlurPass<'a> {
         if let Some(i) = flow_xy.iter().position(|v| !v.is_finite()) {
             return Err(GpuError::Input { input: "flow", problem: format!("non-finite value at pixel {}", i / 2) });
         }
+        // The shader takes a tap every `MB_MAX_SAMPLE_SPACING_PX` along the streak:
+        // a flow past the frame's diagonal (nothing in the frame moves that far; a
+        // flow estimator's failure) would hold one invocation for millions of taps.
+        let diagonal_sq = (width * width + height * height) as f32;
+        if let Some(i) = flow_xy.chunks_exact(2).position(|v| v[0] * v[0] + v[1] * v[1] > diagonal_sq) {
+            return Err(GpuError::Input {
+                input: "flow",
+                problem: format!(
+                    "({}, {}) px/frame at pixel {i} is longer than the {width}×{height} frame's diagonal",
+                    flow_xy[2 * i],
+                    flow_xy[2 * i + 1]
+                ),
+            });
+        }
         if !exposure.is_finite() || !(0.0..=1.0).contains(&exposure) {
             return Err(GpuError::Input { input: "exposure", problem: format!("must be in [0, 1], got {exposure}") });
         }
