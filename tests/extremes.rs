@@ -423,3 +423,72 @@ fn exposure_paths_at_extreme_frames_and_flows() {
         }
     }
 }
+
+/// The blind DoF and noise fits at the extremes, on frames large enough for their
+/// full-size paths (the spectrum's 128/256-px tiles, the edge scan's subsampling,
+/// every noise level and the codec-grid scan): constant, clipped noise of std 0.3,
+/// Nyquist stripes, an 8×8 block pattern (a codec grid with nothing else), HDR
+/// values to 1e3, one step edge, and a photograph; depths constant, spanning 1e-3
+/// to 1e6 m, one valid pixel, relative inverse depth with zeros, and half invalid.
+/// What must hold: no panic, a model that validates, every δ(Z) finite and within
+/// range at the depths given and beyond.
+#[test]
+fn blind_defocus_and_noise_at_extreme_frames_and_depths() {
+    let photo = photo("chelsea.png");
+    for (w, h) in [(160usize, 160usize), (512, 384), (700, 130)] {
+        let fill = |f: &dyn Fn(usize, usize) -> f32| {
+            let mut img = Rgb::new(w, h, [0.0; 3]);
+            for y in 0..h {
+                for x in 0..w {
+                    for c in 0..3 {
+                        img.channels[c][y * w + x] = f(x, y) * [1.0, 0.9, 0.8][c];
+                    }
+                }
+            }
+            img
+        };
+        let noise = fill(&|x, y| (0.5 + 0.3 * synth::gaussian(x as u32, y as u32, 0, 5)).clamp(0.0, 1.0));
+        let frames: Vec<(&str, Rgb)> = vec![
+            ("black", Rgb::new(w, h, [0.0; 3])),
+            ("white", Rgb::new(w, h, [1.0; 3])),
+            ("noise", noise),
+            ("stripes", fill(&|x, _| if x % 2 == 0 { 0.9 } else { 0.1 })),
+            ("8×8 blocks", fill(&|x, y| 0.2 + 0.6 * (((x / 8) * 7 + (y / 8) * 13) % 5) as f32 / 4.0)),
+            ("HDR to 1e3", fill(&|x, y| if (x / 16 + y / 16) % 2 == 0 { 1e3 } else { 0.01 })),
+            ("edge", fill(&|x, _| if x < w / 2 { 0.2 } else { 0.8 })),
+            ("photo", mirror_tile(&photo, w, h)),
+        ];
+        let mut one_valid = Plane::new(w, h, f32::NAN);
+        one_valid.data[(h / 2) * w + w / 2] = 2.0;
+        let mut half_invalid = depth_ramp(w, h, 0.5, 4.0);
+        for v in half_invalid.data.iter_mut().step_by(2) {
+            *v = -1.0;
+        }
+        let mut inverse = depth_ramp(w, h, 0.0, 1.0);
+        inverse.data[..w].iter_mut().for_each(|v| *v = 0.0);
+        let depths: Vec<(&str, Plane, DepthUnits)> = vec![
+            ("constant 2 m", Plane::new(w, h, 2.0), DepthUnits::MetricM),
+            ("1e-3 to 1e6 m", depth_ramp(w, h, 1e-3, 1e6), DepthUnits::MetricM),
+            ("one valid pixel", one_valid, DepthUnits::MetricM),
+            ("half invalid", half_invalid, DepthUnits::MetricM),
+            ("relative inverse with zeros", inverse, DepthUnits::RelativeInverse),
+        ];
+        for (frame_name, frame) in &frames {
+            for (depth_name, depth, units) in &depths {
+                let what = format!("{w}×{h}, {frame_name}, depth {depth_name}");
+                let opts = FitOptions {
+                    tier: Some(Tier::Fast),
+                    effects: Effects { noise: true, motion_blur: false, depth_of_field: true },
+                    ..Default::default()
+                };
+                let out = fit(&FitInputs { depth: Some(depth), depth_units: *units, ..FitInputs::new(frame) }, &opts)
+                    .unwrap_or_else(|e| panic!("{what}: {e}"));
+                out.model.validate().unwrap_or_else(|e| panic!("{what}: invalid model: {e}"));
+                for z in [0.0f32, 1e-3, 0.5, 2.0, 1e6, f32::MAX] {
+                    let s = out.model.depth_of_field.sigma_px(z);
+                    assert!(s.is_finite() && (0.0..=MAX_DOF_SIGMA_PX).contains(&s), "{what}: δ({z}) = {s}");
+                }
+            }
+        }
+    }
+}
