@@ -241,3 +241,26 @@ fn channel_intensity_noise_reads_each_channels_value() {
         assert!((got_luma / want_luma - 1.0).abs() < 0.02, "channel {c} at luma");
     }
 }
+
+/// Flow no frame can hold (past the diagonal: Middlebury's 1e9 unknown marker) is
+/// no motion, like non-finite flow: the pixel keeps its value, at no cost in taps
+/// (a tap every 0.1 px of a 1e9 px streak would be 1e10 per pixel), and the other
+/// pixels are blurred as before.
+#[test]
+fn flow_past_the_diagonal_is_no_motion() {
+    let img = photo("chelsea.png").crop(0, 0, 64, 48).expect("crop");
+    let mut flow = Flow::uniform(64, 48, 6.0, 2.0);
+    let streaked = add_motion_blur(&img, &flow, 1.0);
+    let (i, j) = (20 * 64 + 30, 20 * 64 + 31);
+    flow.dx[i] = 1e9;
+    flow.dy[j] = -80.1; // past the 80 px diagonal of 64×48
+    let out = add_motion_blur(&img, &flow, 1.0);
+    for c in 0..3 {
+        for k in [i, j] {
+            assert_eq!(out.channels[c][k], img.channels[c][k], "channel {c}, pixel {k}");
+        }
+        for k in (0..64 * 48).filter(|&k| k != i && k != j) {
+            assert_eq!(out.channels[c][k], streaked.channels[c][k], "channel {c}, pixel {k}");
+        }
+    }
+}

@@ -13,6 +13,10 @@ use rayon::prelude::*;
 pub use crate::model::{MB_MAX_SAMPLE_SPACING_PX, MB_MIN_INTERVALS};
 
 /// Apply motion blur with exposure `lambda` ∈ [0, 1] (clamped; non-finite → 0).
+/// A pixel whose flow is non-finite or longer than the frame's diagonal (nothing in
+/// the frame moves that far: Middlebury's unknown-flow marker, a flow estimator's
+/// failure) keeps its value, as with no motion: its streak would cost a tap every
+/// `MB_MAX_SAMPLE_SPACING_PX` of its length (the GPU pass refuses such flow by name).
 pub fn add_motion_blur(sharp: &Rgb, flow: &Flow, lambda: f32) -> Rgb {
     let lambda = if lambda.is_finite() { lambda.clamp(0.0, 1.0) } else { 0.0 };
     if lambda == 0.0 {
@@ -27,8 +31,8 @@ pub fn add_motion_blur(sharp: &Rgb, flow: &Flow, lambda: f32) -> Rgb {
             for x in 0..w {
                 let i = y * w + x;
                 let (fx, fy) = (flow.dx[i], flow.dy[i]);
-                let fx = if fx.is_finite() { fx } else { 0.0 };
-                let fy = if fy.is_finite() { fy } else { 0.0 };
+                let known = fx.is_finite() && fy.is_finite() && fx * fx + fy * fy <= (w * w + h * h) as f32;
+                let (fx, fy) = if known { (fx, fy) } else { (0.0, 0.0) };
                 let streak_px = lambda * (fx * fx + fy * fy).sqrt();
                 if streak_px < 1e-6 {
                     for c in 0..3 {
