@@ -424,16 +424,17 @@ fn exposure_paths_at_extreme_frames_and_flows() {
     }
 }
 
-/// The blind DoF and noise fits at the extremes, on frames large enough for their
+/// The DoF and noise fits at the extremes, on frames large enough for their
 /// full-size paths (the spectrum's 128/256-px tiles, the edge scan's subsampling,
 /// every noise level and the codec-grid scan): constant, clipped noise of std 0.3,
 /// Nyquist stripes, an 8×8 block pattern (a codec grid with nothing else), HDR
 /// values to 1e3, one step edge, and a photograph; depths constant, spanning 1e-3
 /// to 1e6 m, one valid pixel, relative inverse depth with zeros, and half invalid.
-/// What must hold: no panic, a model that validates, every δ(Z) finite and within
-/// range at the depths given and beyond.
+/// Each under sensor noise, fitted by the fast tier and by the accurate tier (the
+/// clean frame its references). What must hold: no panic, a model that validates,
+/// every δ(Z) finite and within range at the depths given and beyond.
 #[test]
-fn blind_defocus_and_noise_at_extreme_frames_and_depths() {
+fn defocus_and_noise_at_extreme_frames_and_depths() {
     let photo = photo("chelsea.png");
     for (w, h) in [(160usize, 160usize), (512, 384), (700, 130)] {
         let fill = |f: &dyn Fn(usize, usize) -> f32| {
@@ -474,16 +475,28 @@ fn blind_defocus_and_noise_at_extreme_frames_and_depths() {
             ("relative inverse with zeros", inverse, DepthUnits::RelativeInverse),
         ];
         for (frame_name, frame) in &frames {
-            for (depth_name, depth, units) in &depths {
-                let what = format!("{w}×{h}, {frame_name}, depth {depth_name}");
+            let noisy = add_sensor_noise(frame, [1e-4; 3], [1e-5; 3], 9);
+            for ((depth_name, depth, units), tier) in depths.iter().flat_map(|d| [(d, Tier::Fast), (d, Tier::Accurate)])
+            {
+                let what = format!("{w}×{h}, {frame_name}, depth {depth_name}, {tier:?}");
                 let opts = FitOptions {
-                    tier: Some(Tier::Fast),
+                    tier: Some(tier),
                     effects: Effects { noise: true, motion_blur: false, depth_of_field: true },
                     ..Default::default()
                 };
-                let out = fit(&FitInputs { depth: Some(depth), depth_units: *units, ..FitInputs::new(frame) }, &opts)
-                    .unwrap_or_else(|e| panic!("{what}: {e}"));
+                // The frame under sensor noise; the accurate tier with the clean frame
+                // as its references.
+                let inputs = FitInputs {
+                    depth: Some(depth),
+                    depth_units: *units,
+                    denoised: Some(frame),
+                    defocus_deblurred: Some(frame),
+                    ..FitInputs::new(&noisy)
+                };
+                let out = fit(&inputs, &opts).unwrap_or_else(|e| panic!("{what}: {e}"));
                 out.model.validate().unwrap_or_else(|e| panic!("{what}: invalid model: {e}"));
+                let method = if tier == Tier::Fast { "fast" } else { "accurate" };
+                assert_eq!(out.model.noise.diagnostics.method, method, "{what}");
                 for z in [0.0f32, 1e-3, 0.5, 2.0, 1e6, f32::MAX] {
                     let s = out.model.depth_of_field.sigma_px(z);
                     assert!(s.is_finite() && (0.0..=MAX_DOF_SIGMA_PX).contains(&s), "{what}: δ({z}) = {s}");
