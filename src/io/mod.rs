@@ -183,13 +183,8 @@ pub fn load_flow(path: &Path) -> Result<Flow, IoError> {
     if let Some(i) = data.iter().position(|v| !v.is_finite()) {
         return Err(fmt_err(path, format!("non-finite flow at x={}, y={}", (i / 2) % w, (i / 2) / w)));
     }
-    // A displacement longer than the frame's diagonal matches nothing still in the
-    // frame: Middlebury's marker for unknown flow (> 1e9), or a flow map of another
-    // frame size. Refused here, by name: the fits would not sample it, and the
-    // reference streak (`synth`, the GPU pass) costs taps in proportion to its
-    // length (1e9 px: 1e10 taps per pixel).
-    let diagonal_sq = (w * w + h * h) as f32;
-    if let Some(i) = data.chunks_exact(2).position(|v| v[0] * v[0] + v[1] * v[1] > diagonal_sq) {
+    // Flow past the frame's diagonal (`model::flow_within_frame`) is refused by name.
+    if let Some(i) = data.chunks_exact(2).position(|v| !crate::model::flow_within_frame(v[0], v[1], w, h)) {
         let (u, v) = (data[2 * i], data[2 * i + 1]);
         return Err(fmt_err(
             path,
@@ -198,7 +193,7 @@ pub fn load_flow(path: &Path) -> Result<Flow, IoError> {
                  not a displacement within the frame (Middlebury marks unknown flow with values above 1e9)",
                 i % w,
                 i / w,
-                diagonal_sq.sqrt()
+                ((w * w + h * h) as f32).sqrt()
             ),
         ));
     }

@@ -34,6 +34,16 @@ pub const MB_MAX_SAMPLE_SPACING_PX: f32 = 0.1;
 /// (`synth`) and the GPU pass (`render`) read these, so they define one effect.
 pub const MB_MIN_INTERVALS: u32 = 8;
 
+/// Whether a flow vector (px per frame) displaces content by at most the diagonal
+/// of a `width`×`height` frame. A longer one matches nothing still in the frame (a
+/// flow estimator's failure, Middlebury's > 1e9 unknown-flow marker, a flow map of
+/// another frame size): the fits do not sample it, `io::load_flow` and the GPU
+/// motion-blur pass refuse it, `synth` takes it as no motion — its streak would
+/// cost taps in proportion to its length. False for non-finite flow.
+pub fn flow_within_frame(dx: f32, dy: f32, width: usize, height: usize) -> bool {
+    dx * dx + dy * dy <= (width * width + height * height) as f32
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraModel {

@@ -62,10 +62,11 @@ impl<'a> MotionBlurPass<'a> {
             return Err(GpuError::Input { input: "flow", problem: format!("non-finite value at pixel {}", i / 2) });
         }
         // The shader takes a tap every `MB_MAX_SAMPLE_SPACING_PX` along the streak:
-        // a flow past the frame's diagonal (nothing in the frame moves that far; a
-        // flow estimator's failure) would hold one invocation for millions of taps.
-        let diagonal_sq = (width * width + height * height) as f32;
-        if let Some(i) = flow_xy.chunks_exact(2).position(|v| v[0] * v[0] + v[1] * v[1] > diagonal_sq) {
+        // a flow past the frame's diagonal (`model::flow_within_frame`) would hold
+        // one invocation for millions of taps.
+        if let Some(i) =
+            flow_xy.chunks_exact(2).position(|v| !crate::model::flow_within_frame(v[0], v[1], width, height))
+        {
             return Err(GpuError::Input {
                 input: "flow",
                 problem: format!(

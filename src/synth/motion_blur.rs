@@ -31,7 +31,7 @@ pub fn add_motion_blur(sharp: &Rgb, flow: &Flow, lambda: f32) -> Rgb {
             for x in 0..w {
                 let i = y * w + x;
                 let (fx, fy) = (flow.dx[i], flow.dy[i]);
-                let known = fx.is_finite() && fy.is_finite() && fx * fx + fy * fy <= (w * w + h * h) as f32;
+                let known = crate::model::flow_within_frame(fx, fy, w, h);
                 let (fx, fy) = if known { (fx, fy) } else { (0.0, 0.0) };
                 let streak_px = lambda * (fx * fx + fy * fy).sqrt();
                 if streak_px < 1e-6 {

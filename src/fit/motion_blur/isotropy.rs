@@ -12,7 +12,7 @@ use crate::image::{Flow, Plane};
 /// The isotropy root on plane `p` at `scale` (1: the frame; 2: its reduction, whose
 /// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`.
 /// Samples are frame pixels with flow ≥ 3 px/frame (and within the frame's
-/// diagonal, `within_frame`) and a gradient, picked by
+/// diagonal, `model::flow_within_frame`) and a gradient, picked by
 /// gradient *magnitude* only, so the selection prefers no direction (`candidates`),
 /// or the given `pixels` (the coarse scale takes the fine root's, `IsotropyRoot::pixels`).
 /// `stats`: also the subsets' spread, the along-flow excess and the prior's band
@@ -265,7 +265,7 @@ fn candidates(p: &Plane, flow: &Flow, scale: usize) -> Vec<(usize, usize)> {
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
             // Flow below 3 px/frame: the ±1 px derivative cannot resolve the box.
             let speed_sq = fx * fx + fy * fy;
-            if speed_sq.is_nan() || speed_sq < 9.0 || !super::within_frame(fx, fy, w, h) {
+            if speed_sq.is_nan() || speed_sq < 9.0 || !crate::model::flow_within_frame(fx, fy, w, h) {
                 continue;
             }
             let gx = 0.5 * (p.get(qx + 1, qy) - p.get(qx - 1, qy));

@@ -24,7 +24,7 @@ mod isotropy;
 
 use super::isotropy_pool::{IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane, Rgb};
-use crate::model::{Diagnostics, MotionBlur, Status};
+use crate::model::{flow_within_frame, Diagnostics, MotionBlur, Status};
 #[cfg(test)]
 pub(super) use isotropy::isotropy_evidence;
 use isotropy::{isotropy_root, IsotropyRoot};
@@ -39,15 +39,6 @@ const PROFILE_SPACING_PX: f32 = 0.2;
 /// (`tests/extremes.rs`). A streak's box mean over hundreds of pixels is read as
 /// well from nodes a pixel apart.
 const MAX_PROFILE_INTERVALS: [usize; 2] = [1024, 256];
-
-/// Whether a flow vector displaces content by at most the frame's diagonal: a
-/// longer one matches nothing that is still in the frame (a flow estimator's
-/// failure, or a flow map of another size's frame), and its streak could not be
-/// read from the frame. Pixels flowing farther are not sampled (NaN flow is not
-/// either: the comparison is false).
-fn within_frame(fx: f32, fy: f32, w: usize, h: usize) -> bool {
-    fx * fx + fy * fy <= (w * w + h * h) as f32
-}
 /// Least flow (px per frame) of a pixel the accurate fit reads: a 0.1 px streak at
 /// most, below anything λ could be read from.
 pub const MIN_FLOW_PX: f32 = 0.05;
@@ -233,7 +224,7 @@ fn build_profiles(
         for x in (0..w).step_by(2) {
             let i = y * w + x;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
-            if fx * fx + fy * fy < min_flow_px * min_flow_px || !within_frame(fx, fy, w, h) {
+            if fx * fx + fy * fy < min_flow_px * min_flow_px || !flow_within_frame(fx, fy, w, h) {
                 continue;
             }
             // The reference must hold along the whole streak (its ends and middle).

@@ -327,9 +327,8 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
             let i = cy * w + cx;
             let (fx, fy) = (flow.dx[i], flow.dy[i]);
             let speed = (fx * fx + fy * fy).sqrt();
-            // A flow past the frame's diagonal displaces nothing still in the frame
-            // (as `motion_blur::within_frame`).
-            let too_far = fx * fx + fy * fy > (w * w + h * h) as f32;
+            // A flow past the frame's diagonal displaces nothing still in the frame.
+            let too_far = !crate::model::flow_within_frame(fx, fy, w, h);
             if !speed.is_finite() || speed < MIN_SPEED_PX || too_far || !valid(cx, cy) {
                 continue;
             }
