@@ -61,20 +61,29 @@ fn main() {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
     // `ITERS=n` fits (3 by default; more for `perf record`).
     let iters: usize = std::env::var("ITERS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
+    // `EFFORT=e`: `FitOptions::fast_effort` (1 by default).
+    let fast_effort: f32 = std::env::var("EFFORT").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
     for _ in 0..iters {
         let t = std::time::Instant::now();
         let out = pool
-            .install(|| fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: effects(), ..Default::default() }))
+            .install(|| {
+                fit(&inp, &FitOptions { tier: Some(Tier::Fast), effects: effects(), fast_effort, ..Default::default() })
+            })
             .expect("fit");
         let m = &out.model;
-        println!("total {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        println!(
+            "total {:.1} ms (λ {:?} ± {:?})",
+            t.elapsed().as_secs_f64() * 1e3,
+            m.motion_blur.exposure,
+            m.motion_blur.diagnostics.stderr
+        );
         for (name, d) in [
             ("noise", &m.noise.diagnostics),
             ("mb", &m.motion_blur.diagnostics),
             ("dof", &m.depth_of_field.diagnostics),
         ] {
             let stages: Vec<String> = d.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect();
-            println!("  {name}: {:.1} ms [{}]", d.fit_time_s * 1e3, stages.join(", "));
+            println!("  {name}: {:.1} ms [{}] {:?}", d.fit_time_s * 1e3, stages.join(", "), d.status);
         }
     }
 }

@@ -200,7 +200,8 @@ fn mismatched_sizes_and_missing_references_are_named() {
 
 /// A speed/accuracy setting out of its range is refused by name, never clamped in
 /// silence: the blind noise grid below 16 bins × 24 samples per level, and at that
-/// minimum the fit still returns a valid model (present or not, never a panic).
+/// minimum the fit still returns a valid model (present or not, never a panic); the
+/// fast tier's effort outside [0.25, 1], and at both ends a valid model.
 #[test]
 fn out_of_range_settings_are_named() {
     let img = quantize8(&add_sensor_noise(&photo("chelsea.png"), [2e-5; 3], [8e-4; 3], 5));
@@ -213,6 +214,20 @@ fn out_of_range_settings_are_named() {
     assert!(model.validate().is_ok(), "{:?}", model.validate());
     let err = fit(&FitInputs::new(&img), &FitOptions { mb_max_samples: 63, ..FitOptions::default() }).unwrap_err();
     assert!(matches!(err, FitError::Option { option: "mb_max_samples", .. }), "{err}");
+    // The fast tier's effort: [0.25, 1], NaN and infinities refused by name too.
+    for bad in [0.249f32, 1.001, 0.0, -1.0, f32::NAN, f32::INFINITY] {
+        let err = fit(&FitInputs::new(&img), &FitOptions { fast_effort: bad, ..FitOptions::default() }).unwrap_err();
+        assert!(matches!(err, FitError::Option { option: "fast_effort", .. }), "{bad}: {err}");
+        assert!(err.to_string().contains("[0.25, 1]"), "{err}");
+    }
+    // Both ends are valid, with depth and flow so every scaled count is reached.
+    let depth = Plane::new(img.width, img.height, 2.0);
+    let flow = Flow::uniform(img.width, img.height, 20.0, 5.0);
+    for ok in [blind_augment::fit::MIN_FAST_EFFORT, 1.0] {
+        let inp = FitInputs { depth: Some(&depth), flow: Some(&flow), ..FitInputs::new(&img) };
+        let model = fit(&inp, &FitOptions { fast_effort: ok, ..FitOptions::default() }).expect("valid effort").model;
+        assert!(model.validate().is_ok(), "effort {ok}: {:?}", model.validate());
+    }
 }
 
 /// Forcing the accurate tier only requires the references of the effects asked for.

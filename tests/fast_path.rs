@@ -576,3 +576,72 @@ fn long_streaks_by_their_zeros_cover_the_truth() {
     }
     assert!(by_zeros >= 2, "only {by_zeros} frames read by their zeros");
 }
+
+/// `FitOptions::fast_effort` (BENCHMARKS.md "The fast tier's effort"), at 1280×960
+/// where every scaled count applies: at effort 0.5 the exposure fit reads fewer
+/// streak lines and the defocus fit fewer edges (every other row of its scan, said
+/// in the reason), with answers near full effort's; an edge-poor frame's reduced
+/// scan finds too few edges and the other rows are read too — the full scan's
+/// edges, so the same curve as at full effort. Tolerances, from `examples/effort_probe.rs`' measurements on these
+/// frames: λ within 0.05 of the truth at both efforts (measured 0.495–0.519 for
+/// 0.5 over two seeds); δ(Z) RMSE at effort 0.5 within 0.1 px of full effort's
+/// (measured 0.090 → 0.082–0.425 over six astronaut frames: the 0.425 a thin lens
+/// read as a quadratic — this frame, seed 3, reads 0.091 → 0.090).
+#[test]
+fn fast_effort_reads_fewer_samples_and_keeps_edge_poor_frames() {
+    let (w, h) = (1280, 960);
+    let at = |effort: f32, mb: bool, dof: bool| FitOptions { fast_effort: effort, ..opts(false, mb, dof) };
+    let astronaut = mirror_tile(&photo("astronaut.png"), w, h);
+    // Exposure: a 12 px streak at 30° (24 px/frame, λ 0.5), read by the zeros.
+    let a = 30f32.to_radians();
+    let flow = blind_augment::image::Flow::uniform(w, h, 24.0 * a.cos(), 24.0 * a.sin());
+    let frame = quantize8(&add_sensor_noise(&add_motion_blur(&astronaut, &flow, 0.5), [2e-5; 3], [8e-4; 3], 1));
+    let inp = FitInputs { flow: Some(&flow), ..FitInputs::new(&frame) };
+    let [full, half] = [1.0, 0.5].map(|e| fit(&inp, &at(e, true, false)).expect("valid").model.motion_blur);
+    println!(
+        "effort 1: {:?} from {} lines; 0.5: {:?} from {}",
+        full.exposure, full.diagnostics.samples_used, half.exposure, half.diagnostics.samples_used
+    );
+    for mb in [&full, &half] {
+        let got = mb.exposure.expect("identified by the zeros");
+        assert!((got - 0.5).abs() <= 0.05, "λ {got}: {}", mb.diagnostics.reason);
+    }
+    assert!(half.diagnostics.samples_used < full.diagnostics.samples_used);
+    // Defocus on a thin-lens ramp: edge-rich (astronaut, ~2 900 edges at full
+    // effort) and edge-poor (chelsea, ~240).
+    let depth = depth_ramp(w, h, 0.5, 4.0);
+    let (_, lens) = thin_lens_ramp(w, h);
+    let chelsea = mirror_tile(&photo("chelsea.png"), w, h);
+    for (name, img) in [("astronaut", &astronaut), ("chelsea", &chelsea)] {
+        let frame = quantize8(&add_sensor_noise(&add_dof(img, &depth, &lens), [1e-4; 3], [0.0; 3], 3));
+        let inp = FitInputs { depth: Some(&depth), ..FitInputs::new(&frame) };
+        let [full, half] = [1.0, 0.5].map(|e| fit(&inp, &at(e, false, true)).expect("valid").model.depth_of_field);
+        let rmse = |d: &DepthOfField| {
+            ((0..=100)
+                .map(|i| {
+                    let z = 0.5 + 3.5 * i as f32 / 100.0;
+                    ((d.sigma_px(z) - lens.sigma_px(z)) as f64).powi(2)
+                })
+                .sum::<f64>()
+                / 101.0)
+                .sqrt()
+        };
+        let (n_full, n_half) = (full.diagnostics.samples_used, half.diagnostics.samples_used);
+        println!(
+            "{name}: {n_full} → {n_half} edges, RMSE {:.3} → {:.3}; {}",
+            rmse(&full),
+            rmse(&half),
+            half.diagnostics.reason
+        );
+        assert!(half.diagnostics.reason.contains("edge scan on one row in 2"), "{}", half.diagnostics.reason);
+        if name == "chelsea" {
+            assert!(half.diagnostics.reason.contains("the other rows were read too"), "{}", half.diagnostics.reason);
+            // The full scan's edges in its order: the same curve, bit for bit.
+            assert_eq!(n_half, n_full, "the full scan's edges");
+            assert_eq!(half.curve, full.curve);
+        } else {
+            assert!(n_half < n_full && n_half >= 600, "{n_full} → {n_half}");
+            assert!((rmse(&half) - rmse(&full)).abs() <= 0.1, "RMSE {} → {}", rmse(&full), rmse(&half));
+        }
+    }
+}

@@ -70,9 +70,18 @@ def main():
     ap.add_argument("--bin", required=True)
     args = ap.parse_args()
     tmp = tempfile.mkdtemp()
-    stats = {}
+    stats, every = {}, {}
     for part, name, img8, angle, length in frames():
         lam, reason = fit(args.bin, tmp, img8, angle)
+        # Every frame (zeros, fallback, not identifiable — scored 0 px), for
+        # comparisons between settings that move frames between the paths
+        # (`FIT_ARGS="--fast-effort 0.5"`, BENCHMARKS.md "The fast tier's effort").
+        se_all = re.match(r"λ = [\d.]+ ± ([\d.]+)", reason)
+        a = every.setdefault(part, {"err": [], "answered": 0, "covered": 0})
+        a["err"].append(abs((lam or 0.0) * 50.0 - length) / max(length, 4))
+        a["answered"] += lam is not None
+        a["covered"] += lam is not None and se_all is not None and \
+            abs(lam * 50.0 - length) <= 2 * float(se_all.group(1)) * 50.0
         shape = "from the shape of the derivative autocorrelation" in reason
         iso = re.search(r"isotropy reads λ = ([\d.]+) ± ([\d.]+)", reason) if shape else None
         if not shape and re.match(r"λ = [\d.]+ ± [\d.]+ by gradient-energy isotropy", reason):
@@ -111,6 +120,10 @@ def main():
             print(f"{part}: {n} fallback frames ({s['shape']} read by the shape, {s['dip']} by its dip); "
                   f"{label}: median {np.median(e):.3f}, within 15% {np.sum(e <= 0.15)}, beyond 30% "
                   f"{np.sum(e > 0.3)}{cover}")
+    for part, a in every.items():
+        e = np.array(a["err"])
+        print(f"{part}: all {len(e)} frames: median {np.median(e):.3f}, within 15% {np.sum(e <= 0.15)}, beyond 30% "
+              f"{np.sum(e > 0.3)}; answered {a['answered']}; truth within 2 standard errors {a['covered']}")
 
 
 if __name__ == "__main__":

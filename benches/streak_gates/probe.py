@@ -16,6 +16,8 @@ else (L = 0 included).
         --angles 0,90,45 --noise 0,3
 
 Bare names are read from scikit-image's bundled `skimage/data` (0.26.0 here).
+`FIT_ARGS="--fast-effort 0.5"` passes more options to every `fit` (this script's and
+`benches/streak_acf/*.py`'s, which call `fit` from here).
 Needs numpy, Pillow, opencv-python-headless, scikit-image.
 """
 import argparse
@@ -57,7 +59,8 @@ def fit(binary, tmp, img8, angle, speed=50.0):
     flow[..., 1] = speed * np.sin(np.radians(angle))
     np.save(f"{tmp}/flow.npy", flow)
     subprocess.run([binary, "fit", "--image", f"{tmp}/in.png", "--flow", f"{tmp}/flow.npy", "--only",
-                    "motion-blur", "--tier", "fast", "--threads", "2", "--out", f"{tmp}/out.json"],
+                    "motion-blur", "--tier", "fast", "--threads", "2", "--out", f"{tmp}/out.json",
+                    *os.environ.get("FIT_ARGS", "").split()],
                    check=True, capture_output=True)
     mb = json.load(open(f"{tmp}/out.json"))["motion_blur"]
     return mb.get("exposure"), mb["diagnostics"]["reason"]

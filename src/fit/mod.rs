@@ -163,6 +163,28 @@ pub struct FitOptions {
     /// sample search's cost is linear in it; what fewer cost in accuracy is measured
     /// in BENCHMARKS.md ("Fast tier speed", sixth session).
     pub noise_fast_samples_per_level: usize,
+    /// Blind exposure and defocus: the share of their full sample counts read, in
+    /// [`MIN_FAST_EFFORT`, 1] (default 1) — the isotropy's pixels (4 096), the
+    /// streak's lines (~1 200) and the edge scan's positions (every other row and
+    /// column above 400 000 px: the step grows by 1/√effort; a scan that finds too
+    /// few edges is redone at the full step). The defocus spectrum keeps its tiles
+    /// (fewer mistook Gaussian blur for a disc) and the blind noise grid has its own
+    /// setting (`noise_fast_samples_per_level`). What each effort saves and costs in
+    /// accuracy is measured in BENCHMARKS.md ("The fast tier's effort").
+    pub fast_effort: f32,
+}
+
+/// Least `FitOptions::fast_effort`: a quarter of the full counts (1 024 isotropy
+/// pixels, 300 streak lines, a quarter of the edge positions).
+pub const MIN_FAST_EFFORT: f32 = 0.25;
+
+/// `full` scaled by `effort` (`FitOptions::fast_effort`), rounded, at least 1; at
+/// effort 1 exactly `full`.
+pub(crate) fn scaled_count(full: usize, effort: f32) -> usize {
+    if effort >= 1.0 {
+        return full;
+    }
+    ((full as f64 * effort.max(0.0) as f64).round() as usize).max(1)
 }
 
 impl Default for FitOptions {
@@ -180,6 +202,7 @@ impl Default for FitOptions {
             noise_min_leak_ratio: None,
             mb_isotropy_evidence: false,
             noise_fast_samples_per_level: noise::DEFAULT_FAST_SAMPLES_PER_LEVEL,
+            fast_effort: 1.0,
         }
     }
 }
@@ -310,6 +333,12 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     }
     if opts.noise_stride_px == 0 {
         return Err(FitError::Option { option: "noise_stride_px", problem: "must be ≥ 1".into() });
+    }
+    if !(opts.fast_effort >= MIN_FAST_EFFORT && opts.fast_effort <= 1.0) {
+        return Err(FitError::Option {
+            option: "fast_effort",
+            problem: format!("must be in [{MIN_FAST_EFFORT}, 1], got {}", opts.fast_effort),
+        });
     }
     if opts.noise_fast_samples_per_level < noise::MIN_FAST_SAMPLES_PER_LEVEL {
         return Err(FitError::Option {
@@ -522,7 +551,7 @@ fn fit_motion_blur(
         (Some(flow), Tier::Accurate, Some(sharp)) => {
             motion_blur::fit_accurate(inp.image, sharp, inp.motion_deblurred_second, flow, inp.reference_valid, opts)
         }
-        (Some(flow), _, _) => motion_blur::fit_fast(luma, flow, opts.mb_isotropy_evidence),
+        (Some(flow), _, _) => motion_blur::fit_fast(luma, flow, opts.mb_isotropy_evidence, opts.fast_effort),
     }
 }
 

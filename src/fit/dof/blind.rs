@@ -175,6 +175,10 @@ const INTERFERENCE_MAX_FRACTION: f32 = 0.2;
 /// ratio assumes one step: a thin line's two edges cancel in the re-blur and read
 /// δ low, a staircase's add and read it high. Near the border the walk stops
 /// (nothing seen is nothing against).
+/// Fewest edges a reduced-effort scan must find before its samples are used (see
+/// `fit_fast`): below it the full step's scan is read instead.
+const EFFORT_MIN_EDGES: usize = 600;
+
 fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32), peak: f32) -> bool {
     let (w, h) = (y.width as isize, y.height as isize);
     let step = ((s.0 * s.0 + s.1 * s.1) as f32).sqrt();
@@ -271,6 +275,9 @@ pub fn fit_fast(
     let tile_ok = |x0: usize, y0: usize, t: usize| {
         (y0..y0 + t).step_by(8).all(|yy| (x0..x0 + t).step_by(8).all(|x| valid_depth(depth.get(x, yy), units)))
     };
+    // (All 8 tiles at any `fast_effort`: fewer read Gaussian blur as a disc — on 3–4
+    // of 24 thin-lens and quadratic frames at 4–6 tiles, 10 at 2; BENCHMARKS.md "The
+    // fast tier's effort".)
     let spectrum = crate::fit::defocus_spectrum::disc_signature(y, tile_ok);
     st.lap("search.spectrum");
     let kernel = match &spectrum {
@@ -329,110 +336,156 @@ pub fn fit_fast(
     let re = reblur_half(luma.half());
     st.lap("blur");
     let (w, h) = (y.width, y.height);
-    let (mut zs, mut sig) = (vec![], vec![]);
     // Every other row and column above 400k pixels: edges are lines, so a quarter of
-    // their pixels still gives thousands of samples, at a quarter of the scan.
-    let step = if w * h > 400_000 { 2 } else { 1 };
-    // Squared central-difference gradient magnitudes of rows py − 1, py, py + 1,
-    // each computed over the whole row at once (contiguous, so it vectorises):
-    // ~70% of the scanned pixels fail the edge threshold on them and the
-    // non-maximum suppression reads its neighbours from them (the per-pixel scalar
-    // path took 7.8 ms of 22 at 1280×960).
-    let grad_sq_row = |yy: usize, out: &mut [f32]| {
-        let (up, row, down) =
-            (&y.data[(yy - 1) * w..yy * w], &y.data[yy * w..(yy + 1) * w], &y.data[(yy + 1) * w..(yy + 2) * w]);
-        for x in 1..w - 1 {
-            let (gx, gy) = (0.5 * (row[x + 1] - row[x - 1]), 0.5 * (down[x] - up[x]));
-            out[x] = gx * gx + gy * gy;
+    // their pixels still gives thousands of samples, at a quarter of the scan. A
+    // lower effort reads its share of those rows (every 2nd at effort 0.5, every 4th
+    // at 0.25) — unless that finds fewer than `EFFORT_MIN_EDGES` edges: then the
+    // other rows are read too, which is the full scan (an edge-poor frame, the
+    // rocket's sky, lost its curve on 2 of 6 frames at effort 0.5 without it;
+    // BENCHMARKS.md "The fast tier's effort").
+    let full_step = if w * h > 400_000 { 2 } else { 1 };
+    let row_share = (1.0 / opts.fast_effort.max(crate::fit::MIN_FAST_EFFORT)).round().max(1.0) as usize;
+    // The rows of the full step's lattice whose index `i` satisfies `rows(i)`, every
+    // `step`-th column: per sample its depth, σ and frame row (raster order).
+    let scan = |rows: &dyn Fn(usize) -> bool| -> (Vec<f32>, Vec<f32>, Vec<usize>) {
+        let step = full_step;
+        let (mut zs, mut sig, mut at) = (vec![], vec![], vec![]);
+        // Squared central-difference gradient magnitudes of rows py − 1, py, py + 1,
+        // each computed over the whole row at once (contiguous, so it vectorises):
+        // ~70% of the scanned pixels fail the edge threshold on them and the
+        // non-maximum suppression reads its neighbours from them (the per-pixel scalar
+        // path took 7.8 ms of 22 at 1280×960).
+        let grad_sq_row = |yy: usize, out: &mut [f32]| {
+            let (up, row, down) =
+                (&y.data[(yy - 1) * w..yy * w], &y.data[yy * w..(yy + 1) * w], &y.data[(yy + 1) * w..(yy + 2) * w]);
+            for x in 1..w - 1 {
+                let (gx, gy) = (0.5 * (row[x + 1] - row[x - 1]), 0.5 * (down[x] - up[x]));
+                out[x] = gx * gx + gy * gy;
+            }
+        };
+        let mut m2 = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
+        let min_sq = EDGE_MIN_GRAD * EDGE_MIN_GRAD;
+        // A row's scanned positions over the threshold (at most every position).
+        let mut above = vec![0usize; w / step + 1];
+        // The frame row each of `m2`'s buffers holds: rows py − 1 … py + 1 overlap the
+        // previous scanned row's (one row at step 2, two at step 1), and a row held is
+        // moved into place instead of computed again.
+        let mut held = [usize::MAX; 3];
+        for (_, py) in (2..h.saturating_sub(2)).step_by(step).enumerate().filter(|&(i, _)| rows(i)) {
+            for k in 0..3 {
+                let want = py + k - 1;
+                match (k..3).find(|&j| held[j] == want) {
+                    Some(j) => {
+                        m2.swap(k, j);
+                        held.swap(k, j);
+                    }
+                    None => {
+                        grad_sq_row(want, &mut m2[k]);
+                        held[k] = want;
+                    }
+                }
+            }
+            // The row's positions over the threshold, gathered without a branch per
+            // position (~28% pass on the bench frame: an unpredictable branch).
+            let mut n_above = 0;
+            for px in (2..w.saturating_sub(2)).step_by(step) {
+                above[n_above] = px;
+                n_above += (m2[1][px] >= min_sq) as usize;
+            }
+            for &px in &above[..n_above] {
+                let m_sq = m2[1][px];
+                let z = depth.get(px, py);
+                if !valid_depth(z, units) {
+                    continue;
+                }
+                let (gx, gy) = grad(y, px, py);
+                let m = m_sq.sqrt();
+                // Non-maximum suppression along the (rounded) gradient direction, on
+                // squared magnitudes (the square root is monotone).
+                let (sx, sy) = (round_unit(gx / m), round_unit(gy / m));
+                let (xi, yi) = (px as isize, py as isize);
+                let (ahead, behind) = (&m2[(1 + sy) as usize], &m2[(1 - sy) as usize]);
+                if m_sq < ahead[(xi + sx) as usize] || m_sq < behind[(xi - sx) as usize] {
+                    continue;
+                }
+                // The gradients averaged along the edge (its rounded tangent, ±
+                // `EDGE_TANGENT_TAPS` px; see the constant), and the edge threshold
+                // applied again to the average.
+                let (tx, ty) = (-sy, sx);
+                let k = EDGE_TANGENT_TAPS;
+                let inside = |t: isize| {
+                    let (x, yy) = (xi + t * tx, yi + t * ty);
+                    x >= 2 && yy >= 2 && x < w as isize - 2 && yy < h as isize - 2
+                };
+                if !inside(-k) || !inside(k) {
+                    continue;
+                }
+                // The frame's mean first: the re-blurred one (bilinear, 16 reads per
+                // tap) only for edges that pass the frame's threshold.
+                let (mut g, mut gr) = ((0.0f32, 0.0f32), (0.0f32, 0.0f32));
+                for t in -k..=k {
+                    let (a, b) = grad(y, (xi + t * tx) as usize, (yi + t * ty) as usize);
+                    g = (g.0 + a, g.1 + b);
+                }
+                let taps = (2 * k + 1) as f32;
+                let m = (g.0 * g.0 + g.1 * g.1).sqrt() / taps;
+                if m < EDGE_MIN_GRAD {
+                    continue;
+                }
+                for t in -k..=k {
+                    let (c, d) = reblur_grad(&re, (xi + t * tx) as usize, (yi + t * ty) as usize);
+                    gr = (gr.0 + c, gr.1 + d);
+                }
+                let mr = (gr.0 * gr.0 + gr.1 * gr.1).sqrt() / taps;
+                if mr < EDGE_MIN_REBLUR_GRAD {
+                    continue;
+                }
+                let r = m / mr;
+                if r <= 1.0 {
+                    continue;
+                }
+                let normal = (g.0 / (m * taps), g.1 / (m * taps));
+                if !isolated(y, (xi, yi), (sx, sy), normal, m) {
+                    continue;
+                }
+                sig.push(ZS_SIGMA0 / (r * r - 1.0).sqrt());
+                zs.push(z);
+                at.push(py);
+            }
         }
+        (zs, sig, at)
     };
-    let mut m2 = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
-    let min_sq = EDGE_MIN_GRAD * EDGE_MIN_GRAD;
-    // A row's scanned positions over the threshold (at most every position).
-    let mut above = vec![0usize; w / step + 1];
-    // The frame row each of `m2`'s buffers holds: rows py − 1 … py + 1 overlap the
-    // previous scanned row's (one row at step 2, two at step 1), and a row held is
-    // moved into place instead of computed again.
-    let mut held = [usize::MAX; 3];
-    for py in (2..h.saturating_sub(2)).step_by(step) {
-        for k in 0..3 {
-            let want = py + k - 1;
-            match (k..3).find(|&j| held[j] == want) {
-                Some(j) => {
-                    m2.swap(k, j);
-                    held.swap(k, j);
+    let (mut zs, mut sig, at) = scan(&|i| i % row_share == 0);
+    let mut scan_note = String::new();
+    if row_share > 1 {
+        scan_note = format!(
+            "; edge scan on one row in {row_share} of its {full_step}-px lattice (effort {})",
+            opts.fast_effort
+        );
+        if sig.len() < EFFORT_MIN_EDGES {
+            // The rows left out, merged in frame-row order: the full scan's samples in
+            // its order, exactly (each row's samples depend on that row alone).
+            let (z2, s2, at2) = scan(&|i| i % row_share != 0);
+            scan_note += &format!(
+                " found {} edges, under {EFFORT_MIN_EDGES}: the other rows were read too ({} edges in all)",
+                sig.len(),
+                sig.len() + s2.len()
+            );
+            let (mut merged_z, mut merged_s) = (Vec::with_capacity(zs.len() + z2.len()), vec![]);
+            merged_s.reserve(zs.len() + z2.len());
+            let (mut a, mut b) = (0, 0);
+            while a < at.len() || b < at2.len() {
+                if b == at2.len() || (a < at.len() && at[a] < at2[b]) {
+                    merged_z.push(zs[a]);
+                    merged_s.push(sig[a]);
+                    a += 1;
+                } else {
+                    merged_z.push(z2[b]);
+                    merged_s.push(s2[b]);
+                    b += 1;
                 }
-                None => {
-                    grad_sq_row(want, &mut m2[k]);
-                    held[k] = want;
-                }
             }
-        }
-        // The row's positions over the threshold, gathered without a branch per
-        // position (~28% pass on the bench frame: an unpredictable branch).
-        let mut n_above = 0;
-        for px in (2..w.saturating_sub(2)).step_by(step) {
-            above[n_above] = px;
-            n_above += (m2[1][px] >= min_sq) as usize;
-        }
-        for &px in &above[..n_above] {
-            let m_sq = m2[1][px];
-            let z = depth.get(px, py);
-            if !valid_depth(z, units) {
-                continue;
-            }
-            let (gx, gy) = grad(y, px, py);
-            let m = m_sq.sqrt();
-            // Non-maximum suppression along the (rounded) gradient direction, on
-            // squared magnitudes (the square root is monotone).
-            let (sx, sy) = (round_unit(gx / m), round_unit(gy / m));
-            let (xi, yi) = (px as isize, py as isize);
-            let (ahead, behind) = (&m2[(1 + sy) as usize], &m2[(1 - sy) as usize]);
-            if m_sq < ahead[(xi + sx) as usize] || m_sq < behind[(xi - sx) as usize] {
-                continue;
-            }
-            // The gradients averaged along the edge (its rounded tangent, ±
-            // `EDGE_TANGENT_TAPS` px; see the constant), and the edge threshold
-            // applied again to the average.
-            let (tx, ty) = (-sy, sx);
-            let k = EDGE_TANGENT_TAPS;
-            let inside = |t: isize| {
-                let (x, yy) = (xi + t * tx, yi + t * ty);
-                x >= 2 && yy >= 2 && x < w as isize - 2 && yy < h as isize - 2
-            };
-            if !inside(-k) || !inside(k) {
-                continue;
-            }
-            // The frame's mean first: the re-blurred one (bilinear, 16 reads per
-            // tap) only for edges that pass the frame's threshold.
-            let (mut g, mut gr) = ((0.0f32, 0.0f32), (0.0f32, 0.0f32));
-            for t in -k..=k {
-                let (a, b) = grad(y, (xi + t * tx) as usize, (yi + t * ty) as usize);
-                g = (g.0 + a, g.1 + b);
-            }
-            let taps = (2 * k + 1) as f32;
-            let m = (g.0 * g.0 + g.1 * g.1).sqrt() / taps;
-            if m < EDGE_MIN_GRAD {
-                continue;
-            }
-            for t in -k..=k {
-                let (c, d) = reblur_grad(&re, (xi + t * tx) as usize, (yi + t * ty) as usize);
-                gr = (gr.0 + c, gr.1 + d);
-            }
-            let mr = (gr.0 * gr.0 + gr.1 * gr.1).sqrt() / taps;
-            if mr < EDGE_MIN_REBLUR_GRAD {
-                continue;
-            }
-            let r = m / mr;
-            if r <= 1.0 {
-                continue;
-            }
-            let normal = (g.0 / (m * taps), g.1 / (m * taps));
-            if !isolated(y, (xi, yi), (sx, sy), normal, m) {
-                continue;
-            }
-            sig.push(ZS_SIGMA0 / (r * r - 1.0).sqrt());
-            zs.push(z);
+            (zs, sig) = (merged_z, merged_s);
         }
     }
     st.lap("search.edges");
@@ -449,6 +502,7 @@ pub fn fit_fast(
         dof.kernel = kernel;
         dof.diagnostics.reason = format!("{}; {shape_note}", dof.diagnostics.reason);
     }
+    dof.diagnostics.reason += &scan_note;
     (dof, plot)
 }
 

@@ -3,9 +3,7 @@
 //! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
 //! where the streak zeros are not identified; its method is documented there).
 
-use super::{
-    push_profile, AtLambda, GridTaps, Profiles, FAST_SAMPLES, FAST_SUBSETS, MIN_SAMPLES, TEXTURE_ANISOTROPY_90,
-};
+use super::{push_profile, AtLambda, GridTaps, Profiles, FAST_SUBSETS, MIN_SAMPLES, TEXTURE_ANISOTROPY_90};
 use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
 
@@ -25,12 +23,13 @@ pub(super) fn isotropy_root(
     scale: usize,
     stats: bool,
     pixels: Option<&[(usize, usize)]>,
+    max_samples: usize,
 ) -> Result<IsotropyRoot, usize> {
     let w = flow.width;
     let s = scale as f32;
     let chosen = match pixels {
         Some(px) => px.to_vec(),
-        None => candidates(p, flow, scale),
+        None => candidates(p, flow, scale, max_samples),
     };
     // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
@@ -245,15 +244,16 @@ pub(super) fn isotropy_root(
 }
 
 /// The isotropy samples at `scale`: frame pixels with flow ≥ 3 px/frame and a
-/// gradient on `p`, thinned evenly to at most `FAST_SAMPLES` (see `isotropy_root`).
-fn candidates(p: &Plane, flow: &Flow, scale: usize) -> Vec<(usize, usize)> {
+/// gradient on `p`, thinned evenly to at most `max_samples` (`FAST_SAMPLES` at
+/// full effort; see `isotropy_root`).
+fn candidates(p: &Plane, flow: &Flow, scale: usize, max_samples: usize) -> Vec<(usize, usize)> {
     let (w, h) = (flow.width, flow.height);
     let mut cand = vec![];
-    // Every other pixel of the scale, coarser on large frames: only `FAST_SAMPLES`
+    // Every other pixel of the scale, coarser on large frames: only `max_samples`
     // are kept, so scanning ~8× that many positions (not 300 000 at 1280×960) leaves
     // the selection as even and as magnitude-only as before, at a ninth of the scan.
     let positions = (w / (2 * scale)).max(1) * (h / (2 * scale)).max(1);
-    let thin = ((positions as f64 / (8 * FAST_SAMPLES) as f64).sqrt().floor() as usize).max(1);
+    let thin = ((positions as f64 / (8 * max_samples) as f64).sqrt().floor() as usize).max(1);
     let step = 2 * scale * thin;
     for py in (2 * scale..h.saturating_sub(2 * scale)).step_by(step) {
         for px in (2 * scale..w.saturating_sub(2 * scale)).step_by(step) {
@@ -275,7 +275,7 @@ fn candidates(p: &Plane, flow: &Flow, scale: usize) -> Vec<(usize, usize)> {
             }
         }
     }
-    let keep = cand.len().div_ceil(FAST_SAMPLES).max(1);
+    let keep = cand.len().div_ceil(max_samples).max(1);
     cand.into_iter().step_by(keep).collect()
 }
 
@@ -283,7 +283,7 @@ fn candidates(p: &Plane, flow: &Flow, scale: usize) -> Vec<(usize, usize)> {
 /// for the pooled fit's tests.
 #[cfg(test)]
 pub(in crate::fit) fn isotropy_evidence(p: &Plane, flow: &Flow) -> Option<(f32, IsotropyEvidence)> {
-    isotropy_root(p, flow, 1, true, None).ok().and_then(|r| Some((r.lambda, r.evidence?)))
+    isotropy_root(p, flow, 1, true, None, super::FAST_SAMPLES).ok().and_then(|r| Some((r.lambda, r.evidence?)))
 }
 
 /// What `isotropy_root` measured.

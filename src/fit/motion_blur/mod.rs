@@ -44,7 +44,7 @@ const MAX_PROFILE_INTERVALS: [usize; 2] = [1024, 256];
 pub const MIN_FLOW_PX: f32 = 0.05;
 const MIN_SAMPLES: usize = 64;
 /// Blind tier: pixels (each with 4 profiles) and interleaved subsets for the
-/// standard error.
+/// standard error. `FitOptions::fast_effort` scales the pixels (`fast_samples`).
 const FAST_SAMPLES: usize = 4096;
 const FAST_SUBSETS: usize = 4;
 /// How far a sharp natural scene's gradient-energy ratio along vs across a
@@ -57,6 +57,12 @@ const TEXTURE_ANISOTROPY_90: f64 = 0.21;
 /// Above this half-width of the 90% band the isotropy λ is reported not
 /// identifiable: the band then spans more than half of [0, 1].
 pub(super) const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
+/// The isotropy's pixels at `effort`: `FAST_SAMPLES` scaled, never below 4 subsets
+/// of `MIN_SAMPLES` (the root needs `MIN_SAMPLES` in all).
+fn fast_samples(effort: f32) -> usize {
+    super::scaled_count(FAST_SAMPLES, effort).max(FAST_SUBSETS * MIN_SAMPLES)
+}
+
 /// Default pixel budget of the accurate fit. Measured at 512² (BENCHMARKS.md):
 /// 2048 to 32768 samples all give a median |λ error| below 0.001; 4096 keeps a 2×
 /// margin over the smallest for frames with less texture, at 6 ms instead of 19.
@@ -543,11 +549,21 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 /// texture's own negative lobe at a few px.
 const CONFIRM_MIN_LENGTH_PX: f32 = 10.0;
 
-pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) -> (MotionBlur, Option<MbPlotData>) {
+/// `effort` (`FitOptions::fast_effort`, in [`MIN_FAST_EFFORT`](super::MIN_FAST_EFFORT), 1]) scales the
+/// isotropy's pixels and the streak's lines (BENCHMARKS.md: what each effort costs
+/// in accuracy).
+pub fn fit_fast(
+    luma: &super::SharedLuma,
+    flow: &Flow,
+    evidence_always: bool,
+    effort: f32,
+) -> (MotionBlur, Option<MbPlotData>) {
     let started = Instant::now();
     let y = luma.full();
     let mut st = super::Stages::start();
-    let streak = super::streak_spectrum::streak_signature(y, flow, |_, _| true);
+    let samples = fast_samples(effort);
+    let centres = super::streak_spectrum::target_centres(effort);
+    let streak = super::streak_spectrum::streak_signature_with(y, flow, |_, _| true, centres);
     st.lap("search.spectrum");
     // The autocorrelations, where read for the zeros' check below, serve the
     // fallback too (one FFT per frame).
@@ -617,14 +633,14 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
         );
         // The pooled fit's evidence where asked (`FitOptions::mb_isotropy_evidence`).
         let plot = evidence_always.then(|| {
-            let isotropy = isotropy_root(y, flow, 1, true, None).ok().and_then(|r| r.evidence);
+            let isotropy = isotropy_root(y, flow, 1, true, None, samples).ok().and_then(|r| r.evidence);
             st.lap("search.isotropy");
             MbPlotData { isotropy, ..Default::default() }
         });
         mb.diagnostics.stages_s = st.done();
         return (mb, plot);
     }
-    let fine = isotropy_root(y, flow, 1, true, None);
+    let fine = isotropy_root(y, flow, 1, true, None, samples);
     st.lap("search.isotropy");
     let IsotropyRoot {
         lambda,
@@ -730,7 +746,7 @@ pub fn fit_fast(luma: &super::SharedLuma, flow: &Flow, evidence_always: bool) ->
     // Over the fine root's own pixels: the disagreement then compares one set of
     // pixels at two scales, without a second sampling's scatter (and without a
     // second candidate scan).
-    let coarse = isotropy_root(luma.half(), flow, 2, false, Some(&pixels));
+    let coarse = isotropy_root(luma.half(), flow, 2, false, Some(&pixels), samples);
     st.lap("search.isotropy_coarse");
     let bias = coarse.ok().map_or(0.0, |c| (c.lambda as f64 - lambda as f64).abs());
     // The two-scale disagreement and the prior band (a 90% band: half-width / 1.645

@@ -297,7 +297,25 @@ fn interpolated_noise_correlation(x0: f32, y0: f32, dx: f32, dy: f32, n: usize) 
 
 /// Estimate λ from the streak's spectral zeros on luma `y` with `flow` (px/frame);
 /// `valid(x, y)` says which pixels may be sampled. `None` when no line qualifies.
+/// About `TARGET_CENTRES` lines (full effort; `streak_signature_with` takes another
+/// count).
 pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> bool) -> Option<StreakSignature> {
+    streak_signature_with(y, flow, valid, TARGET_CENTRES)
+}
+
+/// Line centres at `effort` (`FitOptions::fast_effort`): `TARGET_CENTRES` scaled.
+pub fn target_centres(effort: f32) -> usize {
+    crate::fit::scaled_count(TARGET_CENTRES, effort)
+}
+
+/// `streak_signature` over about `centres` line centres (the grid step never below
+/// `GRID_PX`, so small frames read the same lines at any count).
+pub fn streak_signature_with(
+    y: &Plane,
+    flow: &Flow,
+    valid: impl Fn(usize, usize) -> bool,
+    centres: usize,
+) -> Option<StreakSignature> {
     let (w, h) = (y.width, y.height);
     let n = LINE_PX;
     let half = (n / 2) as f32;
@@ -315,7 +333,7 @@ pub fn streak_signature(y: &Plane, flow: &Flow, valid: impl Fn(usize, usize) -> 
     type NoiseKey = (f32, f32, f32, f32);
     let mut noise_r_cache: Option<(NoiseKey, [f64; 3])> = None;
     let inside = |x: f32, yy: f32| x >= 0.0 && yy >= 0.0 && x <= (w - 1) as f32 && yy <= (h - 1) as f32;
-    let grid = (((w * h) as f32 / TARGET_CENTRES as f32).sqrt().ceil() as usize).max(GRID_PX);
+    let grid = (((w * h) as f32 / centres.max(1) as f32).sqrt().ceil() as usize).max(GRID_PX);
     // Centres column by column: a line with a vertical component crosses ~128
     // frame rows, one cache line or two each, and the next centre down the column
     // crosses three quarters of the same rows at the same columns, so it finds them

@@ -169,7 +169,12 @@ fn run_one(inp: &mut Loaded, nets: &mut Networks, opts: &FitOptions) -> Result<F
 }
 
 pub fn run(args: FitArgs) -> Result<()> {
-    let opts = FitOptions { tier: super::tier(args.tier), effects: super::effects(&args.only), ..Default::default() };
+    let opts = FitOptions {
+        tier: super::tier(args.tier),
+        effects: super::effects(&args.only),
+        fast_effort: args.fast_effort,
+        ..Default::default()
+    };
     let g = &args.geometry;
     let mut nets = Networks::load(&args)?;
     let output = if let Some(dir) = &args.frames {

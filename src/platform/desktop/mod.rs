@@ -116,6 +116,10 @@ pub struct FitArgs {
     /// Force a tier; by default accurate where a reference is given, fast elsewhere.
     #[arg(long, value_enum)]
     tier: Option<TierArg>,
+    /// Fast tier: the share of the blind exposure and defocus fits' sample counts
+    /// read, 0.25–1 (speed for accuracy: BENCHMARKS.md "The fast tier's effort").
+    #[arg(long, default_value_t = 1.0)]
+    fast_effort: f32,
     /// Replace a role's provider by an ONNX model (repeatable): ROLE is denoise,
     /// depth, flow, motion-deblur or defocus-deblur; the model must meet the role's
     /// contract (README "Your own networks").
@@ -227,6 +231,10 @@ pub struct CalibrateArgs {
     /// reference).
     #[arg(long, default_value = "accurate")]
     tier: String,
+    /// The blind fits' share of their sample counts, 0.25–1 (speed for accuracy:
+    /// BENCHMARKS.md "The fast tier's effort").
+    #[arg(long, default_value_t = 1.0)]
+    fast_effort: f32,
     /// Replace a role's provider by an ONNX model (repeatable): ROLE is denoise,
     /// depth, flow, motion-deblur or defocus-deblur; the model must meet the role's
     /// contract (README "Your own networks").

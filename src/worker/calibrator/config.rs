@@ -75,6 +75,10 @@ pub struct CalibratorConfig {
     /// aligns only that strip of the previous frame (`None`: the whole frame every
     /// time). Aggregation (the median over `window_s`) then sees the whole frame.
     pub noise_strip_px: Option<usize>,
+    /// The blind exposure and defocus fits' share of their sample counts
+    /// (`FitOptions::fast_effort`, [0.25, 1]): speed for accuracy, measured in
+    /// BENCHMARKS.md ("The fast tier's effort").
+    pub fast_effort: f32,
 }
 
 impl CalibratorConfig {
@@ -110,6 +114,7 @@ impl CalibratorConfig {
             },
             sharp_max_age_s: 3.0,
             noise_strip_px: Some(NOISE_STRIP_PX),
+            fast_effort: 1.0,
         }
     }
 }

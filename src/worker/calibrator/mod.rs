@@ -158,6 +158,13 @@ impl Calibrator {
         if !(cfg.window_s > 0.0 && cfg.burst_s >= 0.0 && cfg.update_interval_s >= 0.0) {
             return Err(CalibError::Config("window, burst and update interval must be ≥ 0 (window > 0)".into()));
         }
+        if !(cfg.fast_effort >= fit::MIN_FAST_EFFORT && cfg.fast_effort <= 1.0) {
+            return Err(CalibError::Config(format!(
+                "fast effort {}: need {} ≤ effort ≤ 1",
+                cfg.fast_effort,
+                fit::MIN_FAST_EFFORT
+            )));
+        }
         if let Some(k) = &cfg.intrinsics {
             if ![k.fx, k.fy, k.cx, k.cy].iter().all(|v| v.is_finite()) || k.fx <= 0.0 || k.fy <= 0.0 {
                 return Err(CalibError::Config(format!("intrinsics {k:?}: need finite values and fx, fy > 0")));
@@ -530,11 +537,15 @@ impl Calibrator {
             self.stages.add("flow", tflow);
         }
         let depth = current.depth.as_ref();
+        // The effects without a reference run blind, at the configured effort.
+        let fast_effort = self.cfg.fast_effort;
         let only = |n, m, d| FitOptions {
             effects: Effects { noise: n, motion_blur: m, depth_of_field: d },
+            fast_effort,
             ..Default::default()
         };
-        let fast_opts = |e: Effects| FitOptions { tier: Some(fit::Tier::Fast), effects: e, ..Default::default() };
+        let fast_opts =
+            |e: Effects| FitOptions { tier: Some(fit::Tier::Fast), effects: e, fast_effort, ..Default::default() };
 
         // References per effect (None: that effect runs blind).
         let t_refs = Instant::now();
