@@ -341,8 +341,8 @@ pub fn fit_fast(
     // lower effort reads its share of those rows (every 2nd at effort 0.5, every 4th
     // at 0.25) — unless that finds fewer than `EFFORT_MIN_EDGES` edges: then the
     // other rows are read too, which is the full scan (an edge-poor frame, the
-    // rocket's sky, lost its curve on 2 of 6 frames at effort 0.5 without it;
-    // BENCHMARKS.md "The fast tier's effort").
+    // rocket's sky at 37–256 edges, lost its curve on 2 of 6 frames to a coarser
+    // scan without this guard; BENCHMARKS.md "The fast tier's effort").
     let full_step = if w * h > 400_000 { 2 } else { 1 };
     let row_share = (1.0 / opts.fast_effort.max(crate::fit::MIN_FAST_EFFORT)).round().max(1.0) as usize;
     // The rows of the full step's lattice whose index `i` satisfies `rows(i)`, every
