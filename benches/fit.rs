@@ -88,6 +88,15 @@ fn bench(cr: &mut Criterion) {
                 let inp = inputs(&c, &c.all);
                 b.iter(|| pool.install(|| fit(&inp, &only(true, true, true, Tier::Fast)).expect("fit")))
             });
+            // The fast tier at half effort (`FitOptions::fast_effort`; its accuracy:
+            // BENCHMARKS.md "The fast tier's effort"), one thread.
+            if pool_name == "1thread" {
+                g.bench_function(BenchmarkId::new("fast_all_effects_effort_0.5", &label), |b| {
+                    let inp = inputs(&c, &c.all);
+                    let opts = FitOptions { fast_effort: 0.5, ..only(true, true, true, Tier::Fast) };
+                    b.iter(|| pool.install(|| fit(&inp, &opts).expect("fit")))
+                });
+            }
         }
         g.finish();
     }
