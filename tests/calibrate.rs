@@ -231,6 +231,13 @@ fn bad_input_is_refused_by_name() {
     let mut cfg = CalibratorConfig::new(tier, 0.0, Some(spec.view));
     assert!(matches!(Calibrator::new(cfg.clone(), Providers::for_tier(tier)).unwrap_err(), CalibError::Config(_)));
     cfg.frame_interval_s = 1.0 / 30.0;
+    // The blind fits' effort outside [0.25, 1] (`FitOptions::fast_effort`): refused
+    // when the worker is made, not on every frame.
+    for bad in [0.2f32, 1.5, f32::NAN] {
+        let cfg = CalibratorConfig { fast_effort: bad, ..cfg.clone() };
+        let err = Calibrator::new(cfg, Providers::for_tier(tier)).unwrap_err();
+        assert!(matches!(&err, CalibError::Config(m) if m.contains("fast effort")), "{bad}: {err}");
+    }
     cfg.intrinsics.as_mut().expect("set").fx = f32::NAN;
     assert!(matches!(Calibrator::new(cfg, Providers::for_tier(tier)).unwrap_err(), CalibError::Config(_)));
 }
