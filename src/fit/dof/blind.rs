@@ -167,6 +167,14 @@ const INTERFERENCE_REACH_PX: f32 = 7.0;
 /// opposite sign: a neighbouring edge).
 const INTERFERENCE_MAX_FRACTION: f32 = 0.2;
 
+/// Fewest edges a reduced-effort scan (`FitOptions::fast_effort` < 1: a share of
+/// the rows) must find before its samples are used alone (see `fit_fast`): below
+/// it the other rows are read too, which makes the full scan. Full-effort scans
+/// find ~2 300–3 000 edges on textured 1280×960 frames, 37–256 on edge-poor ones
+/// (`examples/effort_probe.rs`), so a half-effort scan of a textured frame keeps
+/// over 1 000 and an edge-poor one is read whole.
+const EFFORT_MIN_EDGES: usize = 600;
+
 /// Whether the edge at `c` (gradient direction rounded to `s`, unit `normal`,
 /// tangent-averaged magnitude `peak`) is alone within `INTERFERENCE_REACH_PX`
 /// along its normal: the gradient projected on the normal (averaged along the
@@ -175,10 +183,6 @@ const INTERFERENCE_MAX_FRACTION: f32 = 0.2;
 /// ratio assumes one step: a thin line's two edges cancel in the re-blur and read
 /// δ low, a staircase's add and read it high. Near the border the walk stops
 /// (nothing seen is nothing against).
-/// Fewest edges a reduced-effort scan must find before its samples are used (see
-/// `fit_fast`): below it the full step's scan is read instead.
-const EFFORT_MIN_EDGES: usize = 600;
-
 fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32), peak: f32) -> bool {
     let (w, h) = (y.width as isize, y.height as isize);
     let step = ((s.0 * s.0 + s.1 * s.1) as f32).sqrt();
