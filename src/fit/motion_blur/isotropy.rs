@@ -3,9 +3,29 @@
 //! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
 //! where the streak zeros are not identified; its method is documented there).
 
-use super::{push_profile, AtLambda, GridTaps, Profiles, FAST_SUBSETS, MIN_SAMPLES, TEXTURE_ANISOTROPY_90};
+use super::{push_profile, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
 use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
+
+/// Blind tier: pixels (each with 4 profiles) and interleaved subsets for the
+/// standard error. `FitOptions::fast_effort` scales the pixels (`fast_samples`).
+const FAST_SAMPLES: usize = 4096;
+const FAST_SUBSETS: usize = 4;
+/// How far a sharp natural scene's gradient-energy ratio along vs across a
+/// direction, C(0)/D(0) − 1 over the isotropy estimator's own pixel selection,
+/// strays from 1 — the 90th percentile of |·|, measured on the astronaut, chelsea
+/// and Motorcycle photographs at 12 directions each (36 values: median 0.052, 68th
+/// percentile 0.097, 90th 0.21, largest 0.29 — the astronaut). The isotropy root
+/// assumes 0; the λ range [root at 1 − this, root at 1 + this] is its ~90% band.
+pub(super) const TEXTURE_ANISOTROPY_90: f64 = 0.21;
+/// Above this half-width of the 90% band the isotropy λ is reported not
+/// identifiable: the band then spans more than half of [0, 1].
+pub(in crate::fit) const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
+/// The isotropy's pixels at `effort`: `FAST_SAMPLES` scaled, never below 4 subsets
+/// of `MIN_SAMPLES` (the root needs `MIN_SAMPLES` in all).
+pub(super) fn fast_samples(effort: f32) -> usize {
+    crate::fit::scaled_count(FAST_SAMPLES, effort).max(FAST_SUBSETS * MIN_SAMPLES)
+}
 
 /// The isotropy root on plane `p` at `scale` (1: the frame; 2: its reduction, whose
 /// pixel (x, y) sits at frame pixel (2x, 2y)); `Err(samples)` below `MIN_SAMPLES`.
@@ -283,7 +303,7 @@ fn candidates(p: &Plane, flow: &Flow, scale: usize, max_samples: usize) -> Vec<(
 /// for the pooled fit's tests.
 #[cfg(test)]
 pub(in crate::fit) fn isotropy_evidence(p: &Plane, flow: &Flow) -> Option<(f32, IsotropyEvidence)> {
-    isotropy_root(p, flow, 1, true, None, super::FAST_SAMPLES).ok().and_then(|r| Some((r.lambda, r.evidence?)))
+    isotropy_root(p, flow, 1, true, None, FAST_SAMPLES).ok().and_then(|r| Some((r.lambda, r.evidence?)))
 }
 
 /// What `isotropy_root` measured.

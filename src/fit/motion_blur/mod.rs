@@ -27,7 +27,8 @@ use crate::image::{Flow, Plane, Rgb};
 use crate::model::{flow_within_frame, Diagnostics, MotionBlur, Status};
 #[cfg(test)]
 pub(super) use isotropy::isotropy_evidence;
-use isotropy::{isotropy_root, IsotropyRoot};
+pub(super) use isotropy::MAX_ISOTROPY_HALF_BAND;
+use isotropy::{fast_samples, isotropy_root, IsotropyRoot, TEXTURE_ANISOTROPY_90};
 use std::time::Instant;
 
 const PROFILE_SPACING_PX: f32 = 0.2;
@@ -43,26 +44,6 @@ const MAX_PROFILE_INTERVALS: [usize; 2] = [1024, 256];
 /// most, below anything λ could be read from.
 pub const MIN_FLOW_PX: f32 = 0.05;
 const MIN_SAMPLES: usize = 64;
-/// Blind tier: pixels (each with 4 profiles) and interleaved subsets for the
-/// standard error. `FitOptions::fast_effort` scales the pixels (`fast_samples`).
-const FAST_SAMPLES: usize = 4096;
-const FAST_SUBSETS: usize = 4;
-/// How far a sharp natural scene's gradient-energy ratio along vs across a
-/// direction, C(0)/D(0) − 1 over the isotropy estimator's own pixel selection,
-/// strays from 1 — the 90th percentile of |·|, measured on the astronaut, chelsea
-/// and Motorcycle photographs at 12 directions each (36 values: median 0.052, 68th
-/// percentile 0.097, 90th 0.21, largest 0.29 — the astronaut). The isotropy root
-/// assumes 0; the λ range [root at 1 − this, root at 1 + this] is its ~90% band.
-const TEXTURE_ANISOTROPY_90: f64 = 0.21;
-/// Above this half-width of the 90% band the isotropy λ is reported not
-/// identifiable: the band then spans more than half of [0, 1].
-pub(super) const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
-/// The isotropy's pixels at `effort`: `FAST_SAMPLES` scaled, never below 4 subsets
-/// of `MIN_SAMPLES` (the root needs `MIN_SAMPLES` in all).
-fn fast_samples(effort: f32) -> usize {
-    super::scaled_count(FAST_SAMPLES, effort).max(FAST_SUBSETS * MIN_SAMPLES)
-}
-
 /// Default pixel budget of the accurate fit. Measured at 512² (BENCHMARKS.md):
 /// 2048 to 32768 samples all give a median |λ error| below 0.001; 4096 keeps a 2×
 /// margin over the smallest for frames with less texture, at 6 ms instead of 19.
