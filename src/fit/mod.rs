@@ -165,9 +165,9 @@ pub struct FitOptions {
     pub noise_fast_samples_per_level: usize,
     /// Blind exposure and defocus: the share of their full sample counts read, in
     /// [`MIN_FAST_EFFORT`, 1] (default 1) — the isotropy's pixels (4 096), the
-    /// streak's lines (~1 200) and the edge scan's positions (every other row and
-    /// column above 400 000 px: the step grows by 1/√effort; a scan that finds too
-    /// few edges is redone at the full step). The defocus spectrum keeps its tiles
+    /// streak's lines (~1 200) and the edge scan's rows (one in round(1/effort) of
+    /// its lattice; a scan that finds too few edges reads the other rows too, which
+    /// makes the full scan). The defocus spectrum keeps its tiles
     /// (fewer mistook Gaussian blur for a disc) and the blind noise grid has its own
     /// setting (`noise_fast_samples_per_level`). What each effort saves and costs in
     /// accuracy is measured in BENCHMARKS.md ("The fast tier's effort").

@@ -475,21 +475,13 @@ pub fn fit_fast(
                 sig.len(),
                 sig.len() + s2.len()
             );
-            let (mut merged_z, mut merged_s) = (Vec::with_capacity(zs.len() + z2.len()), vec![]);
-            merged_s.reserve(zs.len() + z2.len());
-            let (mut a, mut b) = (0, 0);
-            while a < at.len() || b < at2.len() {
-                if b == at2.len() || (a < at.len() && at[a] < at2[b]) {
-                    merged_z.push(zs[a]);
-                    merged_s.push(sig[a]);
-                    a += 1;
-                } else {
-                    merged_z.push(z2[b]);
-                    merged_s.push(s2[b]);
-                    b += 1;
-                }
-            }
-            (zs, sig) = (merged_z, merged_s);
+            // Rows are disjoint between the passes and a stable sort keeps each row's
+            // own order.
+            let mut all: Vec<(usize, f32, f32)> =
+                at.iter().zip(&zs).zip(&sig).map(|((&r, &z), &s)| (r, z, s)).collect();
+            all.extend(at2.iter().zip(&z2).zip(&s2).map(|((&r, &z), &s)| (r, z, s)));
+            all.sort_by_key(|t| t.0);
+            (zs, sig) = all.into_iter().map(|(_, z, s)| (z, s)).unzip();
         }
     }
     st.lap("search.edges");
