@@ -240,3 +240,164 @@ pub fn fit_dof_curve(depth: &[f32], sigma_px: &[f32], units: DepthUnits, depth_r
     };
     Some(CurveFit { curve, loss, scale, stderr_px, quadratic: quad.map(|(c, _)| c), thin_lens: thin.map(|(c, _)| c) })
 }
+
+/// The fitted curve's standard error as the RMS over `range` (65 depths, even in
+/// Z) of its prediction standard error, from a cluster-robust (sandwich)
+/// covariance of its linear parameters: bread Σ wᵢ xᵢxᵢᵀ, meat Σ_g (Σ_{i∈g} wᵢrᵢxᵢ)(…)ᵀ
+/// over the samples' clusters `cluster[i]` (Huber weights wᵢ at `scale`), times
+/// G/(G − 1). Why: samples of one edge or one patch of texture share their errors,
+/// so scale·√(p/N) counts them as independent; and the prediction's variance grows
+/// where the range lies beyond the samples' depths (leverage). The thin lens is
+/// linear at its fitted focus (the focus's own uncertainty is left out).
+/// With the number of clusters holding samples; None with fewer than 4 or a
+/// singular design.
+pub fn cluster_stderr(
+    curve: &DofCurve,
+    z: &[f32],
+    s: &[f32],
+    cluster: &[u32],
+    scale: f64,
+    units: DepthUnits,
+    range: [f32; 2],
+) -> Option<(f64, usize)> {
+    let n = z.len().min(s.len()).min(cluster.len());
+    let grid: Vec<f64> = (0..=64).map(|i| (range[0] + (range[1] - range[0]) * i as f32 / 64.0) as f64).collect();
+    match *curve {
+        DofCurve::Quadratic { a, b, c } => {
+            let zm = z[..n].iter().map(|&v| v as f64).sum::<f64>() / n.max(1) as f64;
+            let zs = (z[..n].iter().map(|&v| (v as f64 - zm).powi(2)).sum::<f64>() / n.max(1) as f64).sqrt().max(1e-9);
+            let x = |zz: f64| {
+                let t = (zz - zm) / zs;
+                [t * t, t, 1.0]
+            };
+            let f = |zz: f64| (a as f64 * zz + b as f64) * zz + c as f64;
+            sandwich(
+                n,
+                |i| x(z[i] as f64),
+                |i| s[i] as f64 - f(z[i] as f64),
+                cluster,
+                scale,
+                grid.iter().map(|&g| x(g)),
+            )
+        }
+        DofCurve::ThinLens { k, focus_depth, c0 } => {
+            let uf = units.inverse_depth(focus_depth) as f64;
+            let x = |zz: f32| [(units.inverse_depth(zz) as f64 - uf).abs(), 1.0];
+            let f = |zz: f32| k as f64 * x(zz)[0] + c0 as f64;
+            sandwich(n, |i| x(z[i]), |i| s[i] as f64 - f(z[i]), cluster, scale, grid.iter().map(|&g| x(g as f32)))
+        }
+        DofCurve::Constant { c } => {
+            sandwich(n, |_| [1.0], |i| s[i] as f64 - c as f64, cluster, scale, grid.iter().map(|_| [1.0]))
+        }
+    }
+}
+
+fn sandwich<const P: usize>(
+    n: usize,
+    row: impl Fn(usize) -> [f64; P],
+    res: impl Fn(usize) -> f64,
+    cluster: &[u32],
+    scale: f64,
+    at: impl Iterator<Item = [f64; P]>,
+) -> Option<(f64, usize)> {
+    let groups = cluster[..n].iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let mut score = vec![[0.0f64; P]; groups];
+    let mut bread = nalgebra::SMatrix::<f64, P, P>::zeros();
+    let k = HUBER_K * scale.max(1e-6);
+    for i in 0..n {
+        let (x, r) = (row(i), res(i));
+        if !r.is_finite() {
+            continue;
+        }
+        let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
+        for a in 0..P {
+            score[cluster[i] as usize][a] += w * r * x[a];
+            for b in 0..P {
+                bread[(a, b)] += w * x[a] * x[b];
+            }
+        }
+    }
+    let mut meat = nalgebra::SMatrix::<f64, P, P>::zeros();
+    let mut g = 0usize;
+    for sc in score.iter().filter(|sc| sc.iter().any(|&v| v != 0.0)) {
+        g += 1;
+        let v = nalgebra::SVector::<f64, P>::from_column_slice(sc);
+        meat += v * v.transpose();
+    }
+    if g < 4 {
+        return None;
+    }
+    let inv = bread.try_inverse()?;
+    let cov = inv * meat * inv * (g as f64 / (g - 1) as f64);
+    let (mut sum, mut m) = (0.0f64, 0usize);
+    for x in at {
+        let v = nalgebra::SVector::<f64, P>::from_column_slice(&x);
+        sum += (v.transpose() * cov * v)[(0, 0)].max(0.0);
+        m += 1;
+    }
+    let out = (sum / m.max(1) as f64).sqrt();
+    out.is_finite().then_some((out, g))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Samples that share their errors are counted once: every sample repeated four
+    /// times reads the same standard error as the set once, when each copy shares
+    /// its original's cluster (to the G/(G − 1) factor, the same G) — and half of
+    /// it (1/√4) when every copy is taken as independent, the old formula's mistake.
+    /// Tolerance 1e-9 relative for the equality (float sums in another order), 1%
+    /// for the half (G/(G − 1) of 40 vs 160 clusters).
+    #[test]
+    fn shared_errors_are_counted_once() {
+        let units = DepthUnits::MetricM;
+        let z: Vec<f32> = (0..40).map(|i| 0.8 + 0.07 * i as f32).collect();
+        let noise = |i: usize| ((i * 37 % 11) as f32 - 5.0) * 0.03;
+        let s: Vec<f32> = z.iter().enumerate().map(|(i, &z)| 0.2 * z * z - 0.5 * z + 1.0 + noise(i)).collect();
+        let curve = fit_dof_curve(&z, &s, units, [0.8, 3.53]).expect("fits").curve;
+        let range = [0.8, 3.53];
+        let own: Vec<u32> = (0..40).collect();
+        let (once, g) = cluster_stderr(&curve, &z, &s, &own, 0.1, units, range).expect("40 clusters");
+        assert_eq!(g, 40);
+        let rep = |v: &[f32]| v.iter().flat_map(|&x| [x; 4]).collect::<Vec<f32>>();
+        let (z4, s4) = (rep(&z), rep(&s));
+        let shared: Vec<u32> = (0..160).map(|i| i / 4).collect();
+        let (same, _) = cluster_stderr(&curve, &z4, &s4, &shared, 0.1, units, range).expect("40 clusters");
+        assert!((same / once - 1.0).abs() < 1e-9, "{same} vs {once}");
+        let apart: Vec<u32> = (0..160).collect();
+        let (half, _) = cluster_stderr(&curve, &z4, &s4, &apart, 0.1, units, range).expect("160 clusters");
+        assert!((half / (0.5 * once) - 1.0).abs() < 0.01, "{half} vs {}", 0.5 * once);
+    }
+
+    /// Beyond the samples' depths the prediction's error grows (leverage): the same
+    /// fit read over twice its span reads a larger standard error, for each form.
+    /// Fewer than four clusters give none.
+    #[test]
+    fn extrapolation_widens_and_few_clusters_give_none() {
+        let units = DepthUnits::MetricM;
+        let z: Vec<f32> = (0..60).map(|i| 1.5 + 0.02 * i as f32).collect();
+        let s: Vec<f32> = z
+            .iter()
+            .enumerate()
+            .map(|(i, &z)| 1.5 * (1.0 / z - 0.5).abs() + 0.3 + ((i % 5) as f32 - 2.0) * 0.02)
+            .collect();
+        let cells: Vec<u32> = (0..60).map(|i| i / 6).collect();
+        for curve in [
+            DofCurve::Quadratic { a: 0.1, b: -0.2, c: 0.5 },
+            DofCurve::ThinLens { k: 1.5, focus_depth: 2.0, c0: 0.3 },
+            DofCurve::Constant { c: 0.4 },
+        ] {
+            let (inside, _) = cluster_stderr(&curve, &z, &s, &cells, 0.05, units, [1.5, 2.68]).expect("10 clusters");
+            let (beyond, _) = cluster_stderr(&curve, &z, &s, &cells, 0.05, units, [0.9, 3.3]).expect("10 clusters");
+            assert!(inside > 0.0 && inside.is_finite(), "{curve:?}: {inside}");
+            match curve {
+                // A constant has no leverage: the same error anywhere.
+                DofCurve::Constant { .. } => assert!((beyond / inside - 1.0).abs() < 1e-9, "{inside} vs {beyond}"),
+                _ => assert!(beyond > 1.5 * inside, "{curve:?}: {inside} → {beyond}"),
+            }
+            let three: Vec<u32> = (0..60).map(|i| i % 3).collect();
+            assert!(cluster_stderr(&curve, &z, &s, &three, 0.05, units, [1.5, 2.68]).is_none());
+        }
+    }
+}

@@ -351,7 +351,7 @@ pub fn fit_fast(
     let row_share = (1.0 / opts.fast_effort.max(crate::fit::MIN_FAST_EFFORT)).round().max(1.0) as usize;
     // The rows of the full step's lattice whose index `i` satisfies `rows(i)`, every
     // `step`-th column: per sample its depth, σ and frame row (raster order).
-    let scan = |rows: &dyn Fn(usize) -> bool| -> (Vec<f32>, Vec<f32>, Vec<usize>) {
+    let scan = |rows: &dyn Fn(usize) -> bool| -> (Vec<f32>, Vec<f32>, Vec<(usize, usize)>) {
         let step = full_step;
         let (mut zs, mut sig, mut at) = (vec![], vec![], vec![]);
         // Squared central-difference gradient magnitudes of rows py − 1, py, py + 1,
@@ -454,12 +454,12 @@ pub fn fit_fast(
                 }
                 sig.push(ZS_SIGMA0 / (r * r - 1.0).sqrt());
                 zs.push(z);
-                at.push(py);
+                at.push((py, px));
             }
         }
         (zs, sig, at)
     };
-    let (mut zs, mut sig, at) = scan(&|i| i % row_share == 0);
+    let (mut zs, mut sig, mut at) = scan(&|i| i % row_share == 0);
     let mut scan_note = String::new();
     if row_share > 1 {
         scan_note = format!(
@@ -477,10 +477,11 @@ pub fn fit_fast(
             );
             // Rows are disjoint between the passes and a stable sort keeps each row's
             // own order.
-            let mut all: Vec<(usize, f32, f32)> =
+            let mut all: Vec<((usize, usize), f32, f32)> =
                 at.iter().zip(&zs).zip(&sig).map(|((&r, &z), &s)| (r, z, s)).collect();
             all.extend(at2.iter().zip(&z2).zip(&s2).map(|((&r, &z), &s)| (r, z, s)));
-            all.sort_by_key(|t| t.0);
+            all.sort_by_key(|t| t.0 .0);
+            at = all.iter().map(|t| t.0).collect();
             (zs, sig) = all.into_iter().map(|(_, z, s)| (z, s)).unzip();
         }
     }
@@ -491,9 +492,12 @@ pub fn fit_fast(
     // its depths) is kept, and the reported standard error is that of the kept ones.
     let keep = sig.len().div_ceil(FAST_MAX_EDGE_SAMPLES).max(1);
     let zs: Vec<f32> = zs.into_iter().step_by(keep).collect();
+    let at: Vec<(usize, usize)> = at.into_iter().step_by(keep).collect();
     let sig: Vec<f32> =
         sig.into_iter().step_by(keep).map(|raw| calibrate(raw, kernel).min(opts.dof_max_sigma_px)).collect();
-    let (mut dof, plot) = finish("fast", zs, sig, units, frame_depth_span(depth, units), started, st, |_| None);
+    let cells = super::Cells::new(w, h);
+    let cell: Vec<u32> = at.into_iter().step_by(keep).map(|(py, px)| cells.of(px, py)).collect();
+    let (mut dof, plot) = finish("fast", zs, sig, cell, units, frame_depth_span(depth, units), started, st, |_| None);
     if dof.curve.is_some() {
         dof.kernel = kernel;
         dof.diagnostics.reason = format!("{}; {shape_note}", dof.diagnostics.reason);
@@ -526,20 +530,27 @@ pub fn fit_fast_pooled(
     let started = Instant::now();
     let mut st = crate::fit::Stages::start();
     let share = POOLED_MAX_EDGE_SAMPLES / frames.len().max(1);
-    let (mut z, mut s) = (vec![], vec![]);
+    let (mut z, mut s, mut cell) = (vec![], vec![], vec![]);
     let mut span: Option<[f32; 2]> = None;
+    // Each frame's cells apart (a cell of one view is not the same patch of scene
+    // in the next); a frame without cells gives each sample its own.
+    let mut offset = 0u32;
     for f in frames {
         let n = f.depth.len().min(f.sigma_px.len());
         let keep = n.div_ceil(share.max(1)).max(1);
         z.extend(f.depth[..n].iter().step_by(keep));
         s.extend(f.sigma_px[..n].iter().step_by(keep));
+        let own: Vec<u32> = if f.cell.len() >= n { f.cell[..n].to_vec() } else { (0..n as u32).collect() };
+        let next = offset + own.iter().max().map_or(0, |&c| c + 1);
+        cell.extend(own.into_iter().step_by(keep).map(|c| offset + c));
+        offset = next;
         if let Some([lo, hi]) = f.frame_depth_span {
             span = Some(span.map_or([lo, hi], |[a, b]| [a.min(lo), b.max(hi)]));
         }
     }
     st.lap("pool");
     let method = format!("fast (edges pooled over {} frames)", frames.len());
-    let (mut dof, plot) = finish(&method, z, s, units, span, started, st, |_| None);
+    let (mut dof, plot) = finish(&method, z, s, cell, units, span, started, st, |_| None);
     if dof.curve.is_some() {
         dof.kernel = kernel;
     }
@@ -596,7 +607,7 @@ mod pooled_tests {
         let truth = |z: f32| 4.0 * (1.0 / z - 1.0 / 2.5).abs() + 0.3;
         let sigma_px =
             z.iter().enumerate().map(|(i, &z)| truth(z) + 0.3 * ((i * 7919) % 13) as f32 / 6.0 - 0.3).collect();
-        DofPlotData { depth: z, sigma_px, quadratic: None, thin_lens: None, frame_depth_span: Some(span) }
+        DofPlotData { depth: z, sigma_px, quadratic: None, thin_lens: None, frame_depth_span: Some(span), cell: vec![] }
     }
 
     /// Two views of one camera, one seeing only near depths (1–2 m, ten times the

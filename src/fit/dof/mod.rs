@@ -75,6 +75,43 @@ pub struct DofPlotData {
     /// evaluation range's outer bound (`evaluation_range`); pooled fits take the
     /// union over their frames.
     pub frame_depth_span: Option<[f32; 2]>,
+    /// Per sample, the frame cell it lies in (`Cells`): the clusters of the
+    /// standard error's sandwich (`curve::cluster_stderr`); pooled fits keep each
+    /// frame's cells apart.
+    pub cell: Vec<u32>,
+}
+
+/// Cells of the frame whose samples are taken to share their errors (one edge, one
+/// patch of texture), for the δ(Z) standard error (`curve::cluster_stderr`): a grid
+/// of about `CELLS` square cells, whatever the resolution (80 px at 1280×960, 20 px
+/// at 320×240), so that a cell holds a stretch of edge and its neighbourhood.
+/// Measured on the 24 defocus-ramp frames of `examples/effort_probe` (BENCHMARKS.md
+/// "The blind δ(Z)'s standard error"): 32 / 64 / 128 px cells at 1280×960 read a
+/// median 1.8 / 2.0 / 2.4× (1.2–4.1× over the frames) the sandwich with every
+/// sample its own cluster — growing slowly past the scale of an edge.
+pub(crate) struct Cells {
+    px: usize,
+    cols: usize,
+}
+
+/// The blind tier's edge-calibration bias, as a fraction of δ's RMS over the
+/// evaluated depths (`finish`): on a texture of known blur (no blur of its own) the
+/// blind curves of `examples/effort_probe`'s procedural frames are off by 0.039–0.075
+/// px RMS, 3–5% of their δ's RMS, while their statistical error reads 0.008–0.016 px
+/// (BENCHMARKS.md "The blind δ(Z)'s standard error").
+const EDGE_CALIBRATION_BIAS: f64 = 0.05;
+
+/// About how many cells a frame is cut into (`Cells`).
+const CELLS: usize = 192;
+
+impl Cells {
+    pub(crate) fn new(w: usize, h: usize) -> Self {
+        let px = (((w * h) as f64 / CELLS as f64).sqrt().round() as usize).max(4);
+        Self { px, cols: w.div_ceil(px).max(1) }
+    }
+    pub(crate) fn of(&self, x: usize, y: usize) -> u32 {
+        ((y / self.px) * self.cols + x / self.px) as u32
+    }
 }
 
 fn valid_depth(z: f32, units: DepthUnits) -> bool {
@@ -159,6 +196,7 @@ fn finish(
     method: &str,
     z: Vec<f32>,
     s: Vec<f32>,
+    cell: Vec<u32>,
     units: DepthUnits,
     frame_span: Option<[f32; 2]>,
     started: Instant,
@@ -190,7 +228,72 @@ fn finish(
     };
     let max_sigma =
         (0..=64).map(|i| dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0)).fold(0.0f32, f32::max);
-    let present = max_sigma >= 0.1 && (max_sigma as f64) > 3.0 * fit.stderr_px;
+    // The standard error over the evaluated depths, samples clustered by their frame
+    // cell (`curve::cluster_stderr`): scale·√(3/N) took the edges as independent
+    // and the curve as known beyond them — 6–25× under the error on the blind
+    // tier's known-answer ramps (BENCHMARKS.md "The blind δ(Z)'s standard error").
+    let clustered = crate::fit::curve::cluster_stderr(&fit.curve, &z, &s, &cell, fit.scale, units, range);
+    let (stderr_px, clusters) = match clustered {
+        Some((se, groups)) => (se, format!("samples clustered in {groups} frame cells")),
+        None => {
+            let iid: Vec<u32> = (0..n as u32).collect();
+            let se = crate::fit::curve::cluster_stderr(&fit.curve, &z, &s, &iid, fit.scale, units, range);
+            (se.map_or(fit.stderr_px, |(se, _)| se), "fewer than 4 frame cells: samples taken as independent".into())
+        }
+    };
+    // Never under the independent-sample figure at the samples' own depths.
+    let stat_px = stderr_px.max(fit.stderr_px);
+    // The edge ratios' calibration (`blind::calibrate`) is biased by a texture's own
+    // profile, and that bias is shared by every sample: no spread shows it. Measured
+    // on a texture of known blur (the procedural frames of `examples/effort_probe`:
+    // 3–5% of the curve's RMS), it enters the blind tier's error in quadrature.
+    // Beyond the textured depths the samples cannot choose between the two forms:
+    // half their spread there (none inside), as an RMS over the evaluated depths.
+    let beyond_px = match (fit.quadratic, fit.thin_lens) {
+        (Some(q), Some(t)) => {
+            let (lo, hi) = (textured[0].min(textured[1]), textured[0].max(textured[1]));
+            ((0..=64)
+                .map(|i| {
+                    let zz = range[0] + (range[1] - range[0]) * i as f32 / 64.0;
+                    if (lo..=hi).contains(&zz) {
+                        0.0
+                    } else {
+                        (0.5 * (q.sigma_px(units, zz) - t.sigma_px(units, zz)) as f64).powi(2)
+                    }
+                })
+                .sum::<f64>()
+                / 65.0)
+                .sqrt()
+        }
+        _ => 0.0,
+    };
+    let stat_px = stat_px.hypot(beyond_px);
+    let (stderr_px, bias_note) = if method.starts_with("fast") {
+        let rms = ((0..=64)
+            .map(|i| (dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0) as f64).powi(2))
+            .sum::<f64>()
+            / 65.0)
+            .sqrt();
+        let bias = EDGE_CALIBRATION_BIAS * rms;
+        (
+            stat_px.hypot(bias),
+            format!(", in quadrature with {bias:.3} px of edge-calibration bias ({EDGE_CALIBRATION_BIAS} of δ's RMS)"),
+        )
+    } else {
+        (stat_px, String::new())
+    };
+    // Visible and above 3 standard errors: present. Invisible (< 0.1 px) whatever the
+    // error: absent. A visible curve within 3 standard errors of none says neither
+    // (an edge-poor frame's curve through a narrow band of depths, extrapolated):
+    // not identifiable, so that it does not vote "absent" in the worker's window.
+    let status = if max_sigma < 0.1 {
+        Status::Absent
+    } else if (max_sigma as f64) > 3.0 * stderr_px {
+        Status::Present
+    } else {
+        Status::NotIdentifiable
+    };
+    let present = status == Status::Present;
     st.lap("least_squares");
     let residuals = residual_at(&dof);
     let form = match fit.curve {
@@ -200,24 +303,30 @@ fn finish(
     };
     dof.present = present;
     dof.diagnostics = Diagnostics {
-        status: if present { Status::Present } else { Status::Absent },
+        status,
         reason: format!(
             "{form} kept (lower mean Huber loss, thin lens on ties; flat curves become constants); max δ {max_sigma:.3} px, \
              robust residual scale {:.3} px; fitted on textured depths [{:.3}, {:.3}], evaluated over [{:.3}, {:.3}] \
-             (the frame's depths, extrapolated at most {EXTRAPOLATION_FRACTION} textured inverse-depth span); {}",
+             (the frame's depths, extrapolated at most {EXTRAPOLATION_FRACTION} textured inverse-depth span); standard \
+             error {stderr_px:.3} px (RMS over the evaluated depths: statistical {stat_px:.3} px, {clusters}, with \
+             {beyond_px:.3} px for the forms' spread beyond the textured depths{bias_note}); {}",
             fit.scale,
             textured[0],
             textured[1],
             range[0],
             range[1],
-            if present { "visible (≥ 0.1 px) and above 3 standard errors" } else { "below 0.1 px or within 3 standard errors" }
+            match status {
+                Status::Present => "visible (≥ 0.1 px) and above 3 standard errors",
+                Status::Absent => "below 0.1 px",
+                _ => "visible but within 3 standard errors of none: not identifiable",
+            }
         ),
         method: method.into(),
         residual_before: residuals.map(|r| r.0),
         residual_after: residuals.map(|r| r.1),
         samples_used: n as u64,
         fit_time_s: started.elapsed().as_secs_f64(),
-        stderr: Some(fit.stderr_px),
+        stderr: Some(stderr_px),
         stages_s: st.done(),
     };
     let plot = DofPlotData {
@@ -226,6 +335,7 @@ fn finish(
         quadratic: fit.quadratic,
         thin_lens: fit.thin_lens,
         frame_depth_span: frame_span,
+        cell,
     };
     (dof, Some(plot))
 }
@@ -463,7 +573,9 @@ pub fn fit_accurate(
         let m = (9 * n).max(1) as f64;
         Some((before / m, after / m))
     };
-    finish("accurate", zs.clone(), sig, units, frame_depth_span(depth, units), started, st, residual_at)
+    let cells = Cells::new(depth.width, depth.height);
+    let cell = centres.iter().map(|&(x, y)| cells.of(x, y)).collect();
+    finish("accurate", zs.clone(), sig, cell, units, frame_depth_span(depth, units), started, st, residual_at)
 }
 
 #[cfg(test)]
