@@ -110,10 +110,16 @@ fn main() {
             }
             let o = fit_dof(&s.frame(&scene, i));
             let d = &o.model.depth_of_field;
+            // RMSE over the 8 depths against the truth ⊕ the photograph's pixel (none
+            // for "none"), next to the fit's own standard error and status.
+            let want = |z: f32| s.truth.depth_of_field.sigma_px(z).hypot(floor);
+            let rmse = (depths.iter().map(|&z| ((d.sigma_px(z) - want(z)) as f64).powi(2)).sum::<f64>() / 8.0).sqrt();
             println!(
-                "{case:9} frame {i:3}: {:?}  [{}]",
+                "{case:9} frame {i:3}: {:?} RMSE {rmse:.2} ± {:.2} px {:?} [{}]",
                 depths.iter().map(|&z| (d.sigma_px(z) * 100.0).round() / 100.0).collect::<Vec<_>>(),
-                d.diagnostics.reason.chars().take(160).collect::<String>()
+                d.diagnostics.stderr.unwrap_or(f64::NAN),
+                d.diagnostics.status,
+                d.diagnostics.reason.chars().take(100).collect::<String>()
             );
         }
     }
