@@ -250,9 +250,9 @@ fn score(case: &Case, effort: f32) -> Score {
             let err = c.map_or(1.0, |c| (c / sigma_px - 1.0).abs() as f64);
             Score {
                 err,
-                answered: c.is_some() && got.kernel == DofKernel::Disc,
-                covered: c.is_some_and(|c| ((c - sigma_px) as f64).abs() <= 2.0 * se),
-                detail: format!("{:?} {c:?} ± {se:.3}", got.kernel),
+                answered: got.present && c.is_some() && got.kernel == DofKernel::Disc,
+                covered: got.present && c.is_some_and(|c| ((c - sigma_px) as f64).abs() <= 2.0 * se),
+                detail: format!("{:?} {c:?} ± {se:.3} ({:?})", got.kernel, got.diagnostics.status),
                 time_s: got.diagnostics.fit_time_s,
             }
         }

@@ -97,7 +97,7 @@ pub(crate) struct Cells {
 /// The blind tier's edge-calibration bias, as a fraction of δ's RMS over the
 /// evaluated depths (`finish`): on a texture of known blur (no blur of its own) the
 /// blind curves of `examples/effort_probe`'s six procedural frames are off by
-/// 0.039–0.075 px RMS, 2.8–9.9% of the truth's δ RMS (median 3.6%), while their
+/// 0.039–0.075 px RMS, 2.8–9.9% of the truth's δ RMS (median 3.4%), while their
 /// statistical error reads 0.008–0.016 px (BENCHMARKS.md "The blind δ(Z)'s
 /// standard error").
 const EDGE_CALIBRATION_BIAS: f64 = 0.05;
