@@ -92,6 +92,27 @@ fn fast_fit_carries_the_kernel_shape() {
     assert_eq!(gauss.kernel, DofKernel::Gaussian, "{:?}", gauss.diagnostics);
 }
 
+/// A disc read right is reported present, whatever one half of the tiles' cepstrum
+/// shows elsewhere. Chelsea mirror-tiled to 1280×960 under a σ 2 px disc
+/// (`examples/effort_probe`'s frame): δ read 2.047 px (+2.3%), but the standard error
+/// — half the two tile halves' difference — took one half's global cepstral minimum
+/// at 38.0 px (z 4.9) against the ring at 7.6 (z 33): ± 3.8 px, and the frame was
+/// reported *absent*. Each half's dip is now read near the whole set's
+/// (`defocus_spectrum::dip_near`): ± 0.15 px (the radius mapping's floor), present.
+/// Tolerances: δ within 10% (as above); the standard error under 0.5 px (a
+/// quarter of δ).
+#[test]
+fn a_disc_read_right_is_present_whatever_a_half_of_the_tiles_shows() {
+    let (w, h) = (1280, 960);
+    let img = mirror_tile(&photo("chelsea.png"), w, h);
+    let dof = fit_constant_depth(&q8(&add_defocus_disc(&img, &Plane::new(w, h, 2.0)), 4));
+    println!("{:?} ± {:?}: {}", dof.curve, dof.diagnostics.stderr, dof.diagnostics.reason);
+    assert!(dof.present && dof.kernel == DofKernel::Disc, "{:?}", dof.diagnostics);
+    let c = dof.sigma_px(2.0);
+    assert!((c / 2.0 - 1.0).abs() <= 0.10, "disc δ {c}");
+    assert!(dof.diagnostics.stderr.is_some_and(|e| e < 0.5), "{:?}", dof.diagnostics.stderr);
+}
+
 /// The issue's real defocused photograph: OpenCV's `text_defocus.jpg` ("compact
 /// digital photo camera, no artificial distortion"), restored in OpenCV's
 /// `deconvolution.py` with `--circle --d 19`: a disc of diameter 19 px, R = 9.5,

@@ -311,7 +311,16 @@ pub fn fit_fast(
     let disc = spectrum.as_ref().filter(|s| s.is_disc);
     if let Some((s, range)) = disc.and_then(|s| Some((s, constant_depth(depth, units)?))) {
         let c = s.sigma_px.min(opts.dof_max_sigma_px);
-        let present = c >= 0.1 && c > 3.0 * s.stderr_px;
+        // As `finish`: invisible is absent, visible within 3 standard errors of none
+        // is not identifiable (it does not vote "absent" in the worker's window).
+        let status = if c < 0.1 {
+            Status::Absent
+        } else if c > 3.0 * s.stderr_px {
+            Status::Present
+        } else {
+            Status::NotIdentifiable
+        };
+        let present = status == Status::Present;
         let dof = DepthOfField {
             present,
             units,
@@ -319,12 +328,13 @@ pub fn fit_fast(
             depth_range: range,
             kernel,
             diagnostics: Diagnostics {
-                status: if present { Status::Present } else { Status::Absent },
+                status,
                 reason: format!(
-                    "one depth across the frame: constant δ {c:.3} px from the disc radius ({} px, second moment); \
+                    "one depth across the frame: constant δ {c:.3} px from the disc radius ({} px, second moment), \
+                     ± {:.3} px (split-half spread of the ring, at least the radius mapping's own); \
                      {shape_note}; edge ratios not read (biased by thin strokes and texture where the disc \
                      measures the aperture)",
-                    s.radius_px
+                    s.radius_px, s.stderr_px
                 ),
                 method: "fast".into(),
                 residual_before: None,
