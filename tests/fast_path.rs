@@ -710,3 +710,21 @@ fn blind_dof_standard_error_covers_its_error_or_says_not_identifiable() {
         }
     }
 }
+
+/// Past the curve fit's edge cap (`FAST_MAX_EDGE_SAMPLES`, every k-th edge kept) each
+/// kept edge keeps its own frame cell: the standard error is clustered, not taken
+/// over samples paired with other edges' cells (which falls back to independent
+/// samples). The sharp astronaut mirror-tiled to 2560×1920 gives ~10 700 edges,
+/// so every 2nd is kept (5 345, measured). Fails with the cells thinned twice.
+#[test]
+fn thinned_edges_keep_their_cells() {
+    let (w, h) = (2560, 1920);
+    let img = quantize8(&mirror_tile(&photo("astronaut.png"), w, h));
+    let depth = depth_ramp(w, h, 0.5, 4.0);
+    let inp = FitInputs { depth: Some(&depth), ..FitInputs::new(&img) };
+    let dof = fit(&inp, &opts(false, false, true)).expect("valid").model.depth_of_field;
+    println!("{} edges: {}", dof.diagnostics.samples_used, dof.diagnostics.reason);
+    assert!((4097..=8192).contains(&dof.diagnostics.samples_used), "{}", dof.diagnostics.samples_used);
+    assert!(dof.diagnostics.reason.contains("samples clustered in"), "{}", dof.diagnostics.reason);
+    assert!(!dof.diagnostics.reason.contains("taken as independent"), "{}", dof.diagnostics.reason);
+}

@@ -506,7 +506,7 @@ pub fn fit_fast(
     let sig: Vec<f32> =
         sig.into_iter().step_by(keep).map(|raw| calibrate(raw, kernel).min(opts.dof_max_sigma_px)).collect();
     let cells = super::Cells::new(w, h);
-    let cell: Vec<u32> = at.into_iter().step_by(keep).map(|(py, px)| cells.of(px, py)).collect();
+    let cell: Vec<u32> = at.into_iter().map(|(py, px)| cells.of(px, py)).collect();
     let (mut dof, plot) = finish("fast", zs, sig, cell, units, frame_depth_span(depth, units), started, st, |_| None);
     if dof.curve.is_some() {
         dof.kernel = kernel;

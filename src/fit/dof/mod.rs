@@ -232,65 +232,8 @@ fn finish(
         kernel: crate::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted(""),
     };
-    let max_sigma =
-        (0..=64).map(|i| dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0)).fold(0.0f32, f32::max);
-    // The standard error over the evaluated depths, samples clustered by their frame
-    // cell (`curve::cluster_stderr`): scale·√(3/N) took the edges as independent
-    // and the curve as known beyond them — 6–25× under the error on the blind
-    // tier's known-answer ramps (BENCHMARKS.md "The blind δ(Z)'s standard error").
-    let clustered = crate::fit::curve::cluster_stderr(&fit.curve, &z, &s, &cell, fit.scale, units, range);
-    let (stderr_px, clusters) = match clustered {
-        Some((se, groups)) => (se, format!("samples clustered in {groups} frame cells")),
-        None => {
-            let iid: Vec<u32> = (0..n as u32).collect();
-            let se = crate::fit::curve::cluster_stderr(&fit.curve, &z, &s, &iid, fit.scale, units, range);
-            (se.map_or(fit.stderr_px, |(se, _)| se), "fewer than 4 frame cells: samples taken as independent".into())
-        }
-    };
-    // Never under the independent-sample figure at the samples' own depths.
-    let stat_px = stderr_px.max(fit.stderr_px);
-    // The edge ratios' calibration (`blind::calibrate`) is biased by a texture's own
-    // profile, and that bias is shared by every sample: no spread shows it. Measured
-    // on a texture of known blur (the procedural frames of `examples/effort_probe`:
-    // 3–5% of the curve's RMS), it enters the blind tier's error in quadrature.
-    // Beyond the textured depths the samples cannot choose between the two forms:
-    // half their spread there (none inside), as an RMS over the evaluated depths.
-    let beyond_px = match (fit.quadratic, fit.thin_lens) {
-        (Some(q), Some(t)) => {
-            let (lo, hi) = (textured[0].min(textured[1]), textured[0].max(textured[1]));
-            ((0..=64)
-                .map(|i| {
-                    let zz = range[0] + (range[1] - range[0]) * i as f32 / 64.0;
-                    if (lo..=hi).contains(&zz) {
-                        0.0
-                    } else {
-                        (0.5 * (q.sigma_px(units, zz) - t.sigma_px(units, zz)) as f64).powi(2)
-                    }
-                })
-                .sum::<f64>()
-                / 65.0)
-                .sqrt()
-        }
-        _ => 0.0,
-    };
-    let stat_px = stat_px.hypot(beyond_px);
-    // Each tier's σ estimates share a calibration bias that no spread shows (the
-    // blind tier's edge ratios through `blind::calibrate`, biased by a texture's own
-    // profile; the accurate tier's blend map): measured on textures of known blur,
-    // a fraction of δ's RMS over the evaluated depths, in quadrature.
-    let (fraction, what) = if method.starts_with("fast") {
-        (EDGE_CALIBRATION_BIAS, "edge-ratio calibration")
-    } else {
-        (STACK_CALIBRATION_BIAS, "blend-stack calibration")
-    };
-    let rms = ((0..=64)
-        .map(|i| (dof.sigma_px(range[0] + (range[1] - range[0]) * i as f32 / 64.0) as f64).powi(2))
-        .sum::<f64>()
-        / 65.0)
-        .sqrt();
-    let bias = fraction * rms;
-    let stderr_px = stat_px.hypot(bias);
-    let bias_note = format!(", in quadrature with {bias:.3} px of {what} bias ({fraction} of δ's RMS)");
+    let max_sigma = over_range(range).map(|z| dof.sigma_px(z)).fold(0.0f32, f32::max);
+    let (stderr_px, stderr_note) = standard_error(method, &fit, &dof, (&z, &s, &cell), textured, units);
     // Visible and above 3 standard errors: present. Invisible (< 0.1 px) whatever the
     // error: absent. A visible curve within 3 standard errors of none says neither
     // (an edge-poor frame's curve through a narrow band of depths, extrapolated):
@@ -316,9 +259,7 @@ fn finish(
         reason: format!(
             "{form} kept (lower mean Huber loss, thin lens on ties; flat curves become constants); max δ {max_sigma:.3} px, \
              robust residual scale {:.3} px; fitted on textured depths [{:.3}, {:.3}], evaluated over [{:.3}, {:.3}] \
-             (the frame's depths, extrapolated at most {EXTRAPOLATION_FRACTION} textured inverse-depth span); standard \
-             error {stderr_px:.3} px (RMS over the evaluated depths: statistical {stat_px:.3} px, {clusters}, with \
-             {beyond_px:.3} px for the forms' spread beyond the textured depths{bias_note}); {}",
+             (the frame's depths, extrapolated at most {EXTRAPOLATION_FRACTION} textured inverse-depth span); {stderr_note}; {}",
             fit.scale,
             textured[0],
             textured[1],
@@ -347,6 +288,73 @@ fn finish(
         cell,
     };
     (dof, Some(plot))
+}
+
+/// 65 depths even in Z over `range`, its ends included.
+fn over_range(range: [f32; 2]) -> impl Iterator<Item = f32> {
+    (0..=64).map(move |i| range[0] + (range[1] - range[0]) * i as f32 / 64.0)
+}
+
+/// The δ curve's standard error (px, an RMS over the evaluated depths `dof.depth_range`)
+/// and what it is made of, for the reason. scale·√(3/N) took the edges as
+/// independent and the curve as known beyond them: 2–23× under the error on the
+/// blind tier's known-answer ramps, none within two (BENCHMARKS.md "The blind δ(Z)'s
+/// standard error"). In quadrature:
+/// * the statistical error, samples clustered by frame cell (`curve::cluster_stderr`;
+///   with fewer than 4 cells, each sample its own), never under the
+///   independent-sample figure;
+/// * beyond the textured depths, where the samples cannot choose between the two
+///   forms, half their spread there (none inside);
+/// * each tier's calibration bias, shared by every sample so no spread shows it (the
+///   blind tier's edge ratios through `blind::calibrate`, biased by a texture's own
+///   profile; the accurate tier's blend map): a measured fraction of δ's RMS.
+fn standard_error(
+    method: &str,
+    fit: &crate::fit::curve::CurveFit,
+    dof: &DepthOfField,
+    (z, s, cell): (&[f32], &[f32], &[u32]),
+    textured: [f32; 2],
+    units: DepthUnits,
+) -> (f64, String) {
+    use crate::fit::curve::cluster_stderr;
+    let range = dof.depth_range;
+    let rms = |f: &dyn Fn(f32) -> f64| (over_range(range).map(|z| f(z).powi(2)).sum::<f64>() / 65.0).sqrt();
+    // One cell per sample (else each sample its own: never a shifted pairing).
+    let cells_fit = cell.len() == z.len() && s.len() == z.len();
+    let found = if cells_fit { cluster_stderr(&fit.curve, z, s, cell, fit.scale, units, range) } else { None };
+    let (clustered, clusters) = match found {
+        Some((se, groups)) => (se, format!("samples clustered in {groups} frame cells")),
+        None => {
+            let own: Vec<u32> = (0..z.len() as u32).collect();
+            let se = cluster_stderr(&fit.curve, z, s, &own, fit.scale, units, range).map_or(fit.stderr_px, |r| r.0);
+            (se, "no frame cells (fewer than 4, or not one per sample): samples taken as independent".into())
+        }
+    };
+    let (lo, hi) = (textured[0].min(textured[1]), textured[0].max(textured[1]));
+    let beyond = match (fit.quadratic, fit.thin_lens) {
+        (Some(q), Some(t)) => rms(&|z| {
+            if (lo..=hi).contains(&z) {
+                0.0
+            } else {
+                0.5 * (q.sigma_px(units, z) - t.sigma_px(units, z)) as f64
+            }
+        }),
+        _ => 0.0,
+    };
+    let stat = clustered.max(fit.stderr_px).hypot(beyond);
+    let (fraction, what) = if method.starts_with("fast") {
+        (EDGE_CALIBRATION_BIAS, "edge-ratio calibration")
+    } else {
+        (STACK_CALIBRATION_BIAS, "blend-stack calibration")
+    };
+    let bias = fraction * rms(&|z| dof.sigma_px(z) as f64);
+    let total = stat.hypot(bias);
+    let note = format!(
+        "standard error {total:.3} px (RMS over the evaluated depths: statistical {stat:.3} px, {clusters}, with \
+         {beyond:.3} px for the forms' spread beyond the textured depths, in quadrature with {bias:.3} px of {what} \
+         bias ({fraction} of δ's RMS))"
+    );
+    (total, note)
 }
 
 /// Per-sample sufficient statistics per stack interval, so that the residual at any
