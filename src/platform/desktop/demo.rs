@@ -299,10 +299,10 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
     let _ = writeln!(r, "\n## Depth of field δ (px) at depth Z (m)\n");
     let _ = writeln!(
         r,
-        "| | {} | form | status | fit time |",
+        "| | {} | form | ± (RMS over its depths) | status | fit time |",
         depths.iter().map(|d| format!("{d:.2}")).collect::<Vec<_>>().join(" | ")
     );
-    let _ = writeln!(r, "|---|{}---|---|---|", "---|".repeat(depths.len()));
+    let _ = writeln!(r, "|---|{}---|---|---|---|", "---|".repeat(depths.len()));
     for (name, m) in [("truth", truth), ("accurate", acc), ("fast", fast)] {
         let d = &m.depth_of_field;
         let form = match d.curve {
@@ -313,8 +313,9 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
         };
         let _ = writeln!(
             r,
-            "| {name} | {} | {form} | {} | {:.1} ms |",
+            "| {name} | {} | {form} | {} | {} | {:.1} ms |",
             depths.iter().map(|&z| format!("{:.3}", d.sigma_px(z))).collect::<Vec<_>>().join(" | "),
+            d.diagnostics.stderr.map_or("".into(), |s| format!("{s:.3}")),
             d.diagnostics.status_str(),
             d.diagnostics.fit_time_s * 1e3
         );
