@@ -160,16 +160,23 @@ fn ring(cep: &[f32]) -> Option<(f32, f32)> {
         return None;
     }
     let i = (lo..hi).min_by(|&a, &b| cep[a].total_cmp(&cep[b]))?;
-    let (a, b, c) = (cep[i - 1], cep[i], cep[i + 1]);
-    let den = a - 2.0 * b + c;
-    let off = if den.abs() > 1e-12 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
+    let b = cep[i];
     let mut others: Vec<f32> = (lo..hi).filter(|&k| k + 2 < i || k > i + 2).map(|k| cep[k]).collect();
     others.sort_by(f32::total_cmp);
     let med = others[others.len() / 2];
     let mut dev: Vec<f32> = others.iter().map(|v| (v - med).abs()).collect();
     dev.sort_by(f32::total_cmp);
     let mad = 1.4826 * dev[dev.len() / 2] + 1e-12;
-    Some((i as f32 + off, (med - b) / mad))
+    Some((refined(cep, i), (med - b) / mad))
+}
+
+/// Sub-sample position of the minimum at interior index `i`: the parabola through
+/// it and its neighbours, moved at most half a sample.
+fn refined(cep: &[f32], i: usize) -> f32 {
+    let (a, b, c) = (cep[i - 1], cep[i], cep[i + 1]);
+    let den = a - 2.0 * b + c;
+    let off = if den.abs() > 1e-12 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
+    i as f32 + off
 }
 
 /// The dip of `cep` nearest in kind to `ring`'s at `dip`: its least value within
@@ -184,13 +191,7 @@ fn dip_near(cep: &[f32], dip: f32) -> Option<f32> {
         return None;
     }
     let i = (a..=b).min_by(|&x, &y| cep[x].total_cmp(&cep[y]))?;
-    if i == a || i == b {
-        return None;
-    }
-    let (p, q, r) = (cep[i - 1], cep[i], cep[i + 1]);
-    let den = p - 2.0 * q + r;
-    let off = if den.abs() > 1e-12 { (0.5 * (p - r) / den).clamp(-0.5, 0.5) } else { 0.0 };
-    Some(i as f32 + off)
+    (i != a && i != b).then(|| refined(cep, i))
 }
 
 /// Second-notch contrast at radius `r` (see module docs); NaN past Nyquist.

@@ -94,6 +94,16 @@ pub(crate) struct Cells {
     cols: usize,
 }
 
+impl Cells {
+    pub(crate) fn new(w: usize, h: usize) -> Self {
+        let px = (((w * h) as f64 / CELLS as f64).sqrt().round() as usize).max(4);
+        Self { px, cols: w.div_ceil(px).max(1) }
+    }
+    pub(crate) fn of(&self, x: usize, y: usize) -> u32 {
+        ((y / self.px) * self.cols + x / self.px) as u32
+    }
+}
+
 /// The blind tier's edge-calibration bias, as a fraction of δ's RMS over the
 /// evaluated depths (`finish`): on a texture of known blur (no blur of its own) the
 /// blind curves of `examples/effort_probe`'s six procedural frames are off by
@@ -109,16 +119,6 @@ const STACK_CALIBRATION_BIAS: f64 = 0.03;
 
 /// About how many cells a frame is cut into (`Cells`).
 const CELLS: usize = 192;
-
-impl Cells {
-    pub(crate) fn new(w: usize, h: usize) -> Self {
-        let px = (((w * h) as f64 / CELLS as f64).sqrt().round() as usize).max(4);
-        Self { px, cols: w.div_ceil(px).max(1) }
-    }
-    pub(crate) fn of(&self, x: usize, y: usize) -> u32 {
-        ((y / self.px) * self.cols + x / self.px) as u32
-    }
-}
 
 fn valid_depth(z: f32, units: DepthUnits) -> bool {
     z.is_finite() && (units == DepthUnits::RelativeInverse || z > 0.0)
