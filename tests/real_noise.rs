@@ -183,13 +183,19 @@ fn a_neighbour_is_not_used_on_a_frame_with_a_codec_grid() {
 }
 
 /// Every measured luma bin reports its confidence, and the model says nothing
-/// outside the lumas it measured.
+/// outside the lumas it measured. A bin's confidence is its sampling error (< 0.5
+/// here) and the texture floor's bias (≤ 1: this clip's noise, ~0.004 in level-0
+/// std, lies within a natural scene's floor of 0.006, so one frame cannot tell it
+/// from texture), in quadrature: below √1.25.
 #[test]
 fn bins_report_confidence_and_the_range_is_the_measured_one() {
     let noise = blind_noise(&photo("noise_vtest/frame.png"));
     assert!(noise.bins.len() >= 8, "bins: {}", noise.bins.len());
     for b in &noise.bins {
-        assert!(b.relative_stderr.is_finite() && b.relative_stderr > 0.0 && b.relative_stderr < 0.5, "{b:?}");
+        assert!(
+            b.relative_stderr.is_finite() && b.relative_stderr > 0.0 && b.relative_stderr < 1.25f32.sqrt(),
+            "{b:?}"
+        );
         assert!(b.samples >= 12, "{b:?}");
     }
     let used: Vec<f32> = noise.bins.iter().filter(|b| b.used).map(|b| b.luma).collect();
