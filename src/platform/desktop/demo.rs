@@ -324,10 +324,10 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
     let ys = [0.2f32, 0.4, 0.6, 0.8];
     let _ = writeln!(
         r,
-        "| | {} | status | fit time |",
+        "| | {} | ± (relative, level 0 at mid luma) | status | fit time |",
         ys.iter().map(|y| format!("Y={y}")).collect::<Vec<_>>().join(" | ")
     );
-    let _ = writeln!(r, "|---|{}---|---|", "---|".repeat(ys.len()));
+    let _ = writeln!(r, "|---|{}---|---|---|", "---|".repeat(ys.len()));
     for (name, m) in [("truth", truth), ("accurate", acc), ("fast", fast)] {
         let cells: Vec<String> = ys
             .iter()
@@ -338,8 +338,9 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
             .collect();
         let _ = writeln!(
             r,
-            "| {name} | {} | {} | {:.1} ms |",
+            "| {name} | {} | {} | {} | {:.1} ms |",
             cells.join(" | "),
+            m.noise.diagnostics.stderr.map_or("".into(), |s| format!("{:.1}%", 100.0 * s)),
             m.noise.diagnostics.status_str(),
             m.noise.diagnostics.fit_time_s * 1e3
         );
