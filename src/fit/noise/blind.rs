@@ -212,12 +212,13 @@ fn bicubic_noise_transmission(level: usize) -> f32 {
 /// less) where the reading lies within the floor. Non-finite or non-positive
 /// readings: 1.
 pub(super) fn texture_bias(std: f32) -> f32 {
-    let (t, k) = (TEXTURE_FLOOR_STD, TEXTURE_FLOOR_RELATIVE);
-    let noise_sq = (std * std - t * t) / (1.0 + k * k);
-    if !(std.is_finite() && std > 0.0) || noise_sq <= 0.25 * std * std {
+    // f64: a reading's square stays finite whatever a (validated, finite) frame holds.
+    let (s, t, k) = (std as f64, TEXTURE_FLOOR_STD as f64, TEXTURE_FLOOR_RELATIVE as f64);
+    let noise_sq = (s * s - t * t) / (1.0 + k * k);
+    if !(s.is_finite() && s > 0.0) || noise_sq <= 0.25 * s * s {
         return 1.0;
     }
-    std / noise_sq.sqrt() - 1.0
+    (s / noise_sq.sqrt() - 1.0) as f32
 }
 
 /// One luma bin's blind measurement at one level.

@@ -221,3 +221,35 @@ mod blocking_tests {
         assert_eq!(b.phase_px, [2, 2], "{b:?}");
     }
 }
+
+mod texture_floor_tests {
+    use super::super::blind::texture_bias;
+
+    /// The frame-alone fit's texture-floor bias: 1 (the noise could be half the
+    /// reading or less) at and below the floor and for readings that are not a
+    /// positive number; falling with the reading above it, toward √(1 + k²) − 1 (the
+    /// selection's share, 3.3%) for strong noise; finite and in [0, 1] at every
+    /// extreme. The middle values are the model's own (0.006 in level-0 std, k 0.26),
+    /// to rounding (1e-4).
+    #[test]
+    fn texture_bias_is_bounded_and_falls_with_the_reading() {
+        for s in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -1.0, 0.0, 1e-30, 0.003, 0.006, 0.0069] {
+            assert_eq!(texture_bias(s), 1.0, "reading {s}");
+        }
+        let floor_share = (1.0f64 + 0.26f64.powi(2)).sqrt() - 1.0;
+        for s in [1e3f32, 1e30, f32::MAX] {
+            let b = texture_bias(s) as f64;
+            assert!((b - floor_share).abs() < 1e-4, "reading {s}: {b} against {floor_share}");
+        }
+        // At 0.012 (twice the floor): 0.012 / √((0.012² − 0.006²) / 1.0676) − 1.
+        let want = 0.012f64 / ((0.012f64.powi(2) - 0.006f64.powi(2)) / (1.0 + 0.26f64.powi(2))).sqrt() - 1.0;
+        assert!((texture_bias(0.012) as f64 - want).abs() < 1e-4, "{} against {want}", texture_bias(0.012));
+        let mut last = 1.0f32;
+        for i in 0..2000 {
+            let s = 0.0069 + i as f32 * 1e-4;
+            let b = texture_bias(s);
+            assert!(b.is_finite() && (0.0..=1.0).contains(&b) && b <= last, "reading {s}: {b} after {last}");
+            last = b;
+        }
+    }
+}
