@@ -1,17 +1,23 @@
 //! The blind noise fit's speed/accuracy trade over its grid points per level
 //! (`FitOptions::noise_fast_samples_per_level`): per budget, the noise fit's time at
 //! 1280×960 on one thread and its error on frames of known noise — three photographs
-//! (astronaut, chelsea, the Motorcycle left view) under three sensor-noise strengths,
-//! three seeds each, 8-bit, against the added white noise's band std per level and
-//! luma — and on the real DivX clip against its temporal reference (level 0 inside
-//! the fitted range, as `tests/real_noise.rs`). `BUDGETS=a,b,…` overrides the list;
-//! `DETAIL=1` prints every frame's level-0 error; `LEVELS=1` every frame's signed
-//! error per level, M where the fit measured the level, D where it derived it.
+//! (astronaut, chelsea, the Motorcycle left view) and the real clip's temporal mean
+//! under three sensor-noise strengths, three seeds each, 8-bit, against the added
+//! white noise's band std per level and luma — and on the real DivX clip against its
+//! temporal reference (level 0 inside the fitted range, as `tests/real_noise.rs`).
+//! `BUDGETS=a,b,…` overrides the list; `PHOTOS=a,b` keeps the scenes whose names
+//! start so; `EXTRA_DIR=d` adds every PNG in d as a scene (the held-out scenes of
+//! BENCHMARKS.md "The blind noise's texture floor"); `DETAIL=1` prints every frame's
+//! level-0 error, its reported standard error and the additive floor the error
+//! implies, and counts how often two standard errors hold it; `LEVELS=1` every
+//! frame's signed error per level, M where the fit measured the level, D where it
+//! derived it.
 //!
 //! The photographs carry noise of their own, which the "truth" leaves out (printed
 //! first: the blind fit on each clean photograph — its own noise, or texture taken
-//! for it; astronaut 0.0045 at mid luma against the weakest added 0.0096): read the
-//! table across budgets, not as the fit's absolute error.
+//! for it; astronaut 0.0045 at mid luma against the weakest added 0.0096; the clip's
+//! temporal mean 0.0020): read the table across budgets, not as the fit's absolute
+//! error.
 #[path = "../tests/common/mod.rs"]
 mod common;
 
