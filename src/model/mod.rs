@@ -148,7 +148,9 @@ pub struct NoiseBin {
     pub samples: u32,
     /// Measured level-0 std per channel.
     pub std: [f32; 3],
-    /// Relative standard error of `std` (mean over channels): the bin's confidence.
+    /// Relative standard error of `std` (mean over channels): the bin's confidence —
+    /// its sampling error, and for a frame read alone the texture its flattest
+    /// samples may hold (the blind fit's texture floor), in quadrature.
     pub relative_stderr: f32,
     /// Whether the fit used the bin (false: rejected as texture).
     pub used: bool,
