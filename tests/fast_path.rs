@@ -505,7 +505,7 @@ fn derived_noise_levels_carry_the_measured_error_and_no_more() {
 /// Motorcycle under the bench's noise, +23.7% against ± 8.6%; 7 of its 9 probe
 /// frames held); with the sampling error alone (± 0.3–2.5%) 1 of 10. Tolerance: 9
 /// of 10, and a median standard error ≤ 25% (measured 17.6%), so that no inflated
-/// figure passes.
+/// figure passes. On the clip's temporal mean the error itself is held to 12%.
 #[test]
 fn blind_noise_standard_error_covers_texture_in_the_flat_samples() {
     let (w, h) = (1280, 960);
@@ -546,6 +546,12 @@ fn blind_noise_standard_error_covers_texture_in_the_flat_samples() {
             );
             held += (err.abs() <= 2.0 * se) as usize;
             ses.push(se);
+            // The clip's temporal mean carries no noise of its own to speak of (≤ 0.3
+            // DN), so its error is the estimator's alone: measured +4.7 / +7.9% (seeds
+            // 3, 9, 11: +4.7…+5.6 / +7.5…+8.0%); tolerance 12%.
+            if *name == "vtest mean" {
+                assert!(err.abs() <= 0.12, "{name}: level-0 error {err:+.3} on a scene without noise of its own");
+            }
         }
     }
     let med = median(ses);
