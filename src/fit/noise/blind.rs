@@ -41,7 +41,7 @@ const BLIND_MIN_FLAT: usize = 12;
 /// held 60 (BENCHMARKS.md, "The blind noise's texture floor"). No frame statistic
 /// tried separated texture from noise (the level-1 band at the flat samples misread
 /// grass as noise and the real clip's road as texture), so this is a prior: pure
-/// textures (grass, gravel, brick) exceed it by +16…+695%.
+/// textures (grass, gravel, brick) exceed it by +15…+695%.
 const TEXTURE_FLOOR_STD: f32 = 0.006;
 const TEXTURE_FLOOR_RELATIVE: f32 = 0.26;
 
