@@ -73,16 +73,7 @@ fn main() {
         .map(|n| (n.to_string(), common::mirror_tile(&common::photo(n), w, h)))
         .chain(std::iter::once((
             "motorcycle".to_string(),
-            common::mirror_tile(
-                &blind_augment::io::load_rgb(std::path::Path::new(concat!(
-                    env!("CARGO_MANIFEST_DIR"),
-                    "/assets/motorcycle_left_333x497.png"
-                )))
-                .expect("motorcycle")
-                .0,
-                w,
-                h,
-            ),
+            common::mirror_tile(&common::asset_photo("motorcycle_left_333x497.png"), w, h),
         )))
         // The clip's temporal mean (795 frames): a real scene whose own noise is
         // averaged away — the fit reads 0.0020 on it alone, texture included, which

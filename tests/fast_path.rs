@@ -509,16 +509,10 @@ fn derived_noise_levels_carry_the_measured_error_and_no_more() {
 #[test]
 fn blind_noise_standard_error_covers_texture_in_the_flat_samples() {
     let (w, h) = (1280, 960);
-    let motorcycle = blind_augment::io::load_rgb(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/assets/motorcycle_left_333x497.png"
-    )))
-    .expect("motorcycle")
-    .0;
     let scenes = [
         ("astronaut", photo("astronaut.png")),
         ("chelsea", photo("chelsea.png")),
-        ("motorcycle", motorcycle),
+        ("motorcycle", asset_photo("motorcycle_left_333x497.png")),
         ("vtest mean", photo("noise_vtest/mean.png")),
         ("rocket (held out)", photo("rocket.jpg")),
     ];

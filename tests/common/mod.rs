@@ -18,6 +18,11 @@ pub fn photo(name: &str) -> Rgb {
     io::load_rgb(&data(name)).expect("vendored test photo").0
 }
 
+/// A photograph shipped in `assets/` (the Motorcycle view).
+pub fn asset_photo(name: &str) -> Rgb {
+    io::load_rgb(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets").join(name)).expect("asset photo").0
+}
+
 /// Crop (x0, y0, w, h).
 pub fn crop(img: &Rgb, x0: usize, y0: usize, w: usize, h: usize) -> Rgb {
     let mut out = Rgb::new(w, h, [0.0; 3]);
