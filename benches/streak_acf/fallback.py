@@ -104,7 +104,8 @@ def main():
         s["iso"].append(abs(got_iso - length) / max(length, 4))
         s["covered_new"] += abs(got - length) <= 2 * se
         s["covered_iso"] += abs(got_iso - length) <= 2 * se_iso
-        # A streak reported absent (λ ≤ 3 standard errors: `decide`).
+        # A streak reported absent (`exposure_status`: a negligible reading, under 0.005 or
+        # 0.35 px; before 2026-11-27 every reading within 3 standard errors of 0).
         s["missed_new"] += length > 0 and reason.endswith("absent")
         s["missed_iso"] += length > 0 and not got_iso > 3 * se_iso
         print(f"{part:5s} {name:28s} {angle:3d}° L {length:2d}: reported {got:5.1f} ± {se:4.1f} px "

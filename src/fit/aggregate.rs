@@ -114,10 +114,18 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         let present = mb.iter().filter(|m| m.motion_blur.present).count();
         let ds: Vec<&Diagnostics> = mb.iter().map(|m| &m.motion_blur.diagnostics).collect();
         out.motion_blur.exposure = Some(median(lambdas));
-        // Present if most identifiable frames say so.
-        out.motion_blur.present = 2 * present > mb.len();
+        // Present if most identifiable frames say so: a frame whose visible reading
+        // lies within 3 standard errors of none (`motion_blur::exposure_status`)
+        // votes neither way; with no identifiable frame the aggregate says neither.
+        let votes =
+            mb.iter().filter(|m| matches!(m.motion_blur.diagnostics.status, Status::Present | Status::Absent)).count();
+        out.motion_blur.present = 2 * present > votes;
         out.motion_blur.diagnostics = summary(&ds, present, total);
-        out.motion_blur.diagnostics.status = if out.motion_blur.present { Status::Present } else { Status::Absent };
+        out.motion_blur.diagnostics.status = match (out.motion_blur.present, votes) {
+            (true, _) => Status::Present,
+            (false, 0) => Status::NotIdentifiable,
+            _ => Status::Absent,
+        };
     }
 
     let mut dof: Vec<&CameraModel> = models.iter().filter(|m| m.depth_of_field.present).collect();
@@ -184,5 +192,37 @@ mod tests {
         // Every fit of one form and near each other: the coefficient-wise median.
         let agg = aggregate_models(&[affine(0.98), affine(1.0), affine(1.04)]).expect("valid");
         assert_eq!(agg.noise.levels, affine(1.0).noise.levels);
+    }
+
+    /// A frame's exposure as a fit reports it: λ ± `stderr` with `status`.
+    fn exposure(lambda: f32, stderr: f64, status: Status) -> CameraModel {
+        let mut m = CameraModel::empty(64, 48);
+        m.motion_blur.exposure = Some(lambda);
+        m.motion_blur.present = status == Status::Present;
+        m.motion_blur.diagnostics.status = status;
+        m.motion_blur.diagnostics.stderr = Some(stderr);
+        m
+    }
+
+    /// Presence is the majority of the frames that can tell: frames whose visible
+    /// reading lies within 3 standard errors of none vote neither way (they were
+    /// counted as "absent" votes: one present frame beside two unresolved ones
+    /// published absent); none that can tell gives not identifiable.
+    #[test]
+    fn unresolved_exposures_do_not_vote() {
+        use Status::*;
+        let w =
+            [exposure(0.5, 0.02, Present), exposure(0.3, 0.2, NotIdentifiable), exposure(0.2, 0.1, NotIdentifiable)];
+        let agg = aggregate_models(&w).expect("valid");
+        assert!(agg.motion_blur.present);
+        assert_eq!(agg.motion_blur.diagnostics.status, Present);
+        let w = [exposure(0.5, 0.02, Present), exposure(0.0, 0.05, Absent), exposure(0.001, 0.05, Absent)];
+        let agg = aggregate_models(&w).expect("valid");
+        assert!(!agg.motion_blur.present);
+        assert_eq!(agg.motion_blur.diagnostics.status, Absent);
+        let w = [exposure(0.3, 0.2, NotIdentifiable), exposure(0.2, 0.1, NotIdentifiable)];
+        let agg = aggregate_models(&w).expect("valid");
+        assert!(!agg.motion_blur.present);
+        assert_eq!(agg.motion_blur.diagnostics.status, NotIdentifiable);
     }
 }

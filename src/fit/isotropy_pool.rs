@@ -60,6 +60,8 @@ pub struct DirectionSums {
     /// Σ cos 2θ, Σ sin 2θ over the bin's samples (θ the flow's direction).
     pub cos2: f64,
     pub sin2: f64,
+    /// Σ |F| over the bin's samples (px/frame): the streak length a λ means here.
+    pub speed: f64,
     pub diff: [f64; GRID],
     pub sum: [f64; GRID],
     pub diff_sq: [f64; GRID],
@@ -73,6 +75,7 @@ impl Default for DirectionSums {
             samples: 0,
             cos2: 0.0,
             sin2: 0.0,
+            speed: 0.0,
             diff: [0.0; GRID],
             sum: [0.0; GRID],
             diff_sq: [0.0; GRID],
@@ -108,6 +111,7 @@ impl IsotropyEvidence {
         b.samples += 1;
         b.cos2 += cos2;
         b.sin2 += sin2;
+        b.speed += n2.sqrt();
         for j in 0..GRID {
             let (dl, s) = (c[j] - d[j], c[j] + d[j]);
             b.diff[j] += dl;
@@ -121,6 +125,17 @@ impl IsotropyEvidence {
     /// Samples in bins the pooled fit reads.
     fn usable_samples(&self) -> usize {
         self.bins.iter().filter(|b| b.samples >= MIN_BIN_SAMPLES).map(|b| b.samples).sum()
+    }
+
+    /// The fastest mean flow speed (px/frame) of the bins the pooled fit reads (a
+    /// streak's length per unit λ where it is longest; `None` without such a bin).
+    fn fastest_bin_speed(&self) -> Option<f32> {
+        self.bins
+            .iter()
+            .filter(|b| b.samples >= MIN_BIN_SAMPLES)
+            .map(|b| (b.speed / b.samples as f64) as f32)
+            .filter(|s| s.is_finite())
+            .reduce(f32::max)
     }
 }
 
@@ -236,6 +251,7 @@ fn merge(frames: &[&IsotropyEvidence]) -> IsotropyEvidence {
             m.samples += b.samples;
             m.cos2 += b.cos2;
             m.sin2 += b.sin2;
+            m.speed += b.speed;
             for j in 0..GRID {
                 m.diff[j] += b.diff[j];
                 m.sum[j] += b.sum[j];
@@ -317,12 +333,14 @@ pub fn pooled_exposure(frames: &[&IsotropyEvidence]) -> Option<PooledExposure> {
     Some(PooledExposure { lambda, stderr, bins: kk, rank, dof, chi2_per_dof, anisotropy: ab })
 }
 
-/// The pooled blind exposure as a motion-blur model: present / absent by the
-/// single-frame rule (λ > 3 standard errors and ≥ 0.005), not identifiable where no
-/// direction constrains λ or its standard error exceeds `MAX_STDERR`.
+/// The pooled blind exposure as a motion-blur model: present / absent / not
+/// identifiable by the single-frame rule (`motion_blur::exposure_status`, at the
+/// fastest usable bin's mean speed), not identifiable too where no direction
+/// constrains λ or its standard error exceeds `MAX_STDERR`.
 pub fn fit_fast_pooled_exposure(frames: &[&IsotropyEvidence]) -> MotionBlur {
     let started = Instant::now();
-    let samples = merge(frames).usable_samples();
+    let merged = merge(frames);
+    let (samples, speed) = (merged.usable_samples(), merged.fastest_bin_speed());
     let Some(p) = pooled_exposure(frames) else {
         let mut d = super::not_identifiable(
             "fast (pooled)",
@@ -360,13 +378,13 @@ pub fn fit_fast_pooled_exposure(frames: &[&IsotropyEvidence]) -> MotionBlur {
         d.stderr = Some(p.stderr);
         return MotionBlur::absent(d);
     }
-    let present = lambda as f64 > 3.0 * p.stderr && lambda >= 0.005;
+    let status = super::motion_blur::exposure_status(lambda, p.stderr, speed);
     MotionBlur {
-        present,
+        present: status == Status::Present,
         exposure: Some(lambda),
         diagnostics: Diagnostics {
-            status: if present { Status::Present } else { Status::Absent },
-            reason: format!("{what}; {}", if present { "present" } else { "absent" }),
+            status,
+            reason: format!("{what}; {}", super::motion_blur::exposure_status_note(status, speed)),
             method: "fast (pooled)".into(),
             residual_before: None,
             residual_after: None,
