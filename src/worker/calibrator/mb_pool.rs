@@ -38,11 +38,15 @@ impl Calibrator {
         let frames: Vec<&fit::IsotropyEvidence> = self.mb_pool.iter().map(|p| &p.evidence).collect();
         let mut pooled = fit::fit_fast_pooled_exposure(&frames);
         let own = &model.motion_blur.diagnostics;
-        let better = match (pooled.diagnostics.stderr, own.stderr) {
+        // A frame with a reading (present, absent, or a visible λ within 3 standard
+        // errors of none: `fit::motion_blur::exposure_status`) gives way to a smaller
+        // standard error; one without (not identifiable, no λ) to any identifiable
+        // pooled fit.
+        let better = match (pooled.diagnostics.stderr, own.stderr, model.motion_blur.exposure) {
             _ if pooled.diagnostics.status == crate::model::Status::NotIdentifiable => false,
-            (Some(p), Some(o)) => own.status == crate::model::Status::NotIdentifiable || p < o,
-            (Some(_), None) => true,
-            (None, _) => false,
+            (Some(p), Some(o), Some(_)) => p < o,
+            (Some(_), _, _) => true,
+            (None, _, _) => false,
         };
         if better {
             pooled.diagnostics.fit_time_s += own.fit_time_s;
