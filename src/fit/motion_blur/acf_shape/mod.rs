@@ -57,6 +57,14 @@ const MIN_AXIAL_COHERENCE: f32 = 0.94;
 const MIN_ENERGY_OVER_NOISE: f64 = 1.1;
 /// The flow's 10th and 90th speed percentiles within this factor of the median.
 const MAX_SPEED_SPREAD: f32 = 1.25;
+/// A reading of no streak must be resolved: the match at a `ZERO_PROBE_PX` streak
+/// (or the longest candidate, if shorter) must be worse than at none by this
+/// factor. Smooth shading matches every length about equally: on
+/// `benches/streak_acf/fallback.py`'s frames the colour wheel's residual rose
+/// 0–1.3% from 0 to 4 px (it read its 6, 12 and 24 px streaks as 0 px, *absent*),
+/// every other frame read at 0 px 21–600% (the rendered page at 90° the least).
+const MIN_ZERO_RISE: f64 = 1.1;
+const ZERO_PROBE_PX: usize = 4;
 
 /// What the shape reads.
 #[derive(Clone, Debug)]
@@ -280,6 +288,18 @@ fn read(
     }
     let residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
     let best = (0..residuals.len()).min_by(|&a, &b| residuals[a].total_cmp(&residuals[b])).unwrap_or(0);
+    // No streak is a reading only where a short one would fit measurably worse.
+    let probe = ZERO_PROBE_PX.min(l_max);
+    // (A NaN residual is no rise either.)
+    let rises = residuals[probe] >= MIN_ZERO_RISE * residuals[0];
+    if best == 0 && !rises {
+        return Err(format!(
+            "the match barely depends on the length (a {probe} px streak fits within {:.1}% of none, under \
+             {:.0}%): the shape does not tell a streak from none",
+            100.0 * (residuals[probe] / residuals[0].max(f64::MIN_POSITIVE) - 1.0),
+            100.0 * (MIN_ZERO_RISE - 1.0)
+        ));
+    }
     // A minimum at the search's top end is no balance: the match may improve past
     // it (the lags' `MAX_LENGTH_PX`, or a full-frame streak). Measured: a colour
     // wheel with no streak read 50 px (λ 1) at 50 px/frame.

@@ -235,3 +235,34 @@ fn kernels_and_sizes() {
     assert_eq!(fft_size(720), 720);
     assert_eq!(fft_size(7), 8);
 }
+
+/// Smooth shading (a colour wheel's: luma varying with the angle about the centre, no
+/// edges) matches every streak length about as well as none, so its best length of 0
+/// is not a reading: without a streak the shape refuses (before `MIN_ZERO_RISE` it
+/// read 0 px — and on fallback.py's colour wheel called its 6–24 px streaks absent);
+/// with a 12 px streak at 30° it may read a length (9.0 px here) but never none. An
+/// isotropic texture without a streak still reads 0
+/// (`streaks_on_an_isotropic_texture_read_their_length`).
+#[test]
+fn smooth_shading_does_not_read_as_no_streak() {
+    let (w, h) = (400, 320);
+    let wheel = Plane::from_vec(
+        w,
+        h,
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 - 0.5 * w as f32, (i / w) as f32 - 0.5 * h as f32);
+                0.5 + 0.3 * y.atan2(x).sin()
+            })
+            .collect(),
+    );
+    for len in [0.0f32, 12.0] {
+        let img = streak(&wheel, len, 30.0);
+        match acf_shape(&img, &uniform(w, h, 30.0, 40.0)) {
+            Err(why) => assert!(why.contains("does not tell a streak from none"), "{len} px: {why}"),
+            Ok(got) => {
+                assert!(len > 0.0 && got.length_px >= 1.0, "{len} px: read {} px on smooth shading", got.length_px)
+            }
+        }
+    }
+}
