@@ -460,4 +460,26 @@ mod tests {
         }
         assert!(pooled_exposure(&[]).is_none());
     }
+
+    /// The pooled status's speed: each usable bin's mean |F|, the fastest of them,
+    /// through `add` and `merge`; bins under `MIN_BIN_SAMPLES` do not count.
+    #[test]
+    fn fastest_bin_speed_is_the_fastest_usable_bins_mean() {
+        let (c, d) = ([1.0f64; GRID], [1.0f64; GRID]);
+        let mut a = IsotropyEvidence::default();
+        for i in 0..MIN_BIN_SAMPLES {
+            // Along x at 3 and 7 px/frame alternately: mean 5.
+            a.add(if i % 2 == 0 { 3.0 } else { 7.0 }, 0.0, &c, &d);
+        }
+        // A faster direction with too few samples to be read.
+        for _ in 0..MIN_BIN_SAMPLES - 1 {
+            a.add(0.0, 40.0, &c, &d);
+        }
+        assert_eq!(a.fastest_bin_speed(), Some(5.0));
+        let mut b = IsotropyEvidence::default();
+        b.add(0.0, 40.0, &c, &d);
+        let merged = merge(&[&a, &b]);
+        assert_eq!(merged.fastest_bin_speed(), Some(40.0));
+        assert_eq!(IsotropyEvidence::default().fastest_bin_speed(), None);
+    }
 }
