@@ -178,6 +178,17 @@ pub struct FitOptions {
 /// pixels, 300 streak lines, a quarter of the edge positions).
 pub const MIN_FAST_EFFORT: f32 = 0.25;
 
+/// The `q`-quantile of `v` (the element at rank round((n − 1)·q), NaN ordered by
+/// `total_cmp`), partially reordering `v`; 0 when empty.
+pub(crate) fn percentile(v: &mut [f32], q: f64) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = ((v.len() - 1) as f64 * q).round() as usize;
+    v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+    v[k]
+}
+
 /// `full` scaled by `effort` (`FitOptions::fast_effort`), rounded, at least 1; at
 /// effort 1 exactly `full`.
 pub(crate) fn scaled_count(full: usize, effort: f32) -> usize {

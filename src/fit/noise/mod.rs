@@ -30,6 +30,7 @@
 //! Present when the level-0 std at mid-range luma exceeds 3 standard errors and
 //! 1e-4 (0.026/255: far below visibility).
 
+use super::percentile;
 use crate::image::{gaussian_pyramid, laplacian_pyramid, IntegralImage, Plane, Rgb, LUMA_WEIGHTS};
 use crate::model::{Diagnostics, Noise, NoiseForm, NoiseIntensity, NoiseLevel, Status, NOISE_LEVELS};
 use rayon::prelude::*;
@@ -522,15 +523,6 @@ fn pyramids(img: &Rgb) -> [Vec<Plane>; 3] {
     let mut it = v.into_iter();
     let mut next = || it.next().unwrap_or_default();
     [next(), next(), next()]
-}
-
-fn percentile(v: &mut [f32], q: f64) -> f32 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let k = ((v.len() - 1) as f64 * q).round() as usize;
-    v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-    v[k]
 }
 
 fn finish(
