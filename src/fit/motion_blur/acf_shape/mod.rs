@@ -62,7 +62,7 @@ const MAX_SPEED_SPREAD: f32 = 1.25;
 /// factor. Smooth shading matches every length about equally: on
 /// `benches/streak_acf/fallback.py`'s frames the colour wheel's residual rose
 /// 0–1.3% from 0 to 4 px (it read its 6, 12 and 24 px streaks as 0 px, *absent*),
-/// every other frame read at 0 px 21–600% (the rendered page at 90° the least).
+/// the 30 other frames read at 0 px by 21% or more (the rendered page at 90° the least).
 const MIN_ZERO_RISE: f64 = 1.1;
 const ZERO_PROBE_PX: usize = 4;
 
