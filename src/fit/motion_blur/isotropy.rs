@@ -53,18 +53,25 @@ pub(super) fn isotropy_root(
     };
     // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
-    // Each sample's flow, for the direction bins of the evidence (`stats` only).
+    // Each sample's flow, for the direction bins of the evidence, and its squared
+    // central differences along the two diagonals (u ± v)/√2 (`stats` only).
     let mut flows = vec![];
+    let mut oblique: Vec<(f64, f64)> = vec![];
     for &(px, py) in &chosen {
         let i = py * w + px;
         let (fx, fy) = (flow.dx[i], flow.dy[i]);
-        if stats {
-            flows.push((fx, fy));
-        }
         let speed = (fx * fx + fy * fy).sqrt() / s;
         let (ux, uy) = (fx / (speed * s), fy / (speed * s));
         let (vx, vy) = (-uy, ux);
         let (x, yy) = ((px / scale) as f32, (py / scale) as f32);
+        if stats {
+            flows.push((fx, fy));
+            let diff = |(dx, dy): (f32, f32)| {
+                let (dx, dy) = (dx * std::f32::consts::FRAC_1_SQRT_2, dy * std::f32::consts::FRAC_1_SQRT_2);
+                (0.5 * (p.sample_bilinear(x + dx, yy + dy) - p.sample_bilinear(x - dx, yy - dy)) as f64).powi(2)
+            };
+            oblique.push((diff((ux + vx, uy + vy)), diff((ux - vx, uy - vy))));
+        }
         for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
             push_profile(&mut prof, p, x + ox, yy + oy, (vx * speed, vy * speed));
         }
@@ -143,6 +150,8 @@ pub(super) fn isotropy_root(
             along_excess_se: 0.0,
             top_excess: 0.0,
             top_excess_se: 0.0,
+            oblique_contrast: 0.0,
+            oblique_contrast_se: 0.0,
             band: None,
             evidence: None,
             pixels: chosen,
@@ -220,19 +229,30 @@ pub(super) fn isotropy_root(
         }
     };
     let lambda = exact_root(&total, &g, ROOT_TOL);
-    // The texture prior's band: where the root would sit if the sharp scene's
-    // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1 — on
-    // the frame's scale only (the coarse root only checks the fine one), to 1/256
-    // (a bound on a bias, not a measurement).
-    let band = Some([
-        grid_root(&total, 1.0 - TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
-        grid_root(&total, 1.0 + TEXTURE_ANISOTROPY_90, 1.0 / 256.0),
-    ]);
     let k = FAST_SUBSETS as f64;
     let mean_se = |parts: &[f64]| -> (f64, f64) {
         let mean = parts.iter().sum::<f64>() / k;
         (mean, (parts.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt())
     };
+    // (P − Q)/(P + Q) per subset, P and Q the diagonals' gradient energies.
+    let contrast: Vec<f64> = (0..FAST_SUBSETS)
+        .map(|j| {
+            let (pp, qq) = oblique.iter().skip(j).step_by(FAST_SUBSETS).fold((0.0, 0.0), |a, o| (a.0 + o.0, a.1 + o.1));
+            if pp + qq > 0.0 {
+                (pp - qq) / (pp + qq)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let (oblique_contrast, oblique_contrast_se) = mean_se(&contrast);
+    // The texture prior's band: where the root would sit if the sharp scene's
+    // along/across energy ratio were 1 ∓ `TEXTURE_ANISOTROPY_90` instead of 1 — on
+    // the frame's scale only (the coarse root only checks the fine one), to 1/256
+    // (a bound on a bias, not a measurement) — or as far as the anisotropy the frame
+    // shows on its diagonals, where that is more (`anisotropy_ratios`).
+    let [k_lo, k_hi] = anisotropy_ratios(oblique_contrast, oblique_contrast_se);
+    let band = Some([grid_root(&total, k_lo, 1.0 / 256.0), grid_root(&total, k_hi, 1.0 / 256.0)]);
     // The subsets' roots to 1/1024, exact: their spread (~0.005 and up) is what is
     // read, and interpolation errors differ between subsets (they doubled the text
     // photograph's spread, 0.0045 → 0.0076).
@@ -257,10 +277,41 @@ pub(super) fn isotropy_root(
         along_excess_se,
         top_excess,
         top_excess_se,
+        oblique_contrast,
+        oblique_contrast_se,
         band,
         evidence: Some(evidence),
         pixels: chosen,
     })
+}
+
+/// The along/across energy ratios C/D of the sharp texture that bound the
+/// isotropy root's band: 1 ∓ `TEXTURE_ANISOTROPY_90` (natural scenes), widened to
+/// the anisotropy the frame itself proves on its diagonals.
+///
+/// A texture's directional gradient energy is uᵀJu, a second harmonic
+/// m·(1 + A·cos 2(θ − θ₀)) of the direction θ (J its structure tensor): its
+/// along/across contrast (C − D)/(C + D) is a = A·cos 2θ₀ and its diagonals'
+/// (P − Q)/(P + Q) is b = A·sin 2θ₀ (θ₀ from the flow). A streak along the flow is
+/// mirror-symmetric about it and moves P and Q alike, so b is the texture's; a is
+/// what the isotropy root confounds with the streak. One frame proves A ≥ |b|: the
+/// along/across contrast may be as large, a ratio (1 ∓ |b|)/(1 ± |b|), and the
+/// band reaches that far where it is wider than the prior (|b| less two standard
+/// errors: sampling alone never widens it).
+///
+/// The bound, not more: under a heavy-tailed prior on (a, b) — over four
+/// photographs at 12 directions |b| has median 0.028 and 90th percentile 0.176,
+/// a Cauchy's ratio — the 90% half-width of a given b is 2.06·|b|, but that
+/// refused 19 of the 144 held-out frames of `benches/streak_acf/fallback.py` (15
+/// of them read right; the bound: 3) for 6 more oriented-texture frames (BENCHMARKS.md
+/// "Oriented texture at an angle to the flow"). Measured with
+/// `examples/oblique_probe.rs`: an oriented texture (σ 3 / 1.2 px) 20° and 30° off
+/// the flow, where |b| reads 0.25–0.36 and 0.32–0.48, read λ 0.37–1.0 *present*
+/// for 0 on 20 of 24 frames, and on 1 now; at 10° (|b| 0.14–0.19) and along
+/// the axis (b = 0) one frame cannot tell.
+pub(super) fn anisotropy_ratios(oblique_contrast: f64, oblique_contrast_se: f64) -> [f64; 2] {
+    let a = (oblique_contrast.abs() - 2.0 * oblique_contrast_se).clamp(0.0, 0.9);
+    [(1.0 - TEXTURE_ANISOTROPY_90).min((1.0 - a) / (1.0 + a)), (1.0 + TEXTURE_ANISOTROPY_90).max((1.0 + a) / (1.0 - a))]
 }
 
 /// The isotropy samples at `scale`: frame pixels with flow ≥ 3 px/frame and a
@@ -323,6 +374,13 @@ pub(super) struct IsotropyRoot {
     /// texture is smoother along the flow than any exposure explains.
     pub(super) top_excess: f64,
     pub(super) top_excess_se: f64,
+    /// (P − Q)/(P + Q), P and Q the gradient energies along the diagonals
+    /// (u + v)/√2 and (u − v)/√2 (mean over subsets), and its standard error. A
+    /// streak along u is mirror-symmetric about u, so it moves P and Q alike:
+    /// on an isotropic scene this is 0 at any exposure, and a clearly non-zero one
+    /// is the texture's own anisotropy, at an angle to the flow.
+    pub(super) oblique_contrast: f64,
+    pub(super) oblique_contrast_se: f64,
     /// The roots at C/D = 1 ∓ `TEXTURE_ANISOTROPY_90`: the λ range a natural
     /// texture anisotropy leaves open (~90%); with `stats` only (`None` at the coarse scale).
     pub(super) band: Option<[f32; 2]>,
@@ -332,4 +390,67 @@ pub(super) struct IsotropyRoot {
     /// The sample pixels (frame coordinates) the root was taken over: the coarse
     /// scale's root is taken over the same ones.
     pub(super) pixels: Vec<(usize, usize)>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Rgb;
+
+    /// The band's ratios: the prior's where the diagonals show no more than natural
+    /// anisotropy or only sampling; (1 ∓ a)/(1 ± a) beyond, a = |b| less two
+    /// standard errors; the same for either sign of b; bounded where a nears 1.
+    #[test]
+    fn anisotropy_ratios_widen_only_beyond_the_prior_and_sampling() {
+        let prior = [1.0 - TEXTURE_ANISOTROPY_90, 1.0 + TEXTURE_ANISOTROPY_90];
+        assert_eq!(anisotropy_ratios(0.0, 0.0), prior);
+        // b 0.08: (1 + b)/(1 − b) = 1.17, inside the prior's 1.21.
+        assert_eq!(anisotropy_ratios(0.08, 0.0), prior);
+        // b 0.3 but ± 0.15: sampling alone, not a texture.
+        assert_eq!(anisotropy_ratios(0.3, 0.15), prior);
+        // b 0.2 ± 0.01: a = 0.18.
+        let a = 0.18;
+        let [lo, hi] = anisotropy_ratios(0.2, 0.01);
+        assert!((lo - (1.0 - a) / (1.0 + a)).abs() < 1e-12 && (hi - (1.0 + a) / (1.0 - a)).abs() < 1e-12, "{lo} {hi}");
+        assert_eq!(anisotropy_ratios(-0.2, 0.01), [lo, hi]);
+        let [lo, hi] = anisotropy_ratios(0.999, 0.0);
+        assert!((lo - 0.1 / 1.9).abs() < 1e-12 && (hi - 19.0).abs() < 1e-9, "{lo} {hi}");
+    }
+
+    /// The diagonals' contrast is the texture's: on an isotropic texture it stays
+    /// within sampling of 0 under any streak along the flow (the streak is
+    /// mirror-symmetric about it), and on an oriented one it grows with the angle
+    /// between the texture's axis and the flow (A·sin 2θ₀), a streak or not.
+    /// Tolerance on the isotropic texture: 3 standard errors and 0.02, the one
+    /// 480×400 realisation's own anisotropy (read: |r| ≤ 0.052 ± 0.019 over nine
+    /// cases); the oriented one read 0.25 / 0.46 / 0.60 / 0.67 at 10–45°, 0.21–0.49
+    /// under the streak.
+    #[test]
+    fn the_diagonals_contrast_is_the_textures_not_the_streaks() {
+        let (w, h) = (480usize, 400usize);
+        let read = |tex: &Rgb, deg: f32, lambda: f32| {
+            let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
+            let flow = Flow::uniform(w, h, 12.0 * c, 12.0 * s);
+            let img = crate::synth::add_motion_blur(tex, &flow, lambda);
+            let r = isotropy_root(&img.luma(), &flow, 1, true, None, FAST_SAMPLES).expect("textured");
+            (r.oblique_contrast, r.oblique_contrast_se)
+        };
+        let round = crate::synth::sequence::anisotropic_texture(w, h, 2.0, 2.0, 7);
+        for deg in [0.0f32, 30.0, 75.0] {
+            for lambda in [0.0f32, 0.5, 1.0] {
+                let (r, se) = read(&round, deg, lambda);
+                assert!(r.abs() <= 3.0 * se + 0.02, "isotropic texture, {deg}°, λ {lambda}: {r:.4} ± {se:.4}");
+            }
+        }
+        // σ 3 px along x, 1.2 across: the flow `deg` off its smooth axis.
+        let oriented = crate::synth::sequence::anisotropic_texture(w, h, 3.0, 1.2, 7);
+        let mut last = 0.0;
+        for deg in [10.0f32, 20.0, 30.0, 45.0] {
+            let (r, se) = read(&oriented, deg, 0.0);
+            assert!(r > last + 3.0 * se, "oriented texture {deg}° off: {r:.4} ± {se:.4} after {last:.4}");
+            last = r;
+            let (r_blurred, _) = read(&oriented, deg, 0.5);
+            assert!(r_blurred > 0.1, "oriented texture {deg}° off under a streak: {r_blurred:.4}");
+        }
+    }
 }

@@ -637,6 +637,8 @@ pub fn fit_fast(
         along_excess_se,
         top_excess,
         top_excess_se,
+        oblique_contrast,
+        oblique_contrast_se,
         band,
         evidence,
         pixels,
@@ -711,23 +713,45 @@ pub fn fit_fast(
     }
     let band = band.unwrap_or([lambda; 2]);
     let half_band = 0.5 * (band[1] - band[0]) as f64;
-    let prior = format!(
-        "a natural texture anisotropy (±{:.0}%, 90% of scenes) would put it anywhere in [{:.3}, {:.3}]",
-        100.0 * TEXTURE_ANISOTROPY_90,
-        band[0],
-        band[1]
-    );
+    // The anisotropy the band allows: the natural prior's, or what the diagonals
+    // prove (`isotropy::anisotropy_ratios`) where that is more.
+    let [k_lo, k_hi] = isotropy::anisotropy_ratios(oblique_contrast, oblique_contrast_se);
+    let allowed = if k_hi > 1.0 + TEXTURE_ANISOTROPY_90 {
+        format!(
+            "the frame's own texture anisotropy (its diagonals' gradient-energy contrast {oblique_contrast:.3} ± \
+             {oblique_contrast_se:.3}, beyond natural scenes': along/across ratios {k_lo:.2}–{k_hi:.2})"
+        )
+    } else {
+        format!(
+            "a natural texture anisotropy (±{:.0}%, 90% of scenes; the diagonals' contrast {oblique_contrast:.3} ± \
+             {oblique_contrast_se:.3} shows no more)",
+            100.0 * TEXTURE_ANISOTROPY_90
+        )
+    };
+    let prior = format!("{allowed} would put it anywhere in [{:.3}, {:.3}]", band[0], band[1]);
+    // Isotropy's band wider than half of [0, 1]: isotropy cannot answer, nor can
+    // the autocorrelation shape it gauges — except through the shape's dip along
+    // the flow, the reading a texture's anisotropy moves least (`acf_shape::along_dip`,
+    // from `acf_shape::MIN_DIP_LENGTH_PX`), whose error then carries the wide band
+    // as well (below). Measured: streaks of 12–24 px on text and photographs 30° off
+    // the flow read right by their dip (`benches/streak_acf/fallback.py`), where
+    // the diagonals' anisotropy widened the band past half of [0, 1].
     if half_band > MAX_ISOTROPY_HALF_BAND {
-        let reason = format!(
-            "gradient-energy isotropy reads λ = {lambda:.4} from {n} pixels, but {prior}: the streak changes the \
-             along/across balance less than the scene's own texture may, so exposure is not identifiable blindly \
-             here; streak zeros {streak_note}"
-        );
-        let mut d = super::not_identifiable("fast", reason, started);
-        d.samples_used = n as u64;
-        d.stderr = Some(half_band / 1.645);
-        d.stages_s = st.done();
-        return (MotionBlur::absent(d), plot);
+        let shape = shape_read.take().unwrap_or_else(|| acf_shape::acf_read(y, flow).shape);
+        st.lap("search.acf_shape");
+        if !matches!(&shape, Ok(sh) if sh.dip.is_some()) {
+            let reason = format!(
+                "gradient-energy isotropy reads λ = {lambda:.4} from {n} pixels, but {prior}: the streak changes the \
+                 along/across balance less than the scene's own texture may, and the derivative autocorrelation \
+                 shows no dip along the flow, so exposure is not identifiable blindly here; streak zeros {streak_note}"
+            );
+            let mut d = super::not_identifiable("fast", reason, started);
+            d.samples_used = n as u64;
+            d.stderr = Some(half_band / 1.645);
+            d.stages_s = st.done();
+            return (MotionBlur::absent(d), plot);
+        }
+        shape_read = Some(shape);
     }
     // The second scale only where its answer is used (the bias risk of a root).
     // Over the fine root's own pixels: the disagreement then compares one set of
