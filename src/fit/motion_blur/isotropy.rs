@@ -314,6 +314,26 @@ pub(super) fn anisotropy_ratios(oblique_contrast: f64, oblique_contrast_se: f64)
     [(1.0 - TEXTURE_ANISOTROPY_90).min((1.0 - a) / (1.0 + a)), (1.0 + TEXTURE_ANISOTROPY_90).max((1.0 + a) / (1.0 - a))]
 }
 
+/// The reason's account of the band: the anisotropy it allows — the natural
+/// prior's, or what the diagonals prove (`anisotropy_ratios`) where that is more —
+/// and the λ range that puts the root in.
+pub(super) fn band_note(oblique_contrast: f64, oblique_contrast_se: f64, band: [f32; 2]) -> String {
+    let [k_lo, k_hi] = anisotropy_ratios(oblique_contrast, oblique_contrast_se);
+    let allowed = if k_hi > 1.0 + TEXTURE_ANISOTROPY_90 {
+        format!(
+            "the frame's own texture anisotropy (its diagonals' gradient-energy contrast {oblique_contrast:.3} ± \
+             {oblique_contrast_se:.3}, beyond natural scenes': along/across ratios {k_lo:.2}–{k_hi:.2})"
+        )
+    } else {
+        format!(
+            "a natural texture anisotropy (±{:.0}%, 90% of scenes; the diagonals' contrast {oblique_contrast:.3} ± \
+             {oblique_contrast_se:.3} shows no more)",
+            100.0 * TEXTURE_ANISOTROPY_90
+        )
+    };
+    format!("{allowed} would put it anywhere in [{:.3}, {:.3}]", band[0], band[1])
+}
+
 /// The isotropy samples at `scale`: frame pixels with flow ≥ 3 px/frame and a
 /// gradient on `p`, thinned evenly to at most `max_samples` (`FAST_SAMPLES` at
 /// full effort; see `isotropy_root`).

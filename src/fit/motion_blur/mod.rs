@@ -31,7 +31,7 @@ use crate::model::{flow_within_frame, Diagnostics, MotionBlur, Status};
 #[cfg(test)]
 pub(super) use isotropy::isotropy_evidence;
 pub(super) use isotropy::MAX_ISOTROPY_HALF_BAND;
-use isotropy::{fast_samples, isotropy_root, IsotropyRoot, TEXTURE_ANISOTROPY_90};
+use isotropy::{fast_samples, isotropy_root, IsotropyRoot};
 pub(crate) use status::{exposure_status, exposure_status_note, visible_speed_px};
 use std::time::Instant;
 
@@ -509,7 +509,10 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    scenes' anisotropy (`TEXTURE_ANISOTROPY_90`, measured): the roots of C/D =
 ///    1 ∓ that bound a ~90% band for λ, wide where the streak changes the balance
 ///    little (short streaks, defocus, noise) — wider than half of [0, 1] is *not
-///    identifiable*. The bias
+///    identifiable* unless the shape's dip answers (3.). Where the frame's
+///    diagonals show more anisotropy than the prior allows (a texture oriented at
+///    an angle to the flow; a streak along the flow leaves them balanced), the band
+///    reaches what they prove (`isotropy::anisotropy_ratios`). The bias
 ///    term is added in quadrature to the spread of the root over `FAST_SUBSETS`
 ///    interleaved subsets / √subsets.
 /// 3. **The derivative autocorrelation's shape** (`acf_shape`), where isotropy
@@ -713,22 +716,7 @@ pub fn fit_fast(
     }
     let band = band.unwrap_or([lambda; 2]);
     let half_band = 0.5 * (band[1] - band[0]) as f64;
-    // The anisotropy the band allows: the natural prior's, or what the diagonals
-    // prove (`isotropy::anisotropy_ratios`) where that is more.
-    let [k_lo, k_hi] = isotropy::anisotropy_ratios(oblique_contrast, oblique_contrast_se);
-    let allowed = if k_hi > 1.0 + TEXTURE_ANISOTROPY_90 {
-        format!(
-            "the frame's own texture anisotropy (its diagonals' gradient-energy contrast {oblique_contrast:.3} ± \
-             {oblique_contrast_se:.3}, beyond natural scenes': along/across ratios {k_lo:.2}–{k_hi:.2})"
-        )
-    } else {
-        format!(
-            "a natural texture anisotropy (±{:.0}%, 90% of scenes; the diagonals' contrast {oblique_contrast:.3} ± \
-             {oblique_contrast_se:.3} shows no more)",
-            100.0 * TEXTURE_ANISOTROPY_90
-        )
-    };
-    let prior = format!("{allowed} would put it anywhere in [{:.3}, {:.3}]", band[0], band[1]);
+    let prior = isotropy::band_note(oblique_contrast, oblique_contrast_se, band);
     // Isotropy's band wider than half of [0, 1]: isotropy cannot answer, nor can
     // the autocorrelation shape it gauges — except through the shape's dip along
     // the flow, the reading a texture's anisotropy moves least (`acf_shape::along_dip`,
