@@ -306,9 +306,9 @@ pub(super) fn isotropy_root(
 /// of them read right; the bound: 3) for 6 more oriented-texture frames (BENCHMARKS.md
 /// "Oriented texture at an angle to the flow"). Measured with
 /// `examples/oblique_probe.rs`: an oriented texture (σ 3 / 1.2 px) 20° and 30° off
-/// the flow, where |b| reads 0.25–0.36 and 0.32–0.48, read λ 0.37–1.0 *present*
-/// for 0 on 20 of 24 frames, and on 1 now; at 10° (|b| 0.14–0.19) and along
-/// the axis (b = 0) one frame cannot tell.
+/// the flow, where |b| reads 0.25–0.36 and 0.32–0.48, read *present* and missed
+/// the truth on 20 of 24 frames (λ 0.37–1.0 for none), and on 1 now; at 10° (|b|
+/// 0.14–0.19) and along the axis (b = 0) one frame cannot tell.
 pub(super) fn anisotropy_ratios(oblique_contrast: f64, oblique_contrast_se: f64) -> [f64; 2] {
     let a = (oblique_contrast.abs() - 2.0 * oblique_contrast_se).clamp(0.0, 0.9);
     [(1.0 - TEXTURE_ANISOTROPY_90).min((1.0 - a) / (1.0 + a)), (1.0 + TEXTURE_ANISOTROPY_90).max((1.0 + a) / (1.0 - a))]
@@ -401,8 +401,9 @@ pub(super) struct IsotropyRoot {
     /// is the texture's own anisotropy, at an angle to the flow.
     pub(super) oblique_contrast: f64,
     pub(super) oblique_contrast_se: f64,
-    /// The roots at C/D = 1 ∓ `TEXTURE_ANISOTROPY_90`: the λ range a natural
-    /// texture anisotropy leaves open (~90%); with `stats` only (`None` at the coarse scale).
+    /// The roots at the C/D ratios of `anisotropy_ratios` (1 ∓ `TEXTURE_ANISOTROPY_90`,
+    /// or wider where the diagonals prove more): the λ range the texture's anisotropy
+    /// leaves open (~90% for natural scenes); with `stats` only (`None` at the coarse scale).
     pub(super) band: Option<[f32; 2]>,
     /// The samples' C and D on the pooled fit's λ grid by flow direction (with
     /// `stats` only).
