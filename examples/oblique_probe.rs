@@ -9,7 +9,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
-use blind_augment::image::{Flow, Plane, Rgb};
+use blind_augment::image::{Flow, Rgb};
 use blind_augment::model::Status;
 use blind_augment::synth;
 
@@ -63,17 +63,6 @@ fn read(img: &Rgb, flow: &Flow) -> Read {
         oblique_se,
         path,
     }
-}
-
-fn defocus_noise_q(img: &Rgb, sigma: f32, seed: u64) -> Rgb {
-    let noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
-    let mut img = img.clone();
-    let k = blind_augment::image::discrete_gaussian_kernel(sigma * sigma);
-    for ch in 0..3 {
-        let p = Plane::from_vec(img.width, img.height, img.channels[ch].clone());
-        img.channels[ch] = blind_augment::image::blur_separable(&p, &k).data;
-    }
-    common::quantize8(&synth::add_noise(&img, &noise, seed))
 }
 
 /// One line per frame (with `LINES=1`) and a tally per group.
@@ -130,7 +119,7 @@ fn main() {
                 for speed in [8.0f32, 16.0] {
                     let flow = Flow::uniform(800, 700, speed * c, speed * s);
                     for lam in [0.0f32, 0.25, 0.5] {
-                        let img = defocus_noise_q(&synth::add_motion_blur(&tex, &flow, lam), 1.2, seed);
+                        let img = common::defocus_noise_8bit(&synth::add_motion_blur(&tex, &flow, lam), 1.2, seed);
                         t.add(format!("seed {seed} @{speed}"), lam, &read(&img, &flow));
                     }
                 }
@@ -153,7 +142,7 @@ fn main() {
                 for speed in [8.0f32, 16.0] {
                     let flow = Flow::uniform(800, 600, speed * c, speed * s);
                     for lam in [0.0f32, 0.5] {
-                        let img = defocus_noise_q(&synth::add_motion_blur(&clean, &flow, lam), 0.8, 7);
+                        let img = common::defocus_noise_8bit(&synth::add_motion_blur(&clean, &flow, lam), 0.8, 7);
                         t.add(format!("{deg}° @{speed}"), lam, &read(&img, &flow));
                     }
                 }

@@ -6,23 +6,12 @@
 //! and widens the estimator's band by it.
 
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
-use blind_augment::image::{blur_separable, discrete_gaussian_kernel, Flow, Plane, Rgb};
+use blind_augment::image::Flow;
 use blind_augment::model::Status;
 use blind_augment::synth;
 
 #[path = "common/mod.rs"]
 mod common;
-
-/// Defocus σ 1.2 px, sensor noise and 8-bit quantisation over the streaked texture.
-fn camera(img: &Rgb, seed: u64) -> Rgb {
-    let noise = synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
-    let k = discrete_gaussian_kernel(1.2 * 1.2);
-    let mut out = img.clone();
-    for ch in 0..3 {
-        out.channels[ch] = blur_separable(&Plane::from_vec(img.width, img.height, img.channels[ch].clone()), &k).data;
-    }
-    common::quantize8(&synth::add_noise(&out, &noise, seed))
-}
 
 /// An oriented texture (σ 3 px along its axis, 1.2 across: ~6× the gradient energy
 /// across) with the flow 30° and 45° off its smooth axis, 8 and 16 px/frame, λ 0,
@@ -52,7 +41,7 @@ fn oriented_texture_off_the_flow_is_not_read_as_a_streak() {
             for speed in [8.0f32, 16.0] {
                 let flow = Flow::uniform(w, h, speed * c, speed * s);
                 for truth in [0.0f32, 0.25, 0.5] {
-                    let img = camera(&synth::add_motion_blur(&tex, &flow, truth), seed);
+                    let img = common::defocus_noise_8bit(&synth::add_motion_blur(&tex, &flow, truth), 1.2, seed);
                     let out = fit(&FitInputs { flow: Some(&flow), ..FitInputs::new(&img) }, &opts).expect("fit");
                     let mb = &out.model.motion_blur;
                     frames += 1;

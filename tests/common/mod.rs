@@ -129,6 +129,19 @@ pub fn add_sensor_noise(clean: &Rgb, a: [f32; 3], b: [f32; 3], seed: u64) -> Rgb
     out
 }
 
+/// A camera over a synthetic frame: Gaussian defocus of `sigma_px` per channel, the
+/// bench's white sensor noise (seeded) and 8-bit quantisation.
+pub fn defocus_noise_8bit(img: &Rgb, sigma_px: f32, seed: u64) -> Rgb {
+    let noise = blind_augment::synth::white_sensor_noise([2e-5; 3], [8e-4; 3], [0.0, 1.0]);
+    let k = blind_augment::image::discrete_gaussian_kernel(sigma_px * sigma_px);
+    let mut out = img.clone();
+    for ch in 0..3 {
+        let p = Plane::from_vec(img.width, img.height, img.channels[ch].clone());
+        out.channels[ch] = blind_augment::image::blur_separable(&p, &k).data;
+    }
+    quantize8(&blind_augment::synth::add_noise(&out, &noise, seed))
+}
+
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     if v.is_empty() {
