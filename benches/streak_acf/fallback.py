@@ -87,7 +87,10 @@ def main():
         if not shape and re.match(r"λ = [\d.]+ ± [\d.]+ by gradient-energy isotropy", reason):
             iso = re.match(r"λ = ([\d.]+) ± ([\d.]+)", reason)
         if iso is None:
-            print(f"{part:5s} {name:28s} {angle:3d}° L {length:2d}: not the fallback", flush=True)
+            zeros = re.match(r"λ = ([\d.]+) ± ([\d.]+)[^;]*? from the streak's spectral zeros", reason)
+            what = f"zeros {float(zeros.group(1)) * 50:5.1f} ± {float(zeros.group(2)) * 50:4.1f} px" if zeros else \
+                "not identifiable" if lam is None else "other"
+            print(f"{part:5s} {name:28s} {angle:3d}° L {length:2d}: not the fallback ({what})", flush=True)
             continue
         se = float(re.match(r"λ = [\d.]+ ± ([\d.]+)", reason).group(1)) * 50.0
         got, got_iso, se_iso = (lam or 0.0) * 50.0, float(iso.group(1)) * 50.0, float(iso.group(2)) * 50.0

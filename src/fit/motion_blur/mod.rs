@@ -537,6 +537,23 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 /// (`fit_fast`): below it the dip's window, [L/1.4, 1.4·L], reaches the sharp
 /// texture's own negative lobe at a few px.
 const CONFIRM_MIN_LENGTH_PX: f32 = 10.0;
+/// The streak zeros' model error, relative to λ (one standard error), joined in
+/// quadrature to their sampling and noise-floor spread. The template is sinc² over
+/// a flat noise floor; the measured spectra are Hann-windowed (the window's main
+/// lobe carries a falling scene spectrum's power into the zero: the zero reads at a
+/// higher frequency, the streak shorter) and their floor is not the template's (a
+/// streak along the flow also lowers the across-flow power it is set against, so the
+/// template's floor sits too high and places the zero late). Measured on 111 zeros
+/// answers (`benches/streak_acf/fallback.py`'s 70 — box streaks of 6–31 px at 50
+/// px/frame on photographs; `examples/oblique_probe` `SET=iso`'s 20 — 6–16 px on an
+/// isotropic texture under defocus and noise; `SET=photos`' 21 — 8 px on four
+/// photographs): relative error median −1.7%, |error| 68th percentile 2.5%, 90th
+/// 6.2%; on a noise-free synthetic line field with an exact box (`examples/
+/// zeros_bias_probe`) ±0.05 px, so the error is the scene's and the noise's, not
+/// the estimator's arithmetic. Without it the zeros claimed ± 0.003–0.02 where they
+/// missed by 2–4%: on the isotropic texture 16 of 20 answers held the truth outside
+/// two standard errors.
+const ZEROS_MODEL_ERROR: f64 = 0.025;
 
 /// `effort` (`FitOptions::fast_effort`, in [`MIN_FAST_EFFORT`](super::MIN_FAST_EFFORT), 1]) scales the
 /// isotropy's pixels and the streak's lines (BENCHMARKS.md: what each effort costs
@@ -607,9 +624,12 @@ pub fn fit_fast(
             ),
             _ => (sig.stderr as f64, String::new()),
         };
+        let model = ZEROS_MODEL_ERROR * lambda as f64;
+        let stderr = stderr.hypot(model);
         let mut mb = decide("fast", lambda, stderr, None, sig.lines, speed, started);
         mb.diagnostics.reason = format!(
-            "λ = {lambda:.4} ± {stderr:.4}{widened} from the streak's spectral zeros along the flow ({} lines, \
+            "λ = {lambda:.4} ± {stderr:.4}{widened} (the template's model error ± {model:.4} in quadrature) from \
+             the streak's spectral zeros along the flow ({} lines, \
              correlation {:.2}, \
              next best {:.2}, first side lobe e^{:.2} × the noise floor, along-flow dip {:.2} (ln) at the zero, \
              {:.0}% of the ratio's dip across-flow texture{check_note}); {}",
