@@ -490,7 +490,9 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 ///    that fills the zeros leave them unidentified. From `CONFIRM_MIN_LENGTH_PX`
 ///    they must also be supported by the derivative autocorrelation (a dip along
 ///    the flow near the length, or a shape above half of it): noise on flat
-///    content had its zeros read as 19–21 px streaks that were not there.
+///    content had its zeros read as 19–21 px streaks that were not there. Their
+///    standard error carries the template's model error (`ZEROS_MODEL_ERROR`: the
+///    zeros read ~2% short on most scenes) in quadrature with their spread.
 /// 2. **Gradient-energy isotropy** otherwise. Assume the sharp scene is
 ///    statistically isotropic around the sampled pixels. A box streak of length
 ///    L* = λ*|F| along u = F/|F| leaves the frame I. Blur I once more, by a box of
