@@ -140,7 +140,9 @@ fn main() {
     if set == "iso" {
         // An isotropic texture (σ 1.2 px both ways) at long exposures: what a real
         // full-frame streak reads, next to the oriented texture's λ = 1 end.
-        let mut t = Tally::new("isotropic texture, long exposures".into());
+        // `DEFOCUS=σ` (px, default 1.2): heavier defocus fills the zeros.
+        let defocus: f32 = std::env::var("DEFOCUS").ok().and_then(|v| v.parse().ok()).unwrap_or(1.2);
+        let mut t = Tally::new(format!("isotropic texture, long exposures, defocus σ {defocus} px"));
         for seed in [3u64, 5] {
             let tex = synth::sequence::anisotropic_texture(800, 700, 1.2, 1.2, seed);
             for deg in [0.0f32, 30.0] {
@@ -148,7 +150,7 @@ fn main() {
                 for speed in [8.0f32, 16.0] {
                     let flow = Flow::uniform(800, 700, speed * c, speed * s);
                     for lam in [0.75f32, 0.9, 1.0] {
-                        let img = common::defocus_noise_8bit(&synth::add_motion_blur(&tex, &flow, lam), 1.2, seed);
+                        let img = common::defocus_noise_8bit(&synth::add_motion_blur(&tex, &flow, lam), defocus, seed);
                         t.add(format!("seed {seed} {deg}° @{speed}"), lam, &read(&img, &flow));
                     }
                 }

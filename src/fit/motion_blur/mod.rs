@@ -539,6 +539,9 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 /// (`fit_fast`): below it the dip's window, [L/1.4, 1.4·L], reaches the sharp
 /// texture's own negative lobe at a few px.
 const CONFIRM_MIN_LENGTH_PX: f32 = 10.0;
+/// A shape length within this of the flow's speed reads a full-frame streak: half
+/// the shape's 1 px grid of candidate lengths.
+const FULL_FRAME_MARGIN_PX: f32 = 0.5;
 /// The streak zeros' model error, relative to λ (one standard error), joined in
 /// quadrature to their sampling and noise-floor spread. The template is sinc² over
 /// a flat noise floor; the measured spectra are Hann-windowed (the window's main
@@ -785,6 +788,37 @@ pub fn fit_fast(
     // in quadrature with isotropy's bias risk.
     let shape = shape_read.unwrap_or_else(|| acf_shape::acf_read(y, flow).shape);
     st.lap("search.acf_shape");
+    // Isotropy's root not bracketed below a full-frame exposure (the λ = 1 it reads is
+    // the search's end), and the shape's best length at a full-frame streak or past
+    // it: both searches end at λ = 1. A texture smoother along the flow than across,
+    // by as much as a full-frame streak makes, reads the same, and one frame cannot
+    // tell the two. Measured (`examples/oblique_probe`): an oriented texture (σ 3 /
+    // 1.2 px) 0–20° off its smooth axis at 8 px/frame read λ 1.000 ± 0.05–0.13
+    // *present* on 5 of its 36 frames (truths 0 and 0.5), all now refused; the price,
+    // an isotropic texture at λ 1 whose zeros heavy defocus (σ 2–2.5 px) fills: 3 of
+    // its 72 frames that read 1.000 ± 0.06–0.07 now refused too (BENCHMARKS.md
+    // "λ = 1 where both searches end"). With isotropy's root inside [0, 1] a shape
+    // refused past the full frame leaves isotropy's answer, as every refusal does.
+    let shape_at_end = match &shape {
+        Ok(sh) => (sh.length_px >= sh.speed_px - FULL_FRAME_MARGIN_PX).then(|| {
+            format!("its best length, {:.1} px, is a full-frame streak's ({:.1} px/frame)", sh.length_px, sh.speed_px)
+        }),
+        Err(why) => acf_shape::past_full_frame(why).then(|| why.clone()),
+    };
+    if let Some(why) = shape_at_end.filter(|_| lambda >= 1.0) {
+        let reason = format!(
+            "gradient-energy isotropy's root is not bracketed below a full-frame exposure ({iso_detail}), and the \
+             derivative autocorrelation's shape ends there too ({why}): λ = 1 is where both searches end, not a \
+             balance — a texture smoother along the flow than across by as much as a full-frame streak makes reads \
+             the same, and one frame cannot tell them apart; streak zeros {streak_note}: exposure not identifiable \
+             blindly"
+        );
+        let mut d = super::not_identifiable("fast", reason, started);
+        d.samples_used = n as u64;
+        d.stderr = Some(iso_stderr);
+        d.stages_s = st.done();
+        return (MotionBlur::absent(d), plot);
+    }
     let (lambda, stderr, how) = match shape {
         Ok(sh) => {
             // The dip, where read, is the reading a texture's anisotropy moves least

@@ -89,6 +89,30 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
     acf_read(y, flow).shape
 }
 
+/// How many candidate lengths (1 px apart) the shape reads past a full-frame
+/// streak's, so that a best length at the full frame is a located minimum and one
+/// past it is seen as such (`past_full_frame`), not as "the search's end". A best
+/// past it is no exposure (λ ≤ 1): the frame is smoother along the flow than any
+/// streak makes it. Measured (`examples/oblique_probe`, an oriented texture σ 3 /
+/// 1.2 px at 8 px/frame, 0–20° off its smooth axis, no streak or λ 0.5): the best
+/// lies at 7.8–8.5 px — that texture's smoothness along the flow is a full-frame
+/// streak's; before, the candidates ended at ⌊speed⌋ (7 px for 7.99 px/frame at
+/// 10°), the shape was refused, and isotropy's unbracketed root answered λ 1.000
+/// *present* (`fit_fast` now refuses where both end there). Two, not more: the
+/// motion-blur fit's cost on the bench frame rose ~0.35 ms with candidates to 1.5×
+/// the full frame, for nothing those two do not show (and they are read only where
+/// the best within the full frame is the full frame).
+const PAST_FULL_FRAME_PX: usize = 2;
+/// The phrase of the shape's refusal when its best lies past a full-frame streak
+/// (`past_full_frame`).
+const PAST_FULL_FRAME_PHRASE: &str = "lies past a full-frame streak";
+
+/// Whether the shape was refused because its best length lies past a full-frame
+/// streak (the reason `read` gives).
+pub(super) fn past_full_frame(why: &str) -> bool {
+    why.contains(PAST_FULL_FRAME_PHRASE)
+}
+
 /// What one look at the autocorrelations gives: the shape's reading (or why not),
 /// and the frame's own (L = 0) derivative autocorrelations along and across the
 /// flow, noise removed, lags 0…max_lag, wherever they were computed — also where
@@ -217,7 +241,10 @@ fn read(
     }
     let sigma = immerkaer_sigma(y);
     let noise = NoiseTable::new((ox, oy), (ux, uy), (cw, ch));
-    let (au, av) = autocorrelations(&crop, cw, ch, max_lag, l_max);
+    // The candidates reach `PAST_FULL_FRAME_PX` past a full-frame streak (within the
+    // lags' `MAX_LENGTH_PX`).
+    let l_ext = if curves_only.is_some() { l_max } else { (l_max + PAST_FULL_FRAME_PX).min(MAX_LENGTH_PX) };
+    let (au, av) = autocorrelations(&crop, cw, ch, max_lag, l_ext);
     // Per candidate length: the relative residual of the best amplitude.
     let (a_len, b_len) = (cw - 1, ch - 1);
     // The two autocorrelations after a box of `len` across the flow, noise removed.
@@ -286,8 +313,15 @@ fn read(
              across, noise's {noise_u:.2e} / {noise_v:.2e})"
         ));
     }
-    let residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
-    let best = (0..residuals.len()).min_by(|&a, &b| residuals[a].total_cmp(&residuals[b])).unwrap_or(0);
+    let mut residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
+    let argmin = |r: &[f64]| (0..r.len()).min_by(|&a, &b| r[a].total_cmp(&r[b])).unwrap_or(0);
+    let mut best = argmin(&residuals);
+    // The candidates past the full frame only where the best is the full frame: a
+    // minimum inside it is located as before (and the extra lengths cost ~0.3 ms).
+    if best == l_max && l_ext > l_max {
+        residuals.extend((l_max + 1..=l_ext).map(residual_at));
+        best = argmin(&residuals);
+    }
     // No streak is a reading only where a short one would fit measurably worse.
     let probe = ZERO_PROBE_PX.min(l_max);
     // (A NaN residual is no rise either.)
@@ -303,12 +337,15 @@ fn read(
     // A minimum at the search's top end is no balance: the match may improve past
     // it (the lags' `MAX_LENGTH_PX`, or a full-frame streak). Measured: a colour
     // wheel with no streak read 50 px (λ 1) at 50 px/frame.
-    if best == l_max {
-        return Err(format!("the best length lies at the search's end ({l_max} px)"));
+    if best == l_ext && (l_ext as f32) > speed {
+        return Err(format!("the best length, at least {l_ext} px, {PAST_FULL_FRAME_PHRASE} ({speed:.1} px/frame)"));
+    }
+    if best == l_ext {
+        return Err(format!("the best length lies at the search's end ({l_ext} px)"));
     }
     // Parabola through the best and its neighbours.
     let mut length = best as f64;
-    if best > 0 && best < l_max {
+    if best > 0 && best < l_ext {
         let (a, b, c) = (residuals[best - 1], residuals[best], residuals[best + 1]);
         let den = a - 2.0 * b + c;
         if den > 0.0 {
@@ -316,6 +353,9 @@ fn read(
         }
     }
     let length_px = length as f32;
+    if length_px > speed {
+        return Err(format!("the best length, {length_px:.1} px, {PAST_FULL_FRAME_PHRASE} ({speed:.1} px/frame)"));
+    }
     Ok(AcfShape {
         lambda: (length_px / speed).clamp(0.0, 1.0),
         length_px,
