@@ -5,7 +5,7 @@
 //! contrast measures that anisotropy (`fit::motion_blur::isotropy::anisotropy_ratios`)
 //! and widens the estimator's band by it.
 
-use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
+use blind_augment::fit::{fit, FitInputs};
 use blind_augment::image::Flow;
 use blind_augment::model::Status;
 use blind_augment::synth;
@@ -27,11 +27,7 @@ mod common;
 #[test]
 fn oriented_texture_off_the_flow_is_not_read_as_a_streak() {
     let (w, h) = (640usize, 480usize);
-    let opts = FitOptions {
-        tier: Some(Tier::Fast),
-        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
-        ..Default::default()
-    };
+    let opts = common::fast_exposure_only();
     let mut wrong = vec![];
     let mut frames = 0;
     for seed in [3u64, 5] {
@@ -75,11 +71,7 @@ fn oriented_texture_off_the_flow_is_not_read_as_a_streak() {
 #[test]
 fn a_texture_smoother_along_the_flow_than_any_exposure_is_not_read_as_a_full_frame_streak() {
     let (w, h) = (640usize, 480usize);
-    let opts = FitOptions {
-        tier: Some(Tier::Fast),
-        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
-        ..Default::default()
-    };
+    let opts = common::fast_exposure_only();
     let mut present = vec![];
     for seed in [3u64, 5] {
         let tex = synth::sequence::anisotropic_texture(w, h, 3.0, 1.2, seed);

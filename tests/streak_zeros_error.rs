@@ -5,7 +5,7 @@
 //! floor, read through a Hann window) puts the zero 2–5% short
 //! (`fit::motion_blur::ZEROS_MODEL_ERROR`).
 
-use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
+use blind_augment::fit::{fit, FitInputs};
 use blind_augment::image::Flow;
 use blind_augment::synth;
 
@@ -24,11 +24,7 @@ mod common;
 #[test]
 fn streak_zeros_error_holds_their_model_error() {
     let (w, h) = (640usize, 480usize);
-    let opts = FitOptions {
-        tier: Some(Tier::Fast),
-        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
-        ..Default::default()
-    };
+    let opts = common::fast_exposure_only();
     let tex = synth::sequence::anisotropic_texture(w, h, 1.2, 1.2, 3);
     let (mut zeros, mut missed, mut frames) = (0, vec![], 0);
     for deg in [0.0f32, 30.0] {

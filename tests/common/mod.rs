@@ -129,6 +129,16 @@ pub fn add_sensor_noise(clean: &Rgb, a: [f32; 3], b: [f32; 3], seed: u64) -> Rgb
     out
 }
 
+/// Fit options for the blind (fast) exposure alone: the motion-blur tests' fit.
+pub fn fast_exposure_only() -> blind_augment::fit::FitOptions {
+    use blind_augment::fit::{Effects, FitOptions, Tier};
+    FitOptions {
+        tier: Some(Tier::Fast),
+        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
+        ..Default::default()
+    }
+}
+
 /// A camera over a synthetic frame: Gaussian defocus of `sigma_px` per channel, the
 /// bench's white sensor noise (seeded) and 8-bit quantisation.
 pub fn defocus_noise_8bit(img: &Rgb, sigma_px: f32, seed: u64) -> Rgb {
