@@ -22,6 +22,7 @@
 //! streak length — see its documentation.
 
 mod acf_shape;
+mod ends;
 mod isotropy;
 mod status;
 
@@ -539,9 +540,6 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
 /// (`fit_fast`): below it the dip's window, [L/1.4, 1.4·L], reaches the sharp
 /// texture's own negative lobe at a few px.
 const CONFIRM_MIN_LENGTH_PX: f32 = 10.0;
-/// A shape length within this of the flow's speed reads a full-frame streak: half
-/// the shape's 1 px grid of candidate lengths.
-const FULL_FRAME_MARGIN_PX: f32 = 0.5;
 /// The streak zeros' model error, relative to λ (one standard error), joined in
 /// quadrature to their sampling and noise-floor spread. The template is sinc² over
 /// a flat noise floor; the measured spectra are Hann-windowed (the window's main
@@ -699,41 +697,12 @@ pub fn fit_fast(
         ),
         None => "not measurable (no line along the flow fits the frame)".into(),
     };
-    // Even the prior's most along-heavy texture (C/D = 1 + `TEXTURE_ANISOTROPY_90`)
-    // puts the root at 0: the frame's along excess lies beyond the prior, so the
-    // prior's band ([0, 0]) says nothing about λ.
-    let beyond_prior = band.is_some_and(|b| b[1] == 0.0);
-    if lambda == 0.0 && ((along_excess > 0.02 && along_excess > 3.0 * along_excess_se) || beyond_prior) {
-        // The root sits at 0 because the texture itself carries more gradient
-        // energy along the flow (a streak can only lower it): an isotropic scene
-        // without blur and an anisotropic one with blur look alike here.
-        let reason = format!(
-            "the frame has {:.1}% (± {:.1}%) more gradient energy along the flow than across before any streak — \
-             anisotropic texture, so gradient-energy isotropy cannot separate it from motion blur; streak zeros \
-             {streak_note}: exposure not identifiable blindly",
-            100.0 * along_excess,
-            100.0 * along_excess_se
-        );
-        let mut d = super::not_identifiable("fast", reason, started);
-        d.samples_used = n as u64;
-        d.stages_s = st.done();
-        return (MotionBlur::absent(d), plot);
-    }
-    // The other end: the root is not bracketed below a full-frame exposure and the
-    // frame still holds clearly less gradient energy along the flow than across
-    // after a full-frame streak is undone — its texture is smoother along the flow
-    // than any exposure explains, and λ = 1 is the search's end, not a balance (the
-    // prior's band, cut at 1, then looked narrow). Measured: texture smoothed σ 3 px
-    // along the flow and 1.2 px across read λ 1.000 ± 0.036 *present* for truths 0,
-    // 0.2 and 0.5 (8 px/frame, σ 1.5 px defocus, noise).
-    if lambda >= 1.0 && top_excess < -0.02 && top_excess < -3.0 * top_excess_se {
-        let reason = format!(
-            "even a full-frame streak leaves the frame {:.1}% (± {:.1}%) short of gradient energy along the flow — \
-             texture smoother along the flow than across, so gradient-energy isotropy cannot separate it from \
-             motion blur; streak zeros {streak_note}: exposure not identifiable blindly",
-            -100.0 * top_excess,
-            100.0 * top_excess_se
-        );
+    // Isotropy's root at an end of [0, 1] where the texture, not a balance, put it
+    // (`ends`): not identifiable.
+    let at_end = ends::root_at_zero(lambda, along_excess, along_excess_se, band)
+        .or_else(|| ends::root_at_one(lambda, top_excess, top_excess_se));
+    if let Some(why) = at_end {
+        let reason = format!("{why}; streak zeros {streak_note}: exposure not identifiable blindly");
         let mut d = super::not_identifiable("fast", reason, started);
         d.samples_used = n as u64;
         d.stages_s = st.done();
@@ -788,24 +757,8 @@ pub fn fit_fast(
     // in quadrature with isotropy's bias risk.
     let shape = shape_read.unwrap_or_else(|| acf_shape::acf_read(y, flow).shape);
     st.lap("search.acf_shape");
-    // Isotropy's root not bracketed below a full-frame exposure (the λ = 1 it reads is
-    // the search's end), and the shape's best length at a full-frame streak or past
-    // it: both searches end at λ = 1. A texture smoother along the flow than across,
-    // by as much as a full-frame streak makes, reads the same, and one frame cannot
-    // tell the two. Measured (`examples/oblique_probe`): an oriented texture (σ 3 /
-    // 1.2 px) 0–20° off its smooth axis at 8 px/frame read λ 1.000 ± 0.05–0.13
-    // *present* on 5 of its 36 frames (truths 0 and 0.5), all now refused; the price,
-    // an isotropic texture at λ 1 whose zeros heavy defocus (σ 2–2.5 px) fills: 3 of
-    // its 72 frames that read 1.000 ± 0.06–0.07 now refused too (BENCHMARKS.md
-    // "λ = 1 where both searches end"). With isotropy's root inside [0, 1] a shape
-    // refused past the full frame leaves isotropy's answer, as every refusal does.
-    let shape_at_end = match &shape {
-        Ok(sh) => (sh.length_px >= sh.speed_px - FULL_FRAME_MARGIN_PX).then(|| {
-            format!("its best length, {:.1} px, is a full-frame streak's ({:.1} px/frame)", sh.length_px, sh.speed_px)
-        }),
-        Err(why) => acf_shape::past_full_frame(why).then(|| why.clone()),
-    };
-    if let Some(why) = shape_at_end.filter(|_| lambda >= 1.0) {
+    // Both searches end at λ = 1 (`ends::both_at_full_frame`): not identifiable.
+    if let Some(why) = ends::both_at_full_frame(lambda, &shape) {
         let reason = format!(
             "gradient-energy isotropy's root is not bracketed below a full-frame exposure ({iso_detail}), and the \
              derivative autocorrelation's shape ends there too ({why}): λ = 1 is where both searches end, not a \
