@@ -13,6 +13,8 @@ derivative autocorrelation's shape, shipped".
 Uniform flow of 50 px/frame along the streak (the CLI's `fit --only motion-blur --tier
 fast`). Errors are relative to the streak, or to 4 px where there is none; a frame
 not identifiable scores 0 px. "Covered": the truth within two reported standard errors.
+A frame the streak zeros answer prints their length and the margin of their template's
+correlation over the next best template ≥ 25% away in λ.
 
     python3 benches/streak_acf/fallback.py --bin target/release/blind-augment
     # needs numpy, opencv-python-headless, Pillow, scikit-image (its data photographs)
@@ -88,7 +90,9 @@ def main():
             iso = re.match(r"λ = ([\d.]+) ± ([\d.]+)", reason)
         if iso is None:
             zeros = re.match(r"λ = ([\d.]+) ± ([\d.]+)[^;]*? from the streak's spectral zeros", reason)
-            what = f"zeros {float(zeros.group(1)) * 50:5.1f} ± {float(zeros.group(2)) * 50:4.1f} px" if zeros else \
+            corr = re.search(r"correlation ([\d.]+), next best (-?[\d.]+)", reason)
+            margin = f", margin {float(corr.group(1)) - float(corr.group(2)):.2f}" if zeros and corr else ""
+            what = f"zeros {float(zeros.group(1)) * 50:5.1f} ± {float(zeros.group(2)) * 50:4.1f} px{margin}" if zeros else \
                 "not identifiable" if lam is None else "other"
             print(f"{part:5s} {name:28s} {angle:3d}° L {length:2d}: not the fallback ({what})", flush=True)
             continue
