@@ -307,11 +307,7 @@ fn noise_with_an_aligned_neighbour_reads_through_texture_on_video() {
 fn derived_noise_levels_carry_the_measured_error_and_no_more() {
     let (a, b) = ([5e-6f32; 3], [2e-4f32; 3]);
     let img = quantize8(&add_sensor_noise(&mirror_tile(&photo("astronaut.png"), 1280, 960), a, b, 3));
-    let opts = FitOptions {
-        tier: Some(Tier::Fast),
-        effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
-        ..FitOptions::default()
-    };
+    let opts = opts(true, false, false);
     let n = fit(&FitInputs::new(&img), &opts).expect("fit").model.noise;
     let unit = blind_augment::synth::unit_band_std();
     let [lo, hi] = n.luminance_range;

@@ -4,7 +4,7 @@
 
 mod common;
 
-use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Tier};
+use blind_augment::fit::{fit, FitInputs};
 use blind_augment::image::{Plane, Rgb};
 use blind_augment::synth::{add_dof, add_motion_blur};
 use common::*;
@@ -174,11 +174,7 @@ fn streak_zeros_without_an_autocorrelation_dip_are_not_taken() {
     let noise = white_sensor_noise([sigma * sigma; 3], [0.0; 3], [0.0, 1.0]);
     let a = 30f32.to_radians();
     let flow = Flow::uniform(w, h, 50.0 * a.cos(), 50.0 * a.sin());
-    let opts = FitOptions {
-        tier: Some(Tier::Fast),
-        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
-        ..FitOptions::default()
-    };
+    let opts = fast_exposure_only();
     let mut refused = 0;
     for seed in 1..=8u64 {
         let img = quantize8(&add_noise(&ramp, &noise, seed));
@@ -203,11 +199,7 @@ fn streak_zeros_without_an_autocorrelation_dip_are_not_taken() {
 fn long_streaks_by_their_zeros_cover_the_truth() {
     use blind_augment::image::Flow;
     let (w, h) = (640usize, 480usize);
-    let opts = FitOptions {
-        tier: Some(Tier::Fast),
-        effects: Effects { noise: false, motion_blur: true, depth_of_field: false },
-        ..FitOptions::default()
-    };
+    let opts = fast_exposure_only();
     let mut by_zeros = 0;
     for name in ["astronaut.png", "rocket.jpg", "chelsea.png"] {
         let clean = mirror_tile(&photo(name), w, h);
