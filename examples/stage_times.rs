@@ -83,7 +83,13 @@ fn main() {
             ("dof", &m.depth_of_field.diagnostics),
         ] {
             let stages: Vec<String> = d.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", v * 1e3)).collect();
-            println!("  {name}: {:.1} ms [{}] {:?}", d.fit_time_s * 1e3, stages.join(", "), d.status);
+            println!(
+                "  {name}: {:.1} ms [{}] {:?} n={}",
+                d.fit_time_s * 1e3,
+                stages.join(", "),
+                d.status,
+                d.samples_used
+            );
         }
     }
 }

@@ -3,7 +3,7 @@
 //! the reason (the caller adds the streak zeros' note) where the frame is not
 //! identifiable, else `None`.
 
-use super::acf_shape::{self, AcfShape};
+use super::acf_shape::{AcfShape, Refusal};
 
 /// A shape length within this of the flow's speed reads a full-frame streak: half
 /// the shape's 1 px grid of candidate lengths.
@@ -63,7 +63,7 @@ pub(super) fn root_at_one(lambda: f32, top_excess: f64, top_excess_se: f64) -> O
 /// that read 1.000 ± 0.06–0.07 now refused too (BENCHMARKS.md "λ = 1 where both
 /// searches end"). With isotropy's root inside [0, 1] a shape refused past the full
 /// frame leaves isotropy's answer, as every refusal of the shape does.
-pub(super) fn both_at_full_frame(lambda: f32, shape: &Result<AcfShape, String>) -> Option<String> {
+pub(super) fn both_at_full_frame(lambda: f32, shape: &Result<AcfShape, Refusal>) -> Option<String> {
     if lambda < 1.0 {
         return None;
     }
@@ -71,6 +71,39 @@ pub(super) fn both_at_full_frame(lambda: f32, shape: &Result<AcfShape, String>) 
         Ok(sh) => (sh.length_px >= sh.speed_px - FULL_FRAME_MARGIN_PX).then(|| {
             format!("its best length, {:.1} px, is a full-frame streak's ({:.1} px/frame)", sh.length_px, sh.speed_px)
         }),
-        Err(why) => acf_shape::past_full_frame(why).then(|| why.clone()),
+        Err(Refusal::PastFullFrame(why)) => Some(why.clone()),
+        Err(Refusal::Other(_)) => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shape(length_px: f32, speed_px: f32) -> AcfShape {
+        AcfShape {
+            lambda: (length_px / speed_px).min(1.0),
+            length_px,
+            speed_px,
+            residual: 0.01,
+            residual_sharp: 0.5,
+            crop: (256, 192),
+            dip: None,
+        }
+    }
+
+    /// The refusal's kind decides, not its words: the same words as any other
+    /// refusal leave isotropy's answer; a located length within half a pixel of the
+    /// full frame refuses, one below it does not; and below λ = 1 nothing refuses.
+    #[test]
+    fn both_at_full_frame_branches_on_the_refusal_kind() {
+        let words = "the best length, 8.2 px, lies past a full-frame streak (8.0 px/frame)".to_string();
+        let past = Err(Refusal::PastFullFrame(words.clone()));
+        assert_eq!(both_at_full_frame(1.0, &past), Some(words.clone()));
+        assert_eq!(both_at_full_frame(0.99, &past), None);
+        assert_eq!(both_at_full_frame(1.0, &Err(Refusal::Other(words))), None);
+        assert!(both_at_full_frame(1.0, &Ok(shape(7.6, 8.0))).is_some());
+        assert_eq!(both_at_full_frame(1.0, &Ok(shape(7.4, 8.0))), None);
+        assert_eq!(both_at_full_frame(0.9, &Ok(shape(8.0, 8.0))), None);
     }
 }

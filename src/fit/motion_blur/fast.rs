@@ -105,7 +105,7 @@ pub fn fit_fast(
     st.lap("search.spectrum");
     // The autocorrelations, where read for the zeros' check below, serve the
     // fallback too (one FFT per frame).
-    let mut shape_read: Option<Result<acf_shape::AcfShape, String>> = None;
+    let mut shape_read: Option<Result<acf_shape::AcfShape, acf_shape::Refusal>> = None;
     let mut contradiction: Option<String> = None;
     let mut check_note = String::new();
     // The dip's lag and the flow's speed where the check read one (for the error).

@@ -88,13 +88,13 @@ pub(super) struct AcfShape {
 /// The streak length from the autocorrelations' shape on `y` under `flow`, or why it
 /// is not read.
 #[cfg(test)]
-pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
+pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, Refusal> {
     acf_read(y, flow).shape
 }
 
 /// How many candidate lengths (1 px apart) the shape reads past a full-frame
 /// streak's, so that a best length at the full frame is a located minimum and one
-/// past it is seen as such (`past_full_frame`), not as "the search's end". A best
+/// past it is seen as such (`Refusal::PastFullFrame`), not as "the search's end". A best
 /// past it is no exposure (λ ≤ 1): the frame is smoother along the flow than any
 /// streak makes it. Measured (`examples/oblique_probe`, an oriented texture σ 3 /
 /// 1.2 px at 8 px/frame, 0–20° off its smooth axis, no streak or λ 0.5): the best
@@ -106,14 +106,45 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, String> {
 /// the full frame, for nothing those two do not show (and they are read only where
 /// the best within the full frame is the full frame).
 const PAST_FULL_FRAME_PX: usize = 2;
-/// The phrase of the shape's refusal when its best lies past a full-frame streak
-/// (`past_full_frame`).
-const PAST_FULL_FRAME_PHRASE: &str = "lies past a full-frame streak";
 
-/// Whether the shape was refused because its best length lies past a full-frame
-/// streak (the reason `read` gives).
-pub(super) fn past_full_frame(why: &str) -> bool {
-    why.contains(PAST_FULL_FRAME_PHRASE)
+/// Why the shape gives no length. One kind is told apart because a caller branches
+/// on it (`ends::both_at_full_frame`); the words are for the fit's reason. (Before,
+/// that caller recognised the kind by a phrase in the words.)
+#[derive(Clone, Debug, PartialEq)]
+pub(super) enum Refusal {
+    /// The best length lies past a full-frame streak (`PAST_FULL_FRAME_PX`): the frame
+    /// is smoother along the flow than any exposure makes it.
+    PastFullFrame(String),
+    /// Any other reason: incoherent flow, no texture above the noise, a match that
+    /// does not depend on the length, a best at the search's end.
+    Other(String),
+}
+
+impl Refusal {
+    /// The reason in words.
+    pub(super) fn why(&self) -> &str {
+        match self {
+            Refusal::PastFullFrame(why) | Refusal::Other(why) => why,
+        }
+    }
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.why())
+    }
+}
+
+impl From<String> for Refusal {
+    fn from(why: String) -> Self {
+        Refusal::Other(why)
+    }
+}
+
+impl From<&str> for Refusal {
+    fn from(why: &str) -> Self {
+        Refusal::Other(why.into())
+    }
 }
 
 /// What one look at the autocorrelations gives: the shape's reading (or why not),
@@ -121,7 +152,7 @@ pub(super) fn past_full_frame(why: &str) -> bool {
 /// flow, noise removed, lags 0…max_lag, wherever they were computed — also where
 /// the shape's minimum is refused (the zeros' check in `fit_fast` reads them).
 pub(super) struct AcfRead {
-    pub(super) shape: Result<AcfShape, String>,
+    pub(super) shape: Result<AcfShape, Refusal>,
     pub(super) sharp: Option<(Vec<f64>, Vec<f64>)>,
 }
 
@@ -143,7 +174,7 @@ pub(super) fn sharp_curves(y: &Plane, flow: &Flow, length_px: f32) -> Result<(Ve
     let lags = ((length_px as f64 * DIP_WINDOW).ceil() as usize + 2).max(MIN_CHECK_LAGS);
     let mut sharp = None;
     let why = read(y, flow, &mut sharp, Some(lags)).err();
-    sharp.ok_or_else(|| why.unwrap_or_default())
+    sharp.ok_or_else(|| why.map(|r| r.why().to_string()).unwrap_or_default())
 }
 
 /// What the autocorrelations say about a streak of a given length (`check_length`).
@@ -154,7 +185,7 @@ pub(super) struct LengthCheck {
     /// of it — or `None`.
     pub(super) contradiction: Option<String>,
     /// The full look, where it ran (the fallback reads its shape).
-    pub(super) shape: Option<Result<AcfShape, String>>,
+    pub(super) shape: Option<Result<AcfShape, Refusal>>,
     /// For the fit's reason: "; the derivative autocorrelation …".
     pub(super) note: String,
 }
@@ -213,7 +244,7 @@ fn read(
     flow: &Flow,
     sharp: &mut Option<(Vec<f64>, Vec<f64>)>,
     curves_only: Option<usize>,
-) -> Result<AcfShape, String> {
+) -> Result<AcfShape, Refusal> {
     let (w, h) = (y.width, y.height);
     if flow.width != w || flow.height != h {
         return Err("flow and frame differ in size".into());
@@ -221,7 +252,7 @@ fn read(
     let (theta, speed, (cw, ch)) = coherent_crop(flow)?;
     let l_max = if curves_only.is_some() { 0 } else { (MAX_LENGTH_PX as f32).min(speed).floor() as usize };
     if l_max < 2 && curves_only.is_none() {
-        return Err(format!("flow of {speed:.1} px/frame: no streak length to read"));
+        return Err(Refusal::Other(format!("flow of {speed:.1} px/frame: no streak length to read")));
     }
     // A slow flow's streaks are short: lags to twice the longest candidate (and a
     // texture's scale) hold the streak's signature, and a crop proportioned to them
@@ -311,10 +342,10 @@ fn read(
     let energy_v = av[AV_OFFSET] / (a_len * b_len) as f64;
     let (noise_u, noise_v) = (sigma * sigma * noise.du(0, 0), sigma * sigma * noise.dv(0));
     if energy_v <= MIN_ENERGY_OVER_NOISE * noise_v || !(energy_u > 0.0 && energy_v > 0.0) {
-        return Err(format!(
+        return Err(Refusal::Other(format!(
             "no texture above the noise in the crop (derivative energy {energy_u:.2e} / {energy_v:.2e} along / \
              across, noise's {noise_u:.2e} / {noise_v:.2e})"
-        ));
+        )));
     }
     let mut residuals: Vec<f64> = (0..=l_max).map(residual_at).collect();
     let argmin = |r: &[f64]| (0..r.len()).min_by(|&a, &b| r[a].total_cmp(&r[b])).unwrap_or(0);
@@ -330,21 +361,23 @@ fn read(
     // (A NaN residual is no rise either.)
     let rises = residuals[probe] >= MIN_ZERO_RISE * residuals[0];
     if best == 0 && !rises {
-        return Err(format!(
+        return Err(Refusal::Other(format!(
             "the match barely depends on the length (a {probe} px streak fits within {:.1}% of none, under \
              {:.0}%): the shape does not tell a streak from none",
             100.0 * (residuals[probe] / residuals[0].max(f64::MIN_POSITIVE) - 1.0),
             100.0 * (MIN_ZERO_RISE - 1.0)
-        ));
+        )));
     }
     // A minimum at the search's top end is no balance: the match may improve past
     // it (the lags' `MAX_LENGTH_PX`, or a full-frame streak). Measured: a colour
     // wheel with no streak read 50 px (λ 1) at 50 px/frame.
     if best == l_ext && (l_ext as f32) > speed {
-        return Err(format!("the best length, at least {l_ext} px, {PAST_FULL_FRAME_PHRASE} ({speed:.1} px/frame)"));
+        return Err(Refusal::PastFullFrame(format!(
+            "the best length, at least {l_ext} px, lies past a full-frame streak ({speed:.1} px/frame)"
+        )));
     }
     if best == l_ext {
-        return Err(format!("the best length lies at the search's end ({l_ext} px)"));
+        return Err(Refusal::Other(format!("the best length lies at the search's end ({l_ext} px)")));
     }
     // Parabola through the best and its neighbours.
     let mut length = best as f64;
@@ -357,7 +390,9 @@ fn read(
     }
     let length_px = length as f32;
     if length_px > speed {
-        return Err(format!("the best length, {length_px:.1} px, {PAST_FULL_FRAME_PHRASE} ({speed:.1} px/frame)"));
+        return Err(Refusal::PastFullFrame(format!(
+            "the best length, {length_px:.1} px, lies past a full-frame streak ({speed:.1} px/frame)"
+        )));
     }
     Ok(AcfShape {
         lambda: (length_px / speed).clamp(0.0, 1.0),

@@ -190,7 +190,7 @@ fn incoherent_flow_and_small_frames_are_refused() {
         }
     }
     let e = acf_shape(&img, &turning).unwrap_err();
-    assert!(e.contains("direction"), "{e}");
+    assert!(e.why().contains("direction"), "{e}");
     // 5–45 px/frame across the frame: 15–35 over its central half.
     let mut faster = uniform(400, 320, 0.0, 20.0);
     for x in 0..400 {
@@ -199,10 +199,10 @@ fn incoherent_flow_and_small_frames_are_refused() {
         }
     }
     let e = acf_shape(&img, &faster).unwrap_err();
-    assert!(e.contains("speed"), "{e}");
+    assert!(e.why().contains("speed"), "{e}");
     let small = texture(200, 150, 5);
     let e = acf_shape(&small, &uniform(200, 150, 0.0, 20.0)).unwrap_err();
-    assert!(e.contains("crop"), "{e}");
+    assert!(e.why().contains("crop"), "{e}");
 }
 
 /// A frame of noise alone (no texture), or flat: not read, never a streak of 0.
@@ -211,7 +211,7 @@ fn noise_alone_is_not_read() {
     let mut img = Plane::new(400, 320, 0.5);
     let flow = uniform(400, 320, 30.0, 40.0);
     let e = acf_shape(&img, &flow).unwrap_err();
-    assert!(e.contains("no texture"), "{e}");
+    assert!(e.why().contains("no texture"), "{e}");
     let mut s = 9u64;
     for v in &mut img.data {
         s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -219,7 +219,7 @@ fn noise_alone_is_not_read() {
     }
     let e = acf_shape(&img, &flow).unwrap_err();
     println!("{e}");
-    assert!(e.contains("no texture"), "{e}");
+    assert!(e.why().contains("no texture"), "{e}");
 }
 
 #[test]
@@ -259,7 +259,7 @@ fn smooth_shading_does_not_read_as_no_streak() {
     for len in [0.0f32, 12.0] {
         let img = streak(&wheel, len, 30.0);
         match acf_shape(&img, &uniform(w, h, 30.0, 40.0)) {
-            Err(why) => assert!(why.contains("does not tell a streak from none"), "{len} px: {why}"),
+            Err(why) => assert!(why.why().contains("does not tell a streak from none"), "{len} px: {why}"),
             Ok(got) => {
                 assert!(len > 0.0 && got.length_px >= 1.0, "{len} px: read {} px on smooth shading", got.length_px)
             }
