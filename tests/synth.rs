@@ -192,6 +192,41 @@ fn noise_synthesis_matches_the_model_per_level() {
     }
 }
 
+/// `synth::correlated_sensor_noise`: the synthesised field decays across the levels by
+/// the ratios asked for (level 0 as white sensor noise's), on a flat grey at three
+/// lumas; and a ratio that is not finite and positive is refused by name. Tolerance
+/// 5% on a ratio of two stds: at level 3 a 512² field has 64² samples per channel
+/// (≈1.1% standard error of a std, ~1.6% of a ratio), three channels pooled, so
+/// about 3 standard errors.
+#[test]
+fn correlated_sensor_noise_decays_by_its_ratios() {
+    let ratios = [0.45f32, 0.72, 0.72];
+    let (a, b) = ([3e-5f32, 2e-5, 5e-5], [6e-4f32, 4e-4, 9e-4]);
+    let noise = synth::correlated_sensor_noise(a, b, [0.0, 1.0], ratios).expect("valid ratios");
+    let white = synth::white_sensor_noise(a, b, [0.0, 1.0]);
+    let n = 512;
+    for grey in [0.2f32, 0.5, 0.8] {
+        let field = noise_field(&Plane::new(n, n, grey), &noise, 5);
+        let stds: Vec<Vec<f64>> = (0..3).map(|c| band_stds(&field.plane(c))).collect();
+        for l in 0..NOISE_LEVELS - 1 {
+            let got = (0..3).map(|c| stds[c][l + 1] / stds[c][l]).sum::<f64>() / 3.0;
+            assert!((got / ratios[l] as f64 - 1.0).abs() < 0.05, "grey {grey}, level {} over {l}: {got:.3}", l + 1);
+        }
+        for c in 0..3 {
+            let want = white.levels[0].std(white.form, c, grey) as f64;
+            assert!(
+                (stds[c][0] / want - 1.0).abs() < 0.03,
+                "grey {grey}, channel {c}: level 0 {} vs {want}",
+                stds[c][0]
+            );
+        }
+    }
+    for bad in [f32::NAN, 0.0, -0.5, f32::INFINITY] {
+        let e = synth::correlated_sensor_noise(a, b, [0.0, 1.0], [0.45, bad, 0.72]).expect_err("a bad ratio");
+        assert!(e.contains("level ratio 1 (level 2 over level 1)"), "{e}");
+    }
+}
+
 /// A model round trip: the same seed gives the same frame, another seed another.
 #[test]
 fn synthesis_is_deterministic_per_seed() {

@@ -12,7 +12,9 @@ pub mod training;
 
 pub use dof::{add_defocus, add_defocus_disc, add_dof, dof_sigma_map, for_each_cascade_interval, DOF_NODE_SPACING_PX};
 pub use motion_blur::{add_motion_blur, MB_MAX_SAMPLE_SPACING_PX, MB_MIN_INTERVALS};
-pub use noise::{add_noise, noise_field, noise_field_rgb, unit_band_std, white_sensor_noise, SynthesisTable};
+pub use noise::{
+    add_noise, correlated_sensor_noise, noise_field, noise_field_rgb, unit_band_std, white_sensor_noise, SynthesisTable,
+};
 pub use rng::gaussian;
 
 use crate::image::{Flow, Plane, Rgb};

@@ -281,6 +281,46 @@ pub fn white_sensor_noise(a: [f32; 3], b: [f32; 3], luminance_range: [f32; 2]) -
     }
 }
 
+/// Real camera noise decays slower than white across the pyramid: demosaicing, an
+/// ISP's denoiser and a codec's quantisation correlate it between neighbouring
+/// pixels. Level std ratios (level l + 1 over level l) measured here: white noise
+/// 0.24 / 0.44 / 0.49 (`unit_band_std`), white noise low-passed by a Gaussian of std
+/// 0.7 px (a demosaic's reach) 0.58 / 0.53 / 0.51, the vtest clip's DivX noise
+/// 0.40–0.51 / 0.69–0.74 over its static pixels
+/// (`benches/noise_scenes/level0_correlation.py`).
+///
+/// `white_sensor_noise`'s level 0 (std_c(Y) = √(a_c + b_c·Y)·c_0) with each coarser
+/// level's std `level_ratios[l]` times the finer one's (the low-pass's by the last
+/// ratio): the ground truth of correlated sensor noise for tests and probes. An
+/// error names a ratio that is not finite and positive.
+pub fn correlated_sensor_noise(
+    a: [f32; 3],
+    b: [f32; 3],
+    luminance_range: [f32; 2],
+    level_ratios: [f32; NOISE_LEVELS - 1],
+) -> Result<Noise, String> {
+    if let Some((i, r)) = level_ratios.iter().enumerate().find(|(_, r)| !(r.is_finite() && **r > 0.0)) {
+        return Err(format!("level ratio {i} (level {} over level {i}) must be finite and > 0, got {r}", i + 1));
+    }
+    let mut noise = white_sensor_noise(a, b, luminance_range);
+    let unit = unit_band_std();
+    // Level l's std relative to level 0: the product of the ratios up to it, against
+    // white noise's c_l / c_0 (the variance scales by the square).
+    let mut std_rel = 1.0f32;
+    for l in 1..=NOISE_LEVELS {
+        std_rel *= level_ratios[(l - 1).min(NOISE_LEVELS - 2)];
+        let k = (std_rel * unit[0] / unit[l]).powi(2);
+        let level = if l < NOISE_LEVELS { noise.levels.get_mut(l) } else { noise.lowpass.as_mut() };
+        if let Some(level) = level {
+            level.slope.iter_mut().chain(level.intercept.iter_mut()).for_each(|v| *v *= k);
+        }
+    }
+    noise.diagnostics = crate::model::Diagnostics::not_fitted(&format!(
+        "correlated Poisson–Gaussian sensor noise (level std ratios {level_ratios:?})"
+    ));
+    Ok(noise)
+}
+
 /// addNoise(I, σ): `clean` plus synthesised noise; unclipped (an 8-bit writer clips).
 pub fn add_noise(clean: &Rgb, noise: &Noise, seed: u64) -> Rgb {
     if !noise.present {
