@@ -4,10 +4,18 @@
 //! (the Motorcycle along the head path), the fit with the previous frame aligned and
 //! the frame alone, each level's median error against the truth over 9 lumas × 3
 //! channels, and whether the fit measured or derived the level.
-//! `cargo run --release --example correlated_noise_probe -- FROM TO WIDTH`;
-//! `REASON=1` prints both fits' reasons; `STRIP=rows` fits a strip of that many full rows, the next one down per frame (the
-//! worker's way); `RATIOS=r1,r2,r3` the truth's level std ratios 1/0, 2/1, 3/2 (default: the vtest
-//! clip's, 0.45,0.72,0.72; white noise's are about 0.24,0.44,0.49).
+//! `cargo run --release --example correlated_noise_probe -- FROM TO WIDTH`. Options:
+//! - `RATIOS=r1,r2,r3`: the truth's level std ratios 1/0, 2/1, 3/2 (default: the vtest
+//!   clip's, 0.45,0.72,0.72; white noise's are about 0.24,0.44,0.49);
+//! - `LOWPASS=s`: instead, white noise low-passed by a Gaussian of std s px added to
+//!   each frame (correlated within each band too, as a demosaic's);
+//! - `STRIP=rows`: a strip of that many full rows, the next one down per frame (the
+//!   worker's way);
+//! - `MISMATCH=1`: the previous frame's scene aligned without its noise, fresh noise
+//!   added after (what the difference leaves of the scene);
+//! - `PERFECT=1`: the frame's own scene with independent noise as the neighbour
+//!   (`SHIFT=u,v`: that noise resampled at a sub-pixel offset);
+//! - `REASON=1`: both fits' reasons.
 use blind_augment::analysis::{temporal::align, Analysed, DepthMap, Frame};
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Neighbour, Tier};
 use blind_augment::image::Plane;
@@ -25,11 +33,33 @@ fn main() {
         .unwrap_or_else(|| vec![0.45, 0.72, 0.72]);
     let scene = motorcycle().expect("bundled scene");
     let mut spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, 150, None);
-    let ratios: [f32; NOISE_LEVELS - 1] = std::array::from_fn(|i| ratios[i.min(ratios.len() - 1)]);
-    let truth =
-        blind_augment::synth::correlated_sensor_noise([3e-5, 2e-5, 5e-5], [6e-4, 4e-4, 9e-4], [0.0, 1.0], ratios)
-            .expect("RATIOS");
+    let (a, b) = ([3e-5f32, 2e-5, 5e-5], [6e-4f32, 4e-4, 9e-4]);
+    // LOWPASS=s: instead of synth's per-level grain (white within each band), the
+    // camera's own kind of correlated noise: std √(a + b·Y) times white noise
+    // low-passed by a Gaussian of std s px (normalised to unit variance), added to
+    // each frame; the truth per level is that field's measured band stds.
+    let lowpass: Option<f32> = std::env::var("LOWPASS").ok().and_then(|s| s.parse().ok());
+    let truth = match lowpass {
+        Some(s) => {
+            let (u, norm) = lowpass_band_stds(s);
+            let unit = blind_augment::synth::unit_band_std();
+            let s0 = (u[0] / unit[0]).powi(2);
+            let r: [f32; NOISE_LEVELS - 1] = std::array::from_fn(|l| u[l + 1] / u[l]);
+            println!("low-passed white noise, s {s} px: band stds {u:?} (unit variance: ÷{norm:.4}), ratios {r:?}");
+            blind_augment::synth::correlated_sensor_noise(a.map(|v| v * s0), b.map(|v| v * s0), [0.0, 1.0], r)
+        }
+        None => blind_augment::synth::correlated_sensor_noise(
+            a,
+            b,
+            [0.0, 1.0],
+            std::array::from_fn(|i| ratios[i.min(ratios.len() - 1)]),
+        ),
+    }
+    .expect("RATIOS");
     spec.truth.noise = truth.clone();
+    if lowpass.is_some() {
+        spec.truth.noise.present = false;
+    }
     let analysed = |f: &SequenceFrame| Analysed {
         frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
         depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
@@ -41,12 +71,73 @@ fn main() {
         effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
         ..Default::default()
     };
-    let mut prev = analysed(&spec.frame(&scene, from.saturating_sub(1)));
+    // The frame, with the low-passed noise added where asked (8-bit, as the video).
+    let frame = |i: usize| -> SequenceFrame {
+        let mut f = spec.frame(&scene, i);
+        if let Some(s) = lowpass {
+            let mut model = f.truth.clone();
+            model.noise.present = false;
+            let clean = blind_augment::synth::apply_camera_model(&f.clean, &model, Some(&f.depth_m), Some(&f.flow), 0);
+            let y = clean.luma();
+            let (_, norm) = lowpass_band_stds(s);
+            for c in 0..3 {
+                let n = lowpass_field(f.image.width, f.image.height, s, c as u32, 1000 + i as u64);
+                for (k, v) in f.image.channels[c].iter_mut().enumerate() {
+                    let sd = (a[c] + b[c] * y.data[k].clamp(0.0, 1.0)).sqrt();
+                    *v = ((clean.channels[c][k] + sd * n.data[k] / norm).clamp(0.0, 1.0) * 255.0).round() / 255.0;
+                }
+            }
+        }
+        f
+    };
+    let mut prev = analysed(&frame(from.saturating_sub(1)));
     let (mut with_all, mut alone_all) = (vec![vec![]; NOISE_LEVELS], vec![vec![]; NOISE_LEVELS]);
     for i in from..to {
-        let fr = spec.frame(&scene, i);
+        let fr = frame(i);
         let cur = analysed(&fr);
-        let a = align(&prev, &cur, &spec.view).expect("poses and depth align");
+        let mut a = align(&prev, &cur, &spec.view).expect("poses and depth align");
+        if std::env::var_os("MISMATCH").is_some() {
+            // The previous frame's scene aligned, without its noise; fresh noise on it
+            // (not interpolated): what is left is the scene's mismatch.
+            let mut quiet = spec.clone();
+            quiet.truth.noise.present = false;
+            let p = quiet.frame(&scene, i - 1);
+            let pa = analysed(&p);
+            let a2 = align(&pa, &cur, &spec.view).expect("align");
+            let noisy = blind_augment::synth::add_noise(&a2.image, &truth, 7000 + i as u64);
+            a.image = noisy.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);
+            a.valid = a2.valid;
+        }
+        if std::env::var_os("PERFECT").is_some() {
+            // The same frame's scene with independent noise, nothing interpolated.
+            let mut model = fr.truth.clone();
+            model.noise.present = false;
+            let clean =
+                blind_augment::synth::apply_camera_model(&fr.clean, &model, Some(&fr.depth_m), Some(&fr.flow), 0);
+            let mut noisy = blind_augment::synth::add_noise(&clean, &truth, 5000 + i as u64);
+            // SHIFT=u,v: the neighbour's noise (only) resampled at that sub-pixel offset.
+            if let Some((u, v)) = std::env::var("SHIFT").ok().and_then(|s| {
+                let mut it = s.split(',').filter_map(|t| t.parse::<f32>().ok());
+                Some((it.next()?, it.next()?))
+            }) {
+                for c in 0..3 {
+                    let n = Plane::from_vec(
+                        clean.width,
+                        clean.height,
+                        noisy.channels[c].iter().zip(&clean.channels[c]).map(|(a, b)| a - b).collect(),
+                    );
+                    for y in 0..clean.height {
+                        for x in 0..clean.width {
+                            let k = y * clean.width + x;
+                            noisy.channels[c][k] = clean.channels[c][k]
+                                + blind_augment::image::sample_bicubic(&n, x as f32 + u, y as f32 + v);
+                        }
+                    }
+                }
+            }
+            a.image = noisy.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);
+            a.valid.iter_mut().for_each(|v| *v = true);
+        }
         // STRIP=rows: the worker's way at 1280×960 (`NOISE_STRIP_PX`): a strip of
         // full rows, the next one down per frame, the neighbour cropped alike.
         let h = w * 3 / 4;
@@ -120,4 +211,29 @@ fn derived(n: &Noise) -> String {
         .nth(1)
         .and_then(|t| t.split(']').next())
         .map_or("all measured".into(), |s| format!("derived {s}"))
+}
+
+/// White noise (seeded) low-passed by a Gaussian of std `s` px (not normalised).
+fn lowpass_field(w: usize, h: usize, s: f32, c: u32, seed: u64) -> Plane {
+    let white = Plane::from_vec(
+        w,
+        h,
+        (0..w * h).map(|i| blind_augment::synth::gaussian((i % w) as u32, (i / w) as u32, c, seed)).collect(),
+    );
+    blind_augment::image::blur_separable(&white, &blind_augment::image::discrete_gaussian_kernel(s * s))
+}
+
+/// The band stds (levels 0..NOISE_LEVELS) of unit-variance low-passed white noise,
+/// and the std of the low-passed field that normalises it (measured on 768²).
+fn lowpass_band_stds(s: f32) -> ([f32; NOISE_LEVELS], f32) {
+    let p = lowpass_field(768, 768, s, 0, 77);
+    let norm = (p.data.iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / p.data.len() as f64).sqrt() as f32;
+    let pyr = blind_augment::image::laplacian_pyramid(&p, NOISE_LEVELS);
+    (
+        std::array::from_fn(|l| {
+            let b = &pyr.bands[l];
+            ((b.data.iter().map(|v| (*v as f64).powi(2)).sum::<f64>() / b.data.len() as f64).sqrt() as f32) / norm
+        }),
+        norm,
+    )
 }

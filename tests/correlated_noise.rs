@@ -18,8 +18,6 @@ use blind_augment::synth::correlated_sensor_noise;
 use blind_augment::synth::sequence::{motorcycle, SequenceFrame, SequenceSpec};
 use common::median;
 
-const FRAMES: std::ops::Range<usize> = 55..59;
-
 /// Per level, the median signed relative error of the fitted std against the truth
 /// over 9 lumas inside the fit's range × 3 channels.
 fn level_errors(n: &Noise, t: &Noise) -> Vec<f64> {
@@ -38,9 +36,9 @@ fn level_errors(n: &Noise, t: &Noise) -> Vec<f64> {
         .collect()
 }
 
-/// Per frame of `FRAMES`: the fit with the previous frame aligned and the fit of the
+/// Per frame of `frames`: the fit with the previous frame aligned and the fit of the
 /// frame alone, under noise with these level std ratios.
-fn fits(ratios: [f32; NOISE_LEVELS - 1]) -> (Noise, Vec<(Noise, Noise)>) {
+fn fits(ratios: [f32; NOISE_LEVELS - 1], frames: std::ops::Range<usize>) -> (Noise, Vec<(Noise, Noise)>) {
     let truth = correlated_sensor_noise([3e-5, 2e-5, 5e-5], [6e-4, 4e-4, 9e-4], [0.0, 1.0], ratios).expect("ratios");
     let scene = motorcycle().expect("bundled scene");
     let mut spec = SequenceSpec::motorcycle(&scene, 640, 480, 150, None);
@@ -56,9 +54,9 @@ fn fits(ratios: [f32; NOISE_LEVELS - 1]) -> (Noise, Vec<(Noise, Noise)>) {
         effects: Effects { noise: true, motion_blur: false, depth_of_field: false },
         ..Default::default()
     };
-    let mut prev = analysed(&spec.frame(&scene, FRAMES.start - 1));
+    let mut prev = analysed(&spec.frame(&scene, frames.start - 1));
     let mut out = vec![];
-    for i in FRAMES {
+    for i in frames {
         let f = spec.frame(&scene, i);
         let cur = analysed(&f);
         let a = align(&prev, &cur, &spec.view).expect("poses and depth align");
@@ -88,42 +86,66 @@ fn derived(n: &Noise) -> Vec<usize> {
 /// Two noise spectra far from white: a codec's (the vtest clip's measured ratios,
 /// level 1/0 0.45, then 0.72, 0.72) and a demosaic's (white noise low-passed by a
 /// Gaussian of std 0.7 px: 0.58, 0.53, 0.51); white noise's are 0.24, 0.44, 0.49.
-/// With the neighbour every level is measured; measured 2026-11-28 over frames 55–60:
-/// per-level medians within +0.1…+1.5% (codec) and −1.4…+6.4% (demosaic), every frame
-/// and level within 10%. Tolerances: a level's median over the 4 frames within 8%,
-/// each frame's within 15% — level 3 at 640×480 is 80×60 px, whose std a frame reads
-/// to a few percent, and the alignment's interpolation is divided out by white
-/// noise's transmission (`bicubic_noise_transmission`), not this noise's. The frame
-/// alone measured level 0 within +3…+4% but derived levels 1–3 (codec) or 2–3
-/// (demosaic, most frames) by white noise's ratios, −40…−77%: it must name them, and
-/// it must not claim a level 3.
+/// With the neighbour every level is measured; measured 2026-11-28 over frames 55–58:
+/// every frame and level within −4.4…+5.2%. Tolerances: a level's median over the 4
+/// frames within 8%, each frame's within 15% — level 3 at 640×480 is 80×60 px, whose
+/// std a frame reads to a few percent, and what the difference leaves of the scene
+/// where the two exposures differ reads as noise. The frame alone measured level 0
+/// within +3…+4% but derived levels 1–3 (codec) or 2–3 (demosaic, some frames) by
+/// white noise's ratios, −25…−77%: it must name them.
 #[test]
 fn correlated_noise_is_read_per_level_against_the_aligned_previous_frame() {
     for (name, ratios) in [("codec", [0.45, 0.72, 0.72]), ("demosaic", [0.58, 0.53, 0.51])] {
-        let (truth, frames) = fits(ratios);
-        let mut per_level = vec![vec![]; NOISE_LEVELS];
-        for (k, (with, alone)) in frames.iter().enumerate() {
-            assert!(with.present && alone.present, "{name}, frame {k}: noise present");
-            let e = level_errors(with, &truth);
-            println!(
-                "{name}, frame {k}: with the neighbour {:?}; alone {:?}, levels {:?} not identifiable",
-                e.iter().map(|v| format!("{:+.1}%", 100.0 * v)).collect::<Vec<_>>(),
-                level_errors(alone, &truth).iter().map(|v| format!("{:+.1}%", 100.0 * v)).collect::<Vec<_>>(),
-                derived(alone)
-            );
+        check(name, ratios, 55..59, 0.15, [0.08; NOISE_LEVELS]);
+    }
+}
+
+/// White noise is the weakest at the coarse levels, so what the difference leaves of
+/// the scene where the two exposures differ counts most there. Measured over frames
+/// 55–62: levels 2 / 3 +5.5 / +14% in median, each frame within +21%; with the flat
+/// samples chosen two levels coarser than the band, as for the frame alone (before
+/// 2026-11-28), +8 / +23%, level 3 +13…+25% on seven of eight frames (BENCHMARKS.md
+/// "Correlated noise on video"). Tolerances: each frame within 25%; level 2's median
+/// within 10%, level 3's within 18% (the previous choice fails it).
+#[test]
+fn white_noise_coarse_levels_against_the_aligned_previous_frame() {
+    check("white", [0.2445, 0.436, 0.493], 55..63, 0.25, [0.05, 0.05, 0.10, 0.18]);
+}
+
+fn check(
+    name: &str,
+    ratios: [f32; NOISE_LEVELS - 1],
+    frames: std::ops::Range<usize>,
+    per_frame: f64,
+    in_median: [f64; NOISE_LEVELS],
+) {
+    let (truth, frames) = fits(ratios, frames);
+    let mut per_level = vec![vec![]; NOISE_LEVELS];
+    for (k, (with, alone)) in frames.iter().enumerate() {
+        assert!(with.present && alone.present, "{name}, frame {k}: noise present");
+        let e = level_errors(with, &truth);
+        println!(
+            "{name}, frame {k}: with the neighbour {:?}, levels {:?} not identifiable; alone {:?}, levels {:?} not \
+             identifiable",
+            e.iter().map(|v| format!("{:+.1}%", 100.0 * v)).collect::<Vec<_>>(),
+            derived(with),
+            level_errors(alone, &truth).iter().map(|v| format!("{:+.1}%", 100.0 * v)).collect::<Vec<_>>(),
+            derived(alone)
+        );
+        for (l, v) in e.iter().enumerate() {
+            assert!(v.abs() <= per_frame, "{name}, frame {k}, level {l}: {:+.1}%", 100.0 * v);
+            per_level[l].push(*v);
+        }
+        let e0 = level_errors(alone, &truth)[0];
+        assert!(e0.abs() <= 0.10, "{name}, frame {k}: alone, level 0 {:+.1}%", 100.0 * e0);
+        if name != "white" {
             assert!(derived(with).is_empty(), "{name}, frame {k}: every level measured; {}", with.diagnostics.reason);
-            for (l, v) in e.iter().enumerate() {
-                assert!(v.abs() <= 0.15, "{name}, frame {k}, level {l}: {:+.1}%", 100.0 * v);
-                per_level[l].push(*v);
-            }
             let d = derived(alone);
             assert!(d.contains(&2) && d.contains(&3), "{name}, frame {k}: alone, levels {d:?} not identifiable");
-            let e0 = level_errors(alone, &truth)[0];
-            assert!(e0.abs() <= 0.10, "{name}, frame {k}: alone, level 0 {:+.1}%", 100.0 * e0);
         }
-        for (l, v) in per_level.into_iter().enumerate() {
-            let m = median(v);
-            assert!(m.abs() <= 0.08, "{name}, level {l}: median {:+.1}%", 100.0 * m);
-        }
+    }
+    for (l, v) in per_level.into_iter().enumerate() {
+        let m = median(v);
+        assert!(m.abs() <= in_median[l], "{name}, level {l}: median {:+.1}%", 100.0 * m);
     }
 }

@@ -29,6 +29,26 @@ const BLIND_MIN_PER_BIN: usize = 24;
 /// 0.50, 0.65, 0.67 (temporal reference); the flattest samples of textured frames
 /// 1.1–3 (the astronaut's level 2 over level 1, the vtest frame's levels 1–3).
 const MAX_LEVEL_STD_RATIO: f32 = 0.8;
+/// How many levels coarser than the measured band the frame's structure is read
+/// that chooses the flat samples: two for the frame alone (band l+2 spans the
+/// level-l window and holds little level-l noise, so choosing on it does not pick
+/// low noise); one from level 1 on where an aligned neighbour is given. There the
+/// noise comes from the difference with the neighbour, which cancels texture only
+/// where the two exposures agree: where they do not (motion blur that differs
+/// between the frames, parallax the alignment misses) what is left lives at the
+/// scales of the texture, and band l+2 let level-l texture through. Measured on
+/// the calibration video (`examples/correlated_noise_probe`; BENCHMARKS.md
+/// "Correlated noise on video"), levels 2 / 3, band l+2 → l+1: white noise at
+/// 640×480 +8.5 / +23.0% → +6.9 / +14.4%, in the worker's 240-row strips at
+/// 1280×960 +4.5 / +18.1% → +4.7 / +8.8%; a demosaic's +3.2 / +6.4% → +1.5 / +2.9%;
+/// a codec's within ±1.5% either way; a neighbour that differs only in its noise
+/// within ±2.3% either way (the choice does not select on the noise). The
+/// difference's own band l+1 read white noise better still (+5.2 / +5.9%) but chose
+/// low noise where it is strongly correlated across levels (a codec's level 3
+/// −7.0%): not used.
+const NEIGHBOUR_STRUCTURE_OFFSET: usize = 1;
+/// The frame alone's (see `NEIGHBOUR_STRUCTURE_OFFSET`).
+const STRUCTURE_OFFSET: usize = 2;
 /// Fewest flat samples a bin is measured on (a median of fewer scatters by > 25% at level 3).
 const BLIND_MIN_FLAT: usize = 12;
 /// The texture a natural scene leaves in its flattest samples, as a level-0 band std
@@ -252,6 +272,9 @@ pub const FAST_ALONE: &str = "fast";
 /// uncorrelated with level-l noise, so selecting on it does not bias the level-l
 /// variance the way picking the lowest variances would); their median local
 /// variance, calibrated by `white_noise_median_to_mean(l)`, is the bin's value.
+/// With an aligned `neighbour` the noise is read off the difference (texture
+/// cancels), and from level 1 on the flat samples are chosen one level coarser
+/// instead (band l+1; see `NEIGHBOUR_STRUCTURE_OFFSET`).
 /// Binning by luma means dark bins are measured on dark samples: shadows are never
 /// judged flat or textured by the bright parts' standard. Bins more than 30% above
 /// their level's fitted line are texture and dropped (one-sided). The low-pass is
@@ -320,8 +343,17 @@ pub fn fit_fast(
             crate::image::expand(&luma_of(gauss(l + 1), &pyr[0].0[l]), lw, lh)
         })
         .collect();
+    let structure_band = |k: usize| luma_of(band(k).map(|b| &b.data[..]), &pyr[0].1[k]);
     let structure: Vec<Plane> =
-        (2..NOISE_LEVELS + 2).into_par_iter().map(|k| luma_of(band(k).map(|b| &b.data[..]), &pyr[0].1[k])).collect();
+        (STRUCTURE_OFFSET..NOISE_LEVELS + STRUCTURE_OFFSET).into_par_iter().map(structure_band).collect();
+    // With a neighbour, levels 1.. choose their flat samples one level coarser.
+    let structure_nb: Vec<Plane> = match cross {
+        Some(_) => (1 + NEIGHBOUR_STRUCTURE_OFFSET..NOISE_LEVELS + NEIGHBOUR_STRUCTURE_OFFSET)
+            .into_par_iter()
+            .map(structure_band)
+            .collect(),
+        None => vec![],
+    };
     let band0 = Band0 {
         fine: std::array::from_fn(|c| &image.channels[c][..]),
         g1: std::array::from_fn(|c| &pyr[c].0[0]),
@@ -364,7 +396,11 @@ pub fn fit_fast(
             continue;
         }
         let cross = cross.as_deref().zip(misaligned.as_ref());
-        let all = measure_level(l, (&bands, &band0), cross, &smooth[l], &structure[l], &clip, stride0);
+        let (structure, offset) = match structure_nb.get(l.wrapping_sub(1)) {
+            Some(p) => (p, NEIGHBOUR_STRUCTURE_OFFSET),
+            None => (&structure[l], STRUCTURE_OFFSET),
+        };
+        let all = measure_level(l, (&bands, &band0), cross, &smooth[l], (structure, offset), &clip, stride0);
         // A level whose bins no line explains (fewer than 3 agree) is texture, not
         // noise: measured on the calibration video (Motorcycle, 320×240), keeping
         // every bin there let levels 1–3 read 5–20× the truth on 1 frame in 5.
@@ -596,7 +632,7 @@ fn measure_level(
     (bands, band0): (&[&[Plane]], &Band0),
     cross: Option<(&[Vec<Plane>], &ClipMask)>,
     luma: &Plane,
-    structure: &Plane,
+    (structure, offset): (&Plane, usize),
     clip: &[ClipMask; 3],
     stride0: f32,
 ) -> Vec<BinMeasure> {
@@ -608,7 +644,7 @@ fn measure_level(
     // share a structure pixel, and 18 taps per pixel beat 81 per sample.
     let energy = {
         let sq = Plane::from_vec(structure.width, structure.height, structure.data.iter().map(|v| v * v).collect());
-        crate::image::blur_separable(&sq, &window_1d((l + 2).min(3)))
+        crate::image::blur_separable(&sq, &window_1d((l + offset).min(3)))
     };
     // Footprint of the measured band in level-0 pixels (as in `collect_samples`); clipping
     // under the structure band only makes a sample look textured, it biases nothing.
@@ -625,7 +661,7 @@ fn measure_level(
             if ok == 0 || cross.is_some_and(|(_, bad)| bad.touches(x * scale, y * scale, radius, l >= 2)) {
                 continue;
             }
-            let s = energy.get((x / 4).min(energy.width - 1), (y / 4).min(energy.height - 1));
+            let s = energy.get((x >> offset).min(energy.width - 1), (y >> offset).min(energy.height - 1));
             pts.push((x, y, win.mean(luma, x, y), s, ok));
         }
     }
