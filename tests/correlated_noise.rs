@@ -203,12 +203,12 @@ fn one_frame_without_texture_reads_low_passed_noise_per_level() {
         });
         let n = fit(&FitInputs::new(&Rgb::from_planes(planes)), &opts).expect("fit").model.noise;
         let [lo, hi] = n.luminance_range;
-        for l in 0..NOISE_LEVELS {
+        for (l, unit_l) in unit.iter().enumerate() {
             let e = median(
                 (0..27)
                     .map(|k| {
                         let (y, c) = (lo + (hi - lo) * ((k / 3) as f32 + 0.5) / 9.0, k % 3);
-                        n.levels[l].std(n.form, c, y) as f64 / (((a[c] + b[c] * y) as f64).sqrt() * unit[l]) - 1.0
+                        n.levels[l].std(n.form, c, y) as f64 / (((a[c] + b[c] * y) as f64).sqrt() * unit_l) - 1.0
                     })
                     .collect(),
             );
