@@ -36,6 +36,23 @@ fn main() {
     if std::env::var_os("NODOF").is_some() {
         spec.truth.depth_of_field.present = false;
     }
+    // RATIOS=r1,r2,r3: spatially correlated sensor noise (`synth::correlated_sensor_noise`,
+    // level std ratios 1/0, 2/1, 3/2 on the truth's level 0), before and after the change.
+    if let Some(r) =
+        std::env::var("RATIOS").ok().map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect::<Vec<f32>>())
+    {
+        let ratios: [f32; blind_augment::model::NOISE_LEVELS - 1] = std::array::from_fn(|i| r[i.min(r.len() - 1)]);
+        let correlate = |n: &mut blind_augment::model::Noise| {
+            // The white model's level-0 map: variance = intercept + slope·Y, over c_0².
+            let c0 = blind_augment::synth::unit_band_std()[0].powi(2);
+            let (a, b) = (n.levels[0].intercept.map(|v| v / c0), n.levels[0].slope.map(|v| v / c0));
+            *n = blind_augment::synth::correlated_sensor_noise(a, b, n.luminance_range, ratios).expect("RATIOS");
+        };
+        correlate(&mut spec.truth.noise);
+        if let Some((_, after)) = spec.change.as_mut() {
+            correlate(&mut after.noise);
+        }
+    }
     let mut cfg = CalibratorConfig::new(tier, 1.0 / 30.0, Some(spec.view));
     // WINDOW=s: the aggregation window (a tiny one publishes each fit as it is).
     if let Some(w) = std::env::var("WINDOW").ok().and_then(|s| s.parse().ok()) {
