@@ -16,11 +16,14 @@
 //! - `PERFECT=1`: the frame's own scene with independent noise as the neighbour
 //!   (`SHIFT=u,v`: that noise resampled at a sub-pixel offset);
 //! - `REASON=1`: both fits' reasons.
-use blind_augment::analysis::{temporal::align, Analysed, DepthMap, Frame};
+#[path = "../tests/common/mod.rs"]
+mod common;
+use blind_augment::analysis::temporal::align;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Neighbour, Tier};
 use blind_augment::image::Plane;
-use blind_augment::model::{DepthUnits, Noise, NOISE_LEVELS};
+use blind_augment::model::{Noise, NOISE_LEVELS};
 use blind_augment::synth::sequence::{motorcycle, SequenceFrame, SequenceSpec};
+use common::analysed;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -60,12 +63,6 @@ fn main() {
     if lowpass.is_some() {
         spec.truth.noise.present = false;
     }
-    let analysed = |f: &SequenceFrame| Analysed {
-        frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
-        depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
-        world_from_camera: Some(f.world_from_camera),
-        sparse_flow: None,
-    };
     let opts = FitOptions {
         tier: Some(Tier::Fast),
         effects: Effects { noise: true, motion_blur: false, depth_of_field: false },

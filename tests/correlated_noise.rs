@@ -10,13 +10,13 @@
 
 mod common;
 
-use blind_augment::analysis::{temporal::align, Analysed, DepthMap, Frame};
+use blind_augment::analysis::temporal::align;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Neighbour, Tier};
 use blind_augment::image::{blur_separable, discrete_gaussian_kernel, laplacian_pyramid, Plane, Rgb};
-use blind_augment::model::{DepthUnits, Noise, NOISE_LEVELS};
+use blind_augment::model::{Noise, NOISE_LEVELS};
 use blind_augment::synth::correlated_sensor_noise;
-use blind_augment::synth::sequence::{motorcycle, SequenceFrame, SequenceSpec};
-use common::median;
+use blind_augment::synth::sequence::{motorcycle, SequenceSpec};
+use common::{analysed, median};
 
 /// Per level, the median signed relative error of the fitted std against the truth
 /// over 9 lumas inside the fit's range × 3 channels.
@@ -43,12 +43,6 @@ fn fits(ratios: [f32; NOISE_LEVELS - 1], frames: std::ops::Range<usize>) -> (Noi
     let scene = motorcycle().expect("bundled scene");
     let mut spec = SequenceSpec::motorcycle(&scene, 640, 480, 150, None);
     spec.truth.noise = truth.clone();
-    let analysed = |f: &SequenceFrame| Analysed {
-        frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
-        depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
-        world_from_camera: Some(f.world_from_camera),
-        sparse_flow: None,
-    };
     let opts = FitOptions {
         tier: Some(Tier::Fast),
         effects: Effects { noise: true, motion_blur: false, depth_of_field: false },

@@ -257,18 +257,12 @@ fn coarse_noise_levels_never_run_away_on_the_calibration_video() {
 /// Bounds: median 10% (the fast tier's target on video), every frame 15%.
 #[test]
 fn noise_with_an_aligned_neighbour_reads_through_texture_on_video() {
-    use blind_augment::analysis::{temporal::align, Analysed, DepthMap, Frame};
+    use blind_augment::analysis::temporal::align;
     use blind_augment::fit::Neighbour;
     use blind_augment::model::compare::noise_relative_error;
-    use blind_augment::synth::sequence::{motorcycle, SequenceFrame, SequenceSpec};
+    use blind_augment::synth::sequence::{motorcycle, SequenceSpec};
     let scene = motorcycle().expect("bundled scene");
     let spec = SequenceSpec::motorcycle(&scene, 320, 240, 150, Some(2.5));
-    let analysed = |f: &SequenceFrame| Analysed {
-        frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
-        depth: Some(DepthMap { depth: f.depth_m.clone(), units: DepthUnits::MetricM }),
-        world_from_camera: Some(f.world_from_camera),
-        sparse_flow: None,
-    };
     let mut prev = analysed(&spec.frame(&scene, 54));
     let (mut with, mut alone) = (vec![], vec![]);
     for i in 55..65 {

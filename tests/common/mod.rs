@@ -225,3 +225,15 @@ pub fn demo_camera(spec: &mut blind_augment::synth::sequence::SequenceSpec) {
         c0: 0.2,
     });
 }
+
+/// A frame of a synthetic sequence as the worker's analysis hands it over: its image,
+/// its true metric depth and pose (no flow), for `analysis::temporal::align`.
+pub fn analysed(f: &blind_augment::synth::sequence::SequenceFrame) -> blind_augment::analysis::Analysed {
+    use blind_augment::analysis::{Analysed, DepthMap, Frame};
+    Analysed {
+        frame: Frame { index: f.index as u64, t_s: f.t_s, image: f.image.clone(), depth: None, flow: None },
+        depth: Some(DepthMap { depth: f.depth_m.clone(), units: blind_augment::model::DepthUnits::MetricM }),
+        world_from_camera: Some(f.world_from_camera),
+        sparse_flow: None,
+    }
+}
