@@ -343,17 +343,14 @@ pub fn fit_fast(
             crate::image::expand(&luma_of(gauss(l + 1), &pyr[0].0[l]), lw, lh)
         })
         .collect();
-    let structure_band = |k: usize| luma_of(band(k).map(|b| &b.data[..]), &pyr[0].1[k]);
-    let structure: Vec<Plane> =
-        (STRUCTURE_OFFSET..NOISE_LEVELS + STRUCTURE_OFFSET).into_par_iter().map(structure_band).collect();
-    // With a neighbour, levels 1.. choose their flat samples one level coarser.
-    let structure_nb: Vec<Plane> = match cross {
-        Some(_) => (1 + NEIGHBOUR_STRUCTURE_OFFSET..NOISE_LEVELS + NEIGHBOUR_STRUCTURE_OFFSET)
-            .into_par_iter()
-            .map(structure_band)
-            .collect(),
-        None => vec![],
-    };
+    // The luma bands 2..NOISE_LEVELS + 2: level l's structure is band l + the offset
+    // (`STRUCTURE_OFFSET`, or `NEIGHBOUR_STRUCTURE_OFFSET` from level 1 with a
+    // neighbour: the same planes, one level finer).
+    let structure: Vec<Plane> = (STRUCTURE_OFFSET..NOISE_LEVELS + STRUCTURE_OFFSET)
+        .into_par_iter()
+        .map(|k| luma_of(band(k).map(|b| &b.data[..]), &pyr[0].1[k]))
+        .collect();
+    const _: () = assert!(NEIGHBOUR_STRUCTURE_OFFSET + 1 >= STRUCTURE_OFFSET);
     let band0 = Band0 {
         fine: std::array::from_fn(|c| &image.channels[c][..]),
         g1: std::array::from_fn(|c| &pyr[c].0[0]),
@@ -396,10 +393,8 @@ pub fn fit_fast(
             continue;
         }
         let cross = cross.as_deref().zip(misaligned.as_ref());
-        let (structure, offset) = match structure_nb.get(l.wrapping_sub(1)) {
-            Some(p) => (p, NEIGHBOUR_STRUCTURE_OFFSET),
-            None => (&structure[l], STRUCTURE_OFFSET),
-        };
+        let offset = if cross.is_some() && l >= 1 { NEIGHBOUR_STRUCTURE_OFFSET } else { STRUCTURE_OFFSET };
+        let structure = &structure[l + offset - STRUCTURE_OFFSET];
         let all = measure_level(l, (&bands, &band0), cross, &smooth[l], (structure, offset), &clip, stride0);
         // A level whose bins no line explains (fewer than 3 agree) is texture, not
         // noise: measured on the calibration video (Motorcycle, 320×240), keeping
