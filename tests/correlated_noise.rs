@@ -136,6 +136,12 @@ fn check(
             assert!(derived(with).is_empty(), "{name}, frame {k}: every level measured; {}", with.diagnostics.reason);
             let d = derived(alone);
             assert!(d.contains(&2) && d.contains(&3), "{name}, frame {k}: alone, levels {d:?} not identifiable");
+            // A level 1 it measured stood on a few dark bins here (luma 0.10–0.22 of
+            // 0.10–0.71, reading −9…−28% in median): the reason must say so.
+            if !d.contains(&1) {
+                let r = &alone.diagnostics.reason;
+                assert!(r.contains("level 1 measured over luma"), "{name}, frame {k}: alone, level 1's lumas: {r}");
+            }
         }
     }
     for (l, v) in per_level.into_iter().enumerate() {

@@ -30,25 +30,19 @@ const BLIND_MIN_PER_BIN: usize = 24;
 /// 1.1–3 (the astronaut's level 2 over level 1, the vtest frame's levels 1–3).
 const MAX_LEVEL_STD_RATIO: f32 = 0.8;
 /// How many levels coarser than the measured band the frame's structure is read
-/// that chooses the flat samples: two for the frame alone (band l+2 spans the
-/// level-l window and holds little level-l noise, so choosing on it does not pick
-/// low noise); one from level 1 on where an aligned neighbour is given. There the
-/// noise comes from the difference with the neighbour, which cancels texture only
-/// where the two exposures agree: where they do not (motion blur that differs
-/// between the frames, parallax the alignment misses) what is left lives at the
-/// scales of the texture, and band l+2 let level-l texture through. Measured on
-/// the calibration video (`examples/correlated_noise_probe`; BENCHMARKS.md
-/// "Correlated noise on video"), levels 2 / 3, band l+2 → l+1: white noise at
-/// 640×480 +8.5 / +23.0% → +6.9 / +14.4%, in the worker's 240-row strips at
-/// 1280×960 +4.5 / +18.1% → +4.7 / +8.8%; a demosaic's +3.2 / +6.4% → +1.5 / +2.9%;
-/// a codec's within ±1.5% either way; a neighbour that differs only in its noise
-/// within ±2.3% either way (the choice does not select on the noise). The
-/// difference's own band l+1 read white noise better still (+5.2 / +5.9%) but chose
-/// low noise where it is strongly correlated across levels (a codec's level 3
-/// −7.0%): not used.
+/// that chooses the flat samples: two for the frame alone (band l+2 holds little
+/// level-l noise, so choosing on it does not pick low noise); one from level 1 on
+/// with an aligned neighbour, whose difference cancels texture only where the two
+/// exposures agree — what it leaves lives at the texture's scales. Measured
+/// (`examples/correlated_noise_probe`, BENCHMARKS.md "Correlated noise on video"),
+/// levels 2 / 3, l+2 → l+1: white noise at 640×480 +8.5 / +23.0% → +6.9 / +14.4%,
+/// in the worker's strips at 1280×960 +4.5 / +18.1% → +4.7 / +8.8%; correlated noise
+/// within ±3% either way; a neighbour differing only in its noise within ±2.3%.
 const NEIGHBOUR_STRUCTURE_OFFSET: usize = 1;
 /// The frame alone's (see `NEIGHBOUR_STRUCTURE_OFFSET`).
 const STRUCTURE_OFFSET: usize = 2;
+/// Least share of level 0's luma span a coarser level's bins span unremarked.
+const PARTIAL_LEVEL_SPAN: f32 = 0.5;
 /// Fewest flat samples a bin is measured on (a median of fewer scatters by > 25% at level 3).
 const BLIND_MIN_FLAT: usize = 12;
 /// The texture a natural scene leaves in its flattest samples, as a level-0 band std
@@ -519,6 +513,22 @@ pub fn fit_fast(
             "; levels {derived:?} not identifiable from this frame (texture exceeds the noise there, or too few flat luma bins): \
              they continue the finest measured level by white-noise band ratios"
         );
+    }
+    // A coarser level on bins spanning little of level 0's lumas is their line
+    // extrapolated: say over which (BENCHMARKS.md "Correlated noise on video").
+    if noise.present {
+        let span = |y: &[f32]| luma_span(y).map(|[a, b]| b - a);
+        if let Some(s0) = points.first().and_then(|p| span(&p.y)).filter(|&s| s > 0.0) {
+            for (l, p) in measured_levels.iter().zip(&points).skip(1) {
+                if let Some([a, b]) = luma_span(&p.y).filter(|[a, b]| b - a < PARTIAL_LEVEL_SPAN * s0) {
+                    noise.diagnostics.reason += &format!(
+                        "; level {l} measured over luma {a:.2}–{b:.2} only ({} bins), its line extrapolated over \
+                         level 0's",
+                        p.y.len()
+                    );
+                }
+            }
+        }
     }
     if let Some(b) = blocking {
         noise.diagnostics.reason += &format!(
