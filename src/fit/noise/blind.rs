@@ -523,7 +523,7 @@ pub fn fit_fast(
                 if let Some([a, b]) = luma_span(&p.y).filter(|[a, b]| b - a < PARTIAL_LEVEL_SPAN * s0) {
                     noise.diagnostics.reason += &format!(
                         "; level {l} measured over luma {a:.2}–{b:.2} only ({} bins), its line extrapolated over \
-                         level 0's",
+                         level 0's range",
                         p.y.len()
                     );
                 }
