@@ -15,13 +15,15 @@
 //!   added after (what the difference leaves of the scene);
 //! - `PERFECT=1`: the frame's own scene with independent noise as the neighbour
 //!   (`SHIFT=u,v`: that noise resampled at a sub-pixel offset);
-//! - `REASON=1`: both fits' reasons.
+//! - `REASON=1`: both fits' reasons;
+//! - `SOURCES=1`: both fits' level sources (measured ± stated error, or continued),
+//!   and how often a measured level's error lies within its stated error.
 #[path = "../tests/common/mod.rs"]
 mod common;
 use blind_augment::analysis::temporal::align;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Neighbour, Tier};
 use blind_augment::image::Plane;
-use blind_augment::model::{Noise, NOISE_LEVELS};
+use blind_augment::model::{LevelSource, Noise, NOISE_LEVELS};
 use blind_augment::synth::sequence::{motorcycle, SequenceFrame, SequenceSpec};
 use common::analysed;
 
@@ -42,9 +44,10 @@ fn main() {
     // low-passed by a Gaussian of std s px (normalised to unit variance), added to
     // each frame; the truth per level is that field's measured band stds.
     let lowpass: Option<f32> = std::env::var("LOWPASS").ok().and_then(|s| s.parse().ok());
-    let truth = match lowpass {
-        Some(s) => {
-            let (u, norm) = lowpass_band_stds(s);
+    // The low-passed field's band stds and normalising std, measured once.
+    let reference = lowpass.map(lowpass_band_stds);
+    let truth = match lowpass.zip(reference) {
+        Some((s, (u, norm))) => {
             let unit = blind_augment::synth::unit_band_std();
             let s0 = (u[0] / unit[0]).powi(2);
             let r: [f32; NOISE_LEVELS - 1] = std::array::from_fn(|l| u[l + 1] / u[l]);
@@ -71,12 +74,11 @@ fn main() {
     // The frame, with the low-passed noise added where asked (8-bit, as the video).
     let frame = |i: usize| -> SequenceFrame {
         let mut f = spec.frame(&scene, i);
-        if let Some(s) = lowpass {
+        if let Some((s, (_, norm))) = lowpass.zip(reference) {
             let mut model = f.truth.clone();
             model.noise.present = false;
             let clean = blind_augment::synth::apply_camera_model(&f.clean, &model, Some(&f.depth_m), Some(&f.flow), 0);
             let y = clean.luma();
-            let (_, norm) = lowpass_band_stds(s);
             for c in 0..3 {
                 let n = lowpass_field(f.image.width, f.image.height, s, c as u32, 1000 + i as u64);
                 for (k, v) in f.image.channels[c].iter_mut().enumerate() {
@@ -88,6 +90,9 @@ fn main() {
         f
     };
     let mut prev = analysed(&frame(from.saturating_sub(1)));
+    // SOURCES=1: per level, measured frames whose median error lies within 1, 2, or
+    // beyond 2 of the stated relative standard errors.
+    let (mut cover_with, mut cover_alone) = ([[0usize; 3]; NOISE_LEVELS], [[0usize; 3]; NOISE_LEVELS]);
     let (mut with_all, mut alone_all) = (vec![vec![]; NOISE_LEVELS], vec![vec![]; NOISE_LEVELS]);
     for i in from..to {
         let fr = frame(i);
@@ -159,6 +164,42 @@ fn main() {
             fmt(&ea),
             derived(&alone)
         );
+        if std::env::var_os("SOURCES").is_some() {
+            println!("  sources with: {}\n  sources alone: {}", sources(&with, &ew), sources(&alone, &ea));
+            for (n, e, cov) in [(&with, &ew, &mut cover_with), (&alone, &ea, &mut cover_alone)] {
+                for (l, src) in n.level_sources.iter().enumerate() {
+                    if let LevelSource::Measured { relative_stderr, .. } = *src {
+                        let k = (e[l].abs() / relative_stderr as f64).ceil().clamp(1.0, 3.0) as usize - 1;
+                        cov[l][k] += 1;
+                    }
+                }
+            }
+        }
+        if std::env::var_os("RESIDUE").is_some() {
+            // The std the neighbour fit reads beyond the truth, √(read² − truth²) per
+            // level at the range's mid luma (channel mean): an additive residue's size.
+            // A continued level's is marked `c`.
+            for (fit, name) in [(&with, "with"), (&alone, "alone")] {
+                let ym = 0.5 * (fit.luminance_range[0] + fit.luminance_range[1]);
+                let r: Vec<String> = (0..NOISE_LEVELS)
+                    .map(|l| {
+                        let (mut t, mut n) = (0.0f32, 0.0f32);
+                        for c in 0..3 {
+                            let (g, s) = (fit.levels[l].std(fit.form, c, ym), truth.levels[l].std(truth.form, c, ym));
+                            t += (g * g - s * s).signum() * (g * g - s * s).abs().sqrt() / 3.0;
+                            n += s / 3.0;
+                        }
+                        let c = if matches!(fit.level_sources.get(l), Some(LevelSource::Continued { .. })) {
+                            "c"
+                        } else {
+                            ""
+                        };
+                        format!("{t:+.5}{c} (truth {n:.5})")
+                    })
+                    .collect();
+                println!("  residue {name}: {}", r.join(" | "));
+            }
+        }
         if std::env::var_os("REASON").is_some() {
             println!("  with: {}\n  alone: {}", with.diagnostics.reason, alone.diagnostics.reason);
         }
@@ -172,6 +213,26 @@ fn main() {
         |all: &mut Vec<Vec<f64>>| all.iter_mut().map(|v| format!("{:+.1}%", 100.0 * med(v))).collect::<Vec<_>>();
     println!("median per level, with the neighbour: {:?}", summary(&mut with_all));
     println!("median per level, the frame alone:    {:?}", summary(&mut alone_all));
+    if std::env::var_os("SOURCES").is_some() {
+        println!("measured levels' errors within 1 / 2 / beyond 2 stated errors, with the neighbour: {cover_with:?}");
+        println!("measured levels' errors within 1 / 2 / beyond 2 stated errors, the frame alone:    {cover_alone:?}");
+    }
+}
+
+/// Each level's source as the fit wrote it, with its error: `M 3%±5%` (measured,
+/// error, stated relative standard error) or `C0` (continued from level 0).
+fn sources(n: &Noise, e: &[f64]) -> String {
+    n.level_sources
+        .iter()
+        .zip(e)
+        .map(|(s, e)| match *s {
+            LevelSource::Measured { luma: [a, b], bins, relative_stderr } => {
+                format!("M {:+.0}%±{:.0}% ({bins} bins {a:.2}–{b:.2})", 100.0 * e, 100.0 * relative_stderr)
+            }
+            LevelSource::Continued { from } => format!("C{from} {:+.0}%", 100.0 * e),
+        })
+        .collect::<Vec<_>>()
+        .join(" | ")
 }
 
 /// Per level, the median signed relative error of the fitted std against the truth

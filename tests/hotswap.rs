@@ -44,6 +44,7 @@ fn model_for(g: u64) -> CameraModel {
         lowpass: None,
         luminance_range: [0.02, 0.98],
         bins: vec![],
+        level_sources: vec![],
         blocking: None,
         diagnostics: Diagnostics::not_fitted("test"),
     };

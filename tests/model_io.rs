@@ -55,6 +55,50 @@ fn dof_kernel_shape_round_trips_and_defaults_to_gaussian() {
     assert!(CameraModel::from_json(&v.to_string()).is_err());
 }
 
+/// The blind fit's level sources round-trip; files without them (written before
+/// they existed, or by hand) read as none; a bad one is refused naming its field.
+#[test]
+fn noise_level_sources_round_trip_and_are_validated() {
+    let mut m = sample_model();
+    m.noise.level_sources = vec![
+        LevelSource::Measured { luma: [0.1, 0.7], bins: 11, relative_stderr: 0.11 },
+        LevelSource::Measured { luma: [0.1, 0.22], bins: 3, relative_stderr: 0.4 },
+        LevelSource::Continued { from: 1 },
+        LevelSource::Continued { from: 1 },
+    ];
+    let text = m.to_json().expect("valid");
+    assert!(text.contains("\"measured\"") && text.contains("\"continued\""), "{text}");
+    assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
+    let good = serde_json::to_value(&m).expect("serialises");
+    let mut old = good.clone();
+    old["noise"].as_object_mut().expect("object").remove("level_sources");
+    assert!(CameraModel::from_json(&old.to_string()).expect("old file parses").noise.level_sources.is_empty());
+    let cases: Vec<(&str, serde_json::Value, &str)> = vec![
+        ("/noise/level_sources/1/measured/luma", serde_json::json!([0.5, 0.2]), "noise.level_sources[1].luma"),
+        ("/noise/level_sources/1/measured/luma", serde_json::json!([0.1, 1.5]), "noise.level_sources[1].luma"),
+        ("/noise/level_sources/0/measured/bins", serde_json::json!(0), "noise.level_sources[0].bins"),
+        (
+            "/noise/level_sources/1/measured/relative_stderr",
+            serde_json::json!(-0.1),
+            "noise.level_sources[1].relative_stderr",
+        ),
+        // Continued from itself, from a coarser level, from a continued one.
+        ("/noise/level_sources/2/continued/from", serde_json::json!(2), "noise.level_sources[2].from"),
+        ("/noise/level_sources/2/continued/from", serde_json::json!(3), "noise.level_sources[2].from"),
+        ("/noise/level_sources/3/continued/from", serde_json::json!(2), "noise.level_sources[3].from"),
+    ];
+    for (ptr, value, field) in cases {
+        let mut v = good.clone();
+        *v.pointer_mut(ptr).unwrap_or_else(|| panic!("pointer {ptr}")) = value;
+        let err = CameraModel::from_json(&v.to_string()).expect_err(ptr);
+        assert!(err.to_string().contains(field), "{ptr}: {err}");
+    }
+    let mut v = good.clone();
+    v["noise"]["level_sources"].as_array_mut().expect("array").pop();
+    let err = CameraModel::from_json(&v.to_string()).expect_err("3 sources");
+    assert!(err.to_string().contains("noise.level_sources"), "{err}");
+}
+
 /// Each bad value is rejected with an error naming its field.
 #[test]
 fn validation_names_the_field() {

@@ -8,7 +8,7 @@ mod common;
 
 use blind_augment::fit::{fit, FitInputs, FitOptions, Tier};
 use blind_augment::image::{gaussian_pyramid, laplacian_pyramid, Rgb};
-use blind_augment::model::{Noise, NOISE_LEVELS};
+use blind_augment::model::{LevelSource, Noise, NOISE_LEVELS};
 use blind_augment::synth::noise_field;
 use common::vtest::{cells, reference};
 use common::*;
@@ -82,6 +82,18 @@ fn one_real_frame_reads_the_temporal_noise_per_level_and_luma() {
     assert!(median_abs(&all) <= 0.80, "all levels: {:.1}%", 100.0 * median_abs(&all));
     // The fit must say that it could not measure the coarse levels here.
     assert!(noise.diagnostics.reason.contains("levels [1, 2, 3] not identifiable"), "{}", noise.diagnostics.reason);
+    // And the model says so per level: level 0 measured over the fitted range, the
+    // others continued from it.
+    assert!(
+        matches!(noise.level_sources[0], LevelSource::Measured { luma, .. } if luma == noise.luminance_range),
+        "{:?}",
+        noise.level_sources
+    );
+    assert!(
+        noise.level_sources[1..].iter().all(|s| *s == LevelSource::Continued { from: 0 }),
+        "{:?}",
+        noise.level_sources
+    );
 }
 
 /// The fitted model synthesised through `synth` onto the clip's clean (temporal

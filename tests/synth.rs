@@ -180,6 +180,7 @@ fn noise_synthesis_matches_the_model_per_level() {
         lowpass: None,
         luminance_range: [0.0, 1.0],
         bins: vec![],
+        level_sources: vec![],
         blocking: None,
         diagnostics: Diagnostics::not_fitted("test"),
     };
@@ -240,6 +241,7 @@ fn synthesis_is_deterministic_per_seed() {
         lowpass: None,
         luminance_range: [0.0, 1.0],
         bins: vec![],
+        level_sources: vec![],
         blocking: None,
         diagnostics: Diagnostics::not_fitted("test"),
     };

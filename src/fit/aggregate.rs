@@ -5,7 +5,7 @@
 //! whole, since curve coefficients do not average meaningfully.
 
 use super::FitError;
-use crate::model::{CameraModel, Diagnostics, Status};
+use crate::model::{CameraModel, Diagnostics, LevelSource, Status, NOISE_LEVELS};
 
 /// The median; of an even count, the mean of the middle two (the upper one alone
 /// made a window of two estimates publish the larger: a contaminated noise fit
@@ -83,6 +83,46 @@ fn noise_pool<'a>(noise: &[&'a CameraModel]) -> Vec<&'a CameraModel> {
     kept.into_iter().filter(|m| kind(m) == base).collect()
 }
 
+/// The pooled fits' level sources (`model::LevelSource`): a level is measured where
+/// most fits measured it — over the median of their lumas, bins and errors (the
+/// frames of one window share their scene and its texture, so their errors are not
+/// divided by √fits) — and otherwise continued from the coarsest measured level
+/// finer than it. Empty unless every pooled fit says (hand-written or accurate ones
+/// do not).
+fn pooled_level_sources(fits: &[&CameraModel]) -> Vec<LevelSource> {
+    if fits.is_empty() || fits.iter().any(|m| m.noise.level_sources.len() != NOISE_LEVELS) {
+        return vec![];
+    }
+    let mut out: Vec<LevelSource> = Vec::with_capacity(NOISE_LEVELS);
+    for l in 0..NOISE_LEVELS {
+        let measured: Vec<([f32; 2], u32, f32)> = fits
+            .iter()
+            .filter_map(|m| match m.noise.level_sources[l] {
+                LevelSource::Measured { luma, bins, relative_stderr } => Some((luma, bins, relative_stderr)),
+                LevelSource::Continued { .. } => None,
+            })
+            .collect();
+        let finer = out.iter().rposition(|s| matches!(s, LevelSource::Measured { .. }));
+        let source = match finer {
+            Some(from) if 2 * measured.len() <= fits.len() => LevelSource::Continued { from: from as u32 },
+            // Level 0 (or a level with no measured finer one) stays measured if any fit measured it.
+            None if measured.is_empty() => return vec![],
+            _ => {
+                let med = |k: usize| {
+                    median(measured.iter().map(|&(luma, bins, se)| [luma[0], luma[1], bins as f32, se][k]).collect())
+                };
+                LevelSource::Measured {
+                    luma: [med(0), med(1)],
+                    bins: med(2).round().max(1.0) as u32,
+                    relative_stderr: med(3),
+                }
+            }
+        };
+        out.push(source);
+    }
+    out
+}
+
 pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError> {
     let first = models.first().ok_or(FitError::NoFrames)?;
     let mut out = first.clone();
@@ -99,6 +139,7 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
                     median(same.iter().map(|m| m.noise.levels[l].intercept[c]).collect());
             }
         }
+        out.noise.level_sources = pooled_level_sources(&same);
         out.noise.lowpass = None;
         out.noise.luminance_range = [
             median(same.iter().map(|m| m.noise.luminance_range[0]).collect()),
@@ -192,6 +233,33 @@ mod tests {
         // Every fit of one form and near each other: the coefficient-wise median.
         let agg = aggregate_models(&[affine(0.98), affine(1.0), affine(1.04)]).expect("valid");
         assert_eq!(agg.noise.levels, affine(1.0).noise.levels);
+    }
+
+    /// The pooled level sources: a level most fits measured is measured (medians of
+    /// their lumas, bins and errors), else continued from the coarsest measured finer
+    /// level; a pooled fit without sources leaves none.
+    #[test]
+    fn level_sources_pool_by_majority() {
+        let m = |luma: [f32; 2], bins: u32, relative_stderr: f32| LevelSource::Measured { luma, bins, relative_stderr };
+        let c = |from: u32| LevelSource::Continued { from };
+        let with = |sources: Vec<LevelSource>| {
+            let mut f = affine(1.0);
+            f.noise.level_sources = sources;
+            f
+        };
+        let fits = [
+            with(vec![m([0.1, 0.7], 11, 0.1), m([0.1, 0.2], 3, 0.4), c(1), c(1)]),
+            with(vec![m([0.2, 0.8], 12, 0.2), m([0.1, 0.6], 9, 0.1), m([0.2, 0.5], 4, 0.3), c(2)]),
+            with(vec![m([0.1, 0.6], 10, 0.1), c(0), c(0), c(0)]),
+        ];
+        let agg = aggregate_models(&fits).expect("valid");
+        assert_eq!(
+            agg.noise.level_sources,
+            vec![m([0.1, 0.7], 11, 0.1), m([0.1, 0.4], 6, 0.25), c(1), c(1)],
+            "level 1: two of three measured it (medians of two are means); level 2: one of three"
+        );
+        let agg = aggregate_models(&[fits[0].clone(), affine(1.0)]).expect("valid");
+        assert!(agg.noise.level_sources.is_empty(), "{:?}", agg.noise.level_sources);
     }
 
     /// A frame's exposure as a fit reports it: λ ± `stderr` with `status`.

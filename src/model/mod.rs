@@ -131,6 +131,11 @@ pub struct Noise {
     /// for the accurate tier and for models written by hand).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub bins: Vec<NoiseBin>,
+    /// How the blind fit read each band-pass level (empty for the accurate tier and
+    /// for models written by hand): measured, with its confidence, or continued from
+    /// a finer level where the frame could not say.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub level_sources: Vec<LevelSource>,
     /// Block-transform compression seen in the frame (`null`: none found or not
     /// looked for). Its fine levels then hold codec artefacts as well as noise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -154,6 +159,22 @@ pub struct NoiseBin {
     pub relative_stderr: f32,
     /// Whether the fit used the bin (false: rejected as texture).
     pub used: bool,
+}
+
+/// How the blind fit read one band-pass level's map (`Noise::level_sources`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum LevelSource {
+    /// Fitted on the level's own flat samples: `bins` luma bins whose mean lumas span
+    /// `luma`. `relative_stderr` is the map's standard error relative to its std,
+    /// mean over channels, the largest over `Noise::luminance_range`: its sampling
+    /// error, and beyond `luma` how far two continuations of its bins (its own line,
+    /// and level 0's luma shape scaled to them) part — a level read on a few dark
+    /// bins is only as sure as its line's far end.
+    Measured { luma: [f32; 2], bins: u32, relative_stderr: f32 },
+    /// Not identifiable from the frame (its flattest samples are texture, or too few
+    /// flat luma bins): level `from`'s map continued by white noise's band ratios.
+    Continued { from: u32 },
 }
 
 /// A periodic block grid in the frame (JPEG / MPEG-style codecs).
@@ -334,6 +355,7 @@ impl Noise {
             lowpass: None,
             luminance_range: [0.0, 1.0],
             bins: vec![],
+            level_sources: vec![],
             blocking: None,
             diagnostics,
         }

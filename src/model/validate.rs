@@ -95,6 +95,54 @@ impl CameraModel {
                 }
             }
         }
+        self.validate_level_sources()
+    }
+
+    /// `noise.level_sources`: none, or one per level; a measured level's lumas within
+    /// [0, 1] and ordered, at least one bin, a finite non-negative error; a continued
+    /// level continues a finer, measured one (what the blind fit writes).
+    fn validate_level_sources(&self) -> Result<(), ModelError> {
+        let s = &self.noise.level_sources;
+        if !s.is_empty() && s.len() != NOISE_LEVELS {
+            return Err(bad(
+                "noise.level_sources",
+                format!("must be empty or have {NOISE_LEVELS} entries, got {}", s.len()),
+            ));
+        }
+        for (l, src) in s.iter().enumerate() {
+            let name = format!("noise.level_sources[{l}]");
+            match *src {
+                LevelSource::Measured { luma: [lo, hi], bins, relative_stderr } => {
+                    finite(&format!("{name}.luma[0]"), lo)?;
+                    finite(&format!("{name}.luma[1]"), hi)?;
+                    if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo > hi {
+                        return Err(bad(
+                            format!("{name}.luma"),
+                            format!("must satisfy 0 ≤ lo ≤ hi ≤ 1, got [{lo}, {hi}]"),
+                        ));
+                    }
+                    if bins == 0 {
+                        return Err(bad(format!("{name}.bins"), "a measured level has at least one bin"));
+                    }
+                    finite(&format!("{name}.relative_stderr"), relative_stderr)?;
+                    if relative_stderr < 0.0 {
+                        return Err(bad(
+                            format!("{name}.relative_stderr"),
+                            format!("must be ≥ 0, got {relative_stderr}"),
+                        ));
+                    }
+                }
+                LevelSource::Continued { from } => {
+                    let measured = s.get(from as usize).is_some_and(|f| matches!(f, LevelSource::Measured { .. }));
+                    if from as usize >= l || !measured {
+                        return Err(bad(
+                            format!("{name}.from"),
+                            format!("must name a finer, measured level (< {l}), got {from}"),
+                        ));
+                    }
+                }
+            }
+        }
         Ok(())
     }
 

@@ -276,6 +276,7 @@ pub fn white_sensor_noise(a: [f32; 3], b: [f32; 3], luminance_range: [f32; 2]) -
         lowpass: Some(level(NOISE_LEVELS)),
         luminance_range,
         bins: vec![],
+        level_sources: vec![],
         blocking: None,
         diagnostics: crate::model::Diagnostics::not_fitted("white Poisson–Gaussian sensor noise"),
     }

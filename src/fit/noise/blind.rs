@@ -378,6 +378,8 @@ pub fn fit_fast(
     let (mut points, mut measured_levels, mut derived): (Vec<LevelPoints>, Vec<usize>, Vec<usize>) =
         (vec![], vec![], vec![]);
     let mut prev: Option<Vec<BinMeasure>> = None;
+    // Per measured level, its bins' median relative standard error (`sources`).
+    let mut bin_rel_se: Vec<f32> = vec![];
     let mut level0_untrimmed = false;
     // Level 0's bins, every one measured (the per-bin confidence reports them all).
     let mut measured0: Vec<BinMeasure> = vec![];
@@ -420,6 +422,8 @@ pub fn fit_fast(
                 var: std::array::from_fn(|c| bins.iter().map(|b| b.var[c]).collect()),
                 weights: Some(bins.iter().map(|b| b.n as f32).collect()),
             });
+            let mut se: Vec<f32> = bins.iter().map(|b| b.rel_se).collect();
+            bin_rel_se.push(percentile(&mut se, 0.5));
             prev = Some(bins.into_iter().cloned().collect());
         }
         if l == 0 {
@@ -461,6 +465,7 @@ pub fn fit_fast(
         .iter()
         .map(|p| LevelSamples { y: p.y.clone(), y2: p.y2.clone(), own: None, var: p.var.clone() })
         .collect();
+    let covs = fitted.as_ref().map(|f| f.covs.clone()).unwrap_or_default();
     st.lap("least_squares");
     let samples_used: usize = points.iter().flat_map(|p| p.weights.iter().flatten()).map(|&w| w as usize).sum();
     let method = if neighbour.is_some() { FAST_WITH_NEIGHBOUR } else { FAST_ALONE };
@@ -488,9 +493,23 @@ pub fn fit_fast(
             }
         })
         .collect();
+    let ym = 0.5 * (noise.luminance_range[0] + noise.luminance_range[1]);
+    let std_mid = (0..3).map(|c| noise.levels[0].std(noise.form, c, ym)).sum::<f32>() / 3.0;
+    if measured_levels.first() == Some(&0) && covs.len() == points.len() {
+        let measured: Vec<super::sources::MeasuredLevel> = measured_levels
+            .iter()
+            .zip(&points)
+            .zip(covs.iter().zip(&bin_rel_se))
+            .map(|((&level, points), (&covs, &bin_rel_se))| super::sources::MeasuredLevel {
+                level,
+                points,
+                covs,
+                bin_rel_se,
+            })
+            .collect();
+        noise.level_sources = super::sources::level_sources(&noise, &measured, floor(std_mid), neighbour.is_some());
+    }
     if noise.present && neighbour.is_none() {
-        let ym = 0.5 * (noise.luminance_range[0] + noise.luminance_range[1]);
-        let std_mid = (0..3).map(|c| noise.levels[0].std(noise.form, c, ym)).sum::<f32>() / 3.0;
         let bias = floor(std_mid) as f64;
         let sampling = noise.diagnostics.stderr.unwrap_or(1.0);
         noise.diagnostics.stderr = Some(sampling.hypot(bias));
@@ -516,15 +535,15 @@ pub fn fit_fast(
     }
     // A coarser level on bins spanning little of level 0's lumas is their line
     // extrapolated: say over which (BENCHMARKS.md "Correlated noise on video").
-    if noise.present {
-        let span = |y: &[f32]| luma_span(y).map(|[a, b]| b - a);
-        if let Some(s0) = points.first().and_then(|p| span(&p.y)).filter(|&s| s > 0.0) {
-            for (l, p) in measured_levels.iter().zip(&points).skip(1) {
-                if let Some([a, b]) = luma_span(&p.y).filter(|[a, b]| b - a < PARTIAL_LEVEL_SPAN * s0) {
+    let [lo0, hi0] = noise.luminance_range;
+    if noise.present && hi0 > lo0 {
+        for (l, source) in noise.level_sources.iter().enumerate().skip(1) {
+            if let crate::model::LevelSource::Measured { luma: [a, b], bins, relative_stderr } = *source {
+                if b - a < PARTIAL_LEVEL_SPAN * (hi0 - lo0) {
                     noise.diagnostics.reason += &format!(
-                        "; level {l} measured over luma {a:.2}–{b:.2} only ({} bins), its line extrapolated over \
-                         level 0's range",
-                        p.y.len()
+                        "; level {l} measured over luma {a:.2}–{b:.2} only ({bins} bins), its line extrapolated over \
+                         level 0's range (±{:.0}% over it)",
+                        100.0 * relative_stderr
                     );
                 }
             }

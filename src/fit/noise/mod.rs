@@ -40,6 +40,7 @@ mod blind;
 mod blocking;
 pub use blocking::compression_blocking;
 mod clip;
+mod sources;
 pub use blind::{
     fit_fast, DEFAULT_FAST_SAMPLES_PER_LEVEL, FAST_ALONE, FAST_WITH_NEIGHBOUR, MIN_FAST_SAMPLES_PER_LEVEL,
 };
@@ -550,6 +551,7 @@ fn finish(
         lowpass,
         luminance_range: luma_range,
         bins: vec![],
+        level_sources: vec![],
         blocking: None,
         diagnostics: Diagnostics::not_fitted(""),
     };
