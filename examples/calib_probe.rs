@@ -4,7 +4,7 @@ mod common;
 use blind_augment::analysis::timing::TimedPose;
 use blind_augment::analysis::{DepthMap, Frame};
 use blind_augment::model::compare::*;
-use blind_augment::model::DepthUnits;
+use blind_augment::model::{DepthUnits, LevelSource};
 use blind_augment::synth::sequence::*;
 use blind_augment::worker::*;
 
@@ -70,6 +70,9 @@ fn main() {
     // for the summary: the bench's statistics (medians over the second before the
     // change and over the last second).
     let mut errs: Vec<Errors> = vec![];
+    // NOISE=1: per level, publications whose measured level's error lies within 1, 2,
+    // or beyond 2 of its stated relative standard errors.
+    let mut coverage = [[0usize; 3]; blind_augment::model::NOISE_LEVELS];
     let floor_px = spec.source_pixel_blur_px(&scene);
     for i in 0..frames {
         cal.push_poses(&[pose(i + 2)]).unwrap();
@@ -151,13 +154,40 @@ fn main() {
                                 .join("/")
                         })
                         .collect();
+                    // Each level's median error over 9 lumas of the range × 3 channels
+                    // against its stated error (`level_sources`), counted for the summary.
+                    let sources: Vec<String> = n
+                        .level_sources
+                        .iter()
+                        .enumerate()
+                        .map(|(l, src)| {
+                            let [lo, hi] = n.luminance_range;
+                            let mut e: Vec<f32> = (0..27)
+                                .map(|k| {
+                                    let (y, c) = (lo + (hi - lo) * ((k / 3) as f32 + 0.5) / 9.0, k % 3);
+                                    n.levels[l].std(n.form, c, y) / t.levels[l].std(t.form, c, y) - 1.0
+                                })
+                                .collect();
+                            e.sort_by(f32::total_cmp);
+                            match *src {
+                                LevelSource::Measured { relative_stderr, .. } => {
+                                    let k =
+                                        (e[13].abs() / relative_stderr.max(1e-6)).ceil().clamp(1.0, 3.0) as usize - 1;
+                                    coverage[l][k] += 1;
+                                    format!("M{:+.0}±{:.0}", 100.0 * e[13], 100.0 * relative_stderr)
+                                }
+                                LevelSource::Continued { from } => format!("C{from}{:+.0}", 100.0 * e[13]),
+                            }
+                        })
+                        .collect();
                     println!(
-                        "{i:3} t={:.2} noise_err={:?} per level (g, luma .3/.5/.7, %): {} [{}] range {:?}",
+                        "{i:3} t={:.2} noise_err={:?} per level (g, luma .3/.5/.7, %): {} [{}] range {:?} sources {}",
                         u.t_s,
                         noise_relative_error(n, t),
                         per.join("  "),
                         n.diagnostics.method,
-                        n.luminance_range
+                        n.luminance_range,
+                        sources.join(" ")
                     )
                 }
                 Event::Published(u) => println!(
@@ -177,6 +207,9 @@ fn main() {
                 other => println!("    {other:?}"),
             }
         }
+    }
+    if std::env::var_os("NOISE").is_some() {
+        println!("published measured levels within 1 / 2 / beyond 2 stated errors, per level: {coverage:?}");
     }
     let change_s = spec.change.as_ref().map_or(spec.frame_time_s(frames - 1) + 1.0, |c| c.0);
     let med = |v: Vec<f32>| {

@@ -164,6 +164,16 @@ fn demo_runs_without_files() {
     for effect in ["| depth of field | δ RMSE", "| noise | median relative error"] {
         assert!(report.contains(effect), "{effect} in\n{report}");
     }
+    // Per noise level, how the fast tier read it, as its model says.
+    assert_eq!(fast.noise.level_sources.len(), 4, "the fast tier's level sources");
+    if let blind_augment::model::LevelSource::Measured { luma: [a, b], bins, relative_stderr } =
+        fast.noise.level_sources[0]
+    {
+        let cell = format!("measured, {bins} luma bins over {a:.2}–{b:.2} | ±{:.1}% |", 100.0 * relative_stderr);
+        assert!(report.contains("| 0 | ") && report.contains(&cell), "{cell} in\n{report}");
+    } else {
+        panic!("level 0 is always measured where noise is present: {:?}", fast.noise.level_sources);
+    }
     // The render half needs a Vulkan device: required under REQUIRE_GPU=1 (CI).
     if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") {
         for f in ["composite_side_by_side.png", "composite_zoom.png", "render/matched_007.png", "render/naive_000.png"]

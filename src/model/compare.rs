@@ -1,7 +1,8 @@
 //! How far a model is from a known truth, one number per effect, as the tier
 //! benchmarks, the calibration tests and the demo report state it:
 //! * noise: the median over levels 0–3, R/G/B and luma 0.2…0.8 (clamped into each
-//!   model's range) of |σ_fit / σ_true − 1|, σ the level's std;
+//!   model's range) of |σ_fit / σ_true − 1|, σ the level's std (per level, signed:
+//!   `noise_level_errors`);
 //! * motion blur: |λ_fit − λ_true| (an absent effect reads λ = 0);
 //! * depth of field: the RMS of δ_fit(Z) − δ_true(Z) over the given depths (px).
 
@@ -32,6 +33,29 @@ pub fn noise_relative_error(fit: &Noise, truth: &Noise) -> Option<f32> {
     }
     errs.sort_by(f32::total_cmp);
     Some(errs[errs.len() / 2])
+}
+
+/// Per level 0–3, the median over R/G/B and luma 0.2…0.8 (clamped as above) of the
+/// signed σ_fit / σ_true − 1: which way each level is off (the demo report's table
+/// beside `Noise::level_sources`). None if either side has no noise.
+pub fn noise_level_errors(fit: &Noise, truth: &Noise) -> Option<Vec<f32>> {
+    if !fit.present || !truth.present {
+        return None;
+    }
+    let per_level = fit.levels.iter().zip(&truth.levels).take(4).map(|(lf, lt)| {
+        let mut errs: Vec<f32> = (0..3)
+            .flat_map(|c| LUMAS.iter().map(move |&y| (c, y)))
+            .filter_map(|(c, y)| {
+                let yf = y.clamp(fit.luminance_range[0], fit.luminance_range[1]);
+                let yt = y.clamp(truth.luminance_range[0], truth.luminance_range[1]);
+                let (sf, st) = (lf.std(fit.form, c, yf), lt.std(truth.form, c, yt));
+                (st > 0.0).then(|| sf / st - 1.0)
+            })
+            .collect();
+        errs.sort_by(f32::total_cmp);
+        errs.get(errs.len() / 2).copied()
+    });
+    per_level.collect()
 }
 
 /// The noise headline: level-0 std of the green channel at luma 0.5 (clamped into
@@ -84,5 +108,16 @@ mod tests {
         }
         let e = noise_relative_error(&m, &n).expect("both present");
         assert!((e - 0.1).abs() < 1e-4, "{e}");
+        // Per level, signed: +10% at the three scaled levels, −10% where the truth is
+        // the scaled one; f32 rounding only (1e-4).
+        m.levels[3] = n.levels[3];
+        let e = noise_level_errors(&m, &n).expect("both present");
+        assert!(e[..3].iter().all(|v| (v - 0.1).abs() < 1e-4) && e[3].abs() < 1e-6, "{e:?}");
+        let e = noise_level_errors(&n, &m).expect("both present");
+        assert!((e[0] + 1.0 / 11.0).abs() < 1e-4, "{e:?}");
+        assert_eq!(
+            noise_level_errors(&crate::model::Noise::absent(crate::model::Diagnostics::not_fitted("x")), &n),
+            None
+        );
     }
 }

@@ -345,6 +345,30 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
             m.noise.diagnostics.fit_time_s * 1e3
         );
     }
+    // Per level: each tier's error, and how the fast tier says it read the level.
+    use blind_augment::model::compare::noise_level_errors;
+    use blind_augment::model::LevelSource;
+    let _ = writeln!(
+        r,
+        "\n## Noise per level: each tier's error (median over R, G, B and luma 0.2–0.8), and how the fast tier read it\n"
+    );
+    let _ = writeln!(r, "| level | accurate | fast | fast: read as | fast: its stated error |\n|---|---|---|---|---|");
+    let (ea, ef) = (noise_level_errors(&acc.noise, &truth.noise), noise_level_errors(&fast.noise, &truth.noise));
+    let pct = |e: &Option<Vec<f32>>, l: usize| {
+        e.as_ref().and_then(|v| v.get(l)).map_or("—".into(), |x| format!("{:+.1}%", 100.0 * x))
+    };
+    for l in 0..blind_augment::model::NOISE_LEVELS {
+        let (read, stated) = match fast.noise.level_sources.get(l) {
+            Some(LevelSource::Measured { luma: [a, b], bins, relative_stderr }) => {
+                (format!("measured, {bins} luma bins over {a:.2}–{b:.2}"), format!("±{:.1}%", 100.0 * relative_stderr))
+            }
+            Some(LevelSource::Continued { from }) => {
+                (format!("not identifiable: level {from} continued by white noise's ratios"), "—".into())
+            }
+            None => ("—".into(), "—".into()),
+        };
+        let _ = writeln!(r, "| {l} | {} | {} | {read} | {stated} |", pct(&ea, l), pct(&ef, l));
+    }
     let _ = writeln!(r, "\nThe fast tier sees only the combined frame: its δ includes the photograph's own edge softness (and the motion blur and noise on top), its λ the texture's own anisotropy; its noise measures every level from flat regions of the frame itself. How far to trust each in the field: README, \"Tiers and measured accuracy\".");
     r
 }
