@@ -55,6 +55,17 @@ fn dof_kernel_shape_round_trips_and_defaults_to_gaussian() {
     assert!(CameraModel::from_json(&v.to_string()).is_err());
 }
 
+/// Each case — the JSON pointer set to the value in `good` — is refused with an
+/// error naming the field.
+fn refused_naming_the_field(good: &serde_json::Value, cases: Vec<(&str, serde_json::Value, &str)>) {
+    for (ptr, value, field) in cases {
+        let mut v = good.clone();
+        *v.pointer_mut(ptr).unwrap_or_else(|| panic!("pointer {ptr}")) = value;
+        let err = CameraModel::from_json(&v.to_string()).expect_err(ptr);
+        assert!(err.to_string().contains(field), "{ptr}: {err}");
+    }
+}
+
 /// The blind fit's level sources round-trip; files without them (written before
 /// they existed, or by hand) read as none; a bad one is refused naming its field.
 #[test]
@@ -87,12 +98,7 @@ fn noise_level_sources_round_trip_and_are_validated() {
         ("/noise/level_sources/2/continued/from", serde_json::json!(3), "noise.level_sources[2].from"),
         ("/noise/level_sources/3/continued/from", serde_json::json!(2), "noise.level_sources[3].from"),
     ];
-    for (ptr, value, field) in cases {
-        let mut v = good.clone();
-        *v.pointer_mut(ptr).unwrap_or_else(|| panic!("pointer {ptr}")) = value;
-        let err = CameraModel::from_json(&v.to_string()).expect_err(ptr);
-        assert!(err.to_string().contains(field), "{ptr}: {err}");
-    }
+    refused_naming_the_field(&good, cases);
     let mut v = good.clone();
     v["noise"]["level_sources"].as_array_mut().expect("array").pop();
     let err = CameraModel::from_json(&v.to_string()).expect_err("3 sources");
@@ -114,12 +120,7 @@ fn validation_names_the_field() {
         ("/reference/frame_interval_s", serde_json::json!(0.0), "reference.frame_interval_s"),
         ("/noise/levels/2/slope/1", serde_json::json!(5.0), "noise.levels[2]"),
     ];
-    for (ptr, value, field) in cases {
-        let mut v = good.clone();
-        *v.pointer_mut(ptr).unwrap_or_else(|| panic!("pointer {ptr}")) = value;
-        let err = CameraModel::from_json(&v.to_string()).expect_err(ptr);
-        assert!(err.to_string().contains(field), "{ptr}: {err}");
-    }
+    refused_naming_the_field(&good, cases);
     // Three levels (the official code's layout) is not this schema.
     let mut v = good.clone();
     v["noise"]["levels"].as_array_mut().expect("array").pop();
