@@ -41,8 +41,6 @@ const MAX_LEVEL_STD_RATIO: f32 = 0.8;
 const NEIGHBOUR_STRUCTURE_OFFSET: usize = 1;
 /// The frame alone's (see `NEIGHBOUR_STRUCTURE_OFFSET`).
 const STRUCTURE_OFFSET: usize = 2;
-/// Least share of level 0's luma span a coarser level's bins span unremarked.
-const PARTIAL_LEVEL_SPAN: f32 = 0.5;
 /// Fewest flat samples a bin is measured on (a median of fewer scatters by > 25% at level 3).
 const BLIND_MIN_FLAT: usize = 12;
 /// The texture a natural scene leaves in its flattest samples, as a level-0 band std
@@ -496,18 +494,9 @@ pub fn fit_fast(
     let ym = 0.5 * (noise.luminance_range[0] + noise.luminance_range[1]);
     let std_mid = (0..3).map(|c| noise.levels[0].std(noise.form, c, ym)).sum::<f32>() / 3.0;
     if measured_levels.first() == Some(&0) && covs.len() == points.len() {
-        let measured: Vec<super::sources::MeasuredLevel> = measured_levels
-            .iter()
-            .zip(&points)
-            .zip(covs.iter().zip(&bin_rel_se))
-            .map(|((&level, points), (&covs, &bin_rel_se))| super::sources::MeasuredLevel {
-                level,
-                points,
-                covs,
-                bin_rel_se,
-            })
-            .collect();
-        noise.level_sources = super::sources::level_sources(&noise, &measured, floor(std_mid), neighbour.is_some());
+        let (bias, with_neighbour) = (floor(std_mid), neighbour.is_some());
+        noise.level_sources =
+            super::sources::level_sources(&noise, &measured_levels, &points, &covs, &bin_rel_se, bias, with_neighbour);
     }
     if noise.present && neighbour.is_none() {
         let bias = floor(std_mid) as f64;
@@ -533,21 +522,8 @@ pub fn fit_fast(
              they continue the finest measured level by white-noise band ratios"
         );
     }
-    // A coarser level on bins spanning little of level 0's lumas is their line
-    // extrapolated: say over which (BENCHMARKS.md "Correlated noise on video").
-    let [lo0, hi0] = noise.luminance_range;
-    if noise.present && hi0 > lo0 {
-        for (l, source) in noise.level_sources.iter().enumerate().skip(1) {
-            if let crate::model::LevelSource::Measured { luma: [a, b], bins, relative_stderr } = *source {
-                if b - a < PARTIAL_LEVEL_SPAN * (hi0 - lo0) {
-                    noise.diagnostics.reason += &format!(
-                        "; level {l} measured over luma {a:.2}–{b:.2} only ({bins} bins), its line extrapolated over \
-                         level 0's range (±{:.0}% over it)",
-                        100.0 * relative_stderr
-                    );
-                }
-            }
-        }
+    if noise.present {
+        noise.diagnostics.reason += &super::sources::partial_level_notes(&noise);
     }
     if let Some(b) = blocking {
         noise.diagnostics.reason += &format!(

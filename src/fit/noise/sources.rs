@@ -4,9 +4,8 @@
 use super::LevelPoints;
 use crate::model::{LevelSource, Noise, NOISE_LEVELS};
 
-/// Lumas across the model's range at which a level's error is evaluated (its
-/// largest is reported): the ends, where a line extrapolated from a few bins is
-/// least sure, and points between.
+/// Lumas across the model's range, ends included (where a line extrapolated from a
+/// few bins is least sure), at which a level's error is evaluated.
 const EVAL_POINTS: usize = 9;
 
 /// The std (0–1 pixel values, any band-pass level ≥ 1) that the difference against
@@ -26,17 +25,15 @@ const NEIGHBOUR_RESIDUE_STD: f32 = 0.0005;
 /// `blind::TEXTURE_FLOOR_STD`, twice it.
 const ALONE_RESIDUE_STD: f32 = 0.003;
 
-/// One measured level's fit inputs: its bins, the affine-variance covariance per
-/// channel (`fit_levels`), and the median relative standard error of its bins' stds.
-pub(super) struct MeasuredLevel<'a> {
-    pub level: usize,
-    pub points: &'a LevelPoints,
-    pub covs: [[[f64; 2]; 2]; 3],
-    pub bin_rel_se: f32,
-}
+/// Least share of level 0's luma span a coarser level's bins span unremarked.
+const PARTIAL_LEVEL_SPAN: f32 = 0.5;
 
 /// Every level's source for a blind fit whose levels `measured` (finest first,
-/// level 0 among them) were fitted and the rest continued from the coarsest of them.
+/// level 0 among them) were fitted — on `points`, with the affine-variance
+/// covariance per channel `covs` (`fit_levels`) and their bins' median relative
+/// standard error `bin_rel_se`, one each — and the rest continued from the coarsest
+/// of them.
+///
 /// A measured level's relative standard error is, at each luma of
 /// `noise.luminance_range`, in quadrature:
 /// - sampling: the delta method on its variance line's covariance (δstd = δvar /
@@ -61,25 +58,28 @@ pub(super) struct MeasuredLevel<'a> {
 /// level sources": how often the error exceeds the stated one, held-out frames too).
 pub(super) fn level_sources(
     noise: &Noise,
-    measured: &[MeasuredLevel],
+    measured: &[usize],
+    points: &[LevelPoints],
+    covs: &[[[[f64; 2]; 2]; 3]],
+    bin_rel_se: &[f32],
     level0_bias: f32,
     with_neighbour: bool,
 ) -> Vec<LevelSource> {
-    let Some(coarsest) = measured.last().map(|m| m.level) else { return vec![] };
+    let Some(&coarsest) = measured.last() else { return vec![] };
     let [lo, hi] = noise.luminance_range;
     let lumas: Vec<f32> = (0..EVAL_POINTS).map(|i| lo + (hi - lo) * i as f32 / (EVAL_POINTS - 1) as f32).collect();
     let form = noise.form;
     let level0 = &noise.levels[0];
     (0..NOISE_LEVELS)
         .map(|l| {
-            let Some(m) = measured.iter().find(|m| m.level == l) else {
+            let Some(i) = measured.iter().position(|&m| m == l) else {
                 return LevelSource::Continued { from: coarsest as u32 };
             };
-            let y = &m.points.y;
+            let y = &points[i].y;
             let span =
                 [y.iter().cloned().fold(f32::INFINITY, f32::min), y.iter().cloned().fold(f32::NEG_INFINITY, f32::max)];
             let mean_y = y.iter().sum::<f32>() / y.len().max(1) as f32;
-            let floor = m.bin_rel_se / (y.len().max(1) as f32).sqrt();
+            let floor = bin_rel_se[i] / (y.len().max(1) as f32).sqrt();
             let own = &noise.levels[l];
             let worst = lumas
                 .iter()
@@ -90,7 +90,7 @@ pub(super) fn level_sources(
                             if std <= 0.0 {
                                 return 1.0;
                             }
-                            let cov = m.covs[c];
+                            let cov = covs[i][c];
                             let yd = yl as f64;
                             let var_se = (cov[0][0] + 2.0 * yd * cov[0][1] + yd * yd * cov[1][1]).max(0.0).sqrt();
                             let sampling = (var_se / (2.0 * std * std)).max(floor as f64);
@@ -121,4 +121,25 @@ pub(super) fn level_sources(
             }
         })
         .collect()
+}
+
+/// The reason's note on each coarser level measured on bins spanning under
+/// `PARTIAL_LEVEL_SPAN` of level 0's lumas: its line is extrapolated over the rest
+/// (one frame of demosaic-like noise read level 1 on three dark bins, −9…−28%:
+/// BENCHMARKS.md "Correlated noise on video"). Empty when there is none.
+pub(super) fn partial_level_notes(noise: &Noise) -> String {
+    let [lo0, hi0] = noise.luminance_range;
+    let mut out = String::new();
+    for (l, source) in noise.level_sources.iter().enumerate().skip(1) {
+        if let LevelSource::Measured { luma: [a, b], bins, relative_stderr } = *source {
+            if hi0 > lo0 && b - a < PARTIAL_LEVEL_SPAN * (hi0 - lo0) {
+                out += &format!(
+                    "; level {l} measured over luma {a:.2}–{b:.2} only ({bins} bins), its line extrapolated over \
+                     level 0's range (±{:.0}% over it)",
+                    100.0 * relative_stderr
+                );
+            }
+        }
+    }
+    out
 }
