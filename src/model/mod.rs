@@ -167,10 +167,11 @@ pub struct NoiseBin {
 pub enum LevelSource {
     /// Fitted on the level's own flat samples: `bins` luma bins whose mean lumas span
     /// `luma`. `relative_stderr` is the map's standard error relative to its std,
-    /// mean over channels, the largest over `Noise::luminance_range`: its sampling
-    /// error, and beyond `luma` how far two continuations of its bins (its own line,
-    /// and level 0's luma shape scaled to them) part — a level read on a few dark
-    /// bins is only as sure as its line's far end.
+    /// mean over channels, root-mean-square over `Noise::luminance_range`: its
+    /// sampling error, a prior for what the frame's texture (or, against an aligned
+    /// neighbour, the scene's mismatch) adds, and beyond `luma` how far two
+    /// continuations of its bins (its own line, and level 0's luma shape scaled to
+    /// them) part — a level read on a few dark bins is only as sure as its line there.
     Measured { luma: [f32; 2], bins: u32, relative_stderr: f32 },
     /// Not identifiable from the frame (its flattest samples are texture, or too few
     /// flat luma bins): level `from`'s map continued by white noise's band ratios.
