@@ -108,8 +108,8 @@ mod tests {
         }
         let e = noise_relative_error(&m, &n).expect("both present");
         assert!((e - 0.1).abs() < 1e-4, "{e}");
-        // Per level, signed: +10% at the three scaled levels, −10% where the truth is
-        // the scaled one; f32 rounding only (1e-4).
+        // Per level, signed: +10% at the three scaled levels (0 at the unscaled one),
+        // 1/1.1 − 1 = −9.1% where the truth is the scaled one; f32 rounding only (1e-4).
         m.levels[3] = n.levels[3];
         let e = noise_level_errors(&m, &n).expect("both present");
         assert!(e[..3].iter().all(|v| (v - 0.1).abs() < 1e-4) && e[3].abs() < 1e-6, "{e:?}");
