@@ -10,29 +10,39 @@ use super::{CameraModel, DepthOfField, Noise};
 
 const LUMAS: [f32; 7] = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8];
 
+/// Level `l`'s signed σ_fit / σ_true − 1 over R/G/B and `LUMAS` (each clamped into
+/// its model's range), where the truth's std is positive.
+fn level_ratio_errors(fit: &Noise, truth: &Noise, l: usize) -> Vec<f32> {
+    let (lf, lt) = (&fit.levels[l], &truth.levels[l]);
+    (0..3)
+        .flat_map(|c| LUMAS.iter().map(move |&y| (c, y)))
+        .filter_map(|(c, y)| {
+            let yf = y.clamp(fit.luminance_range[0], fit.luminance_range[1]);
+            let yt = y.clamp(truth.luminance_range[0], truth.luminance_range[1]);
+            let (sf, st) = (lf.std(fit.form, c, yf), lt.std(truth.form, c, yt));
+            (st > 0.0).then(|| sf / st - 1.0)
+        })
+        .collect()
+}
+
+/// The median of `v` (the upper middle of an even count); None when empty.
+fn median_of(mut v: Vec<f32>) -> Option<f32> {
+    v.sort_by(f32::total_cmp);
+    v.get(v.len() / 2).copied()
+}
+
+/// Levels both models have, at most 4.
+fn shared_levels(fit: &Noise, truth: &Noise) -> usize {
+    fit.levels.len().min(truth.levels.len()).min(4)
+}
+
 /// Median relative error of the level stds; None if either side has no noise.
 pub fn noise_relative_error(fit: &Noise, truth: &Noise) -> Option<f32> {
     if !fit.present || !truth.present {
         return None;
     }
-    let mut errs = vec![];
-    for (lf, lt) in fit.levels.iter().zip(&truth.levels).take(4) {
-        for c in 0..3 {
-            for y in LUMAS {
-                let yf = y.clamp(fit.luminance_range[0], fit.luminance_range[1]);
-                let yt = y.clamp(truth.luminance_range[0], truth.luminance_range[1]);
-                let (sf, st) = (lf.std(fit.form, c, yf), lt.std(truth.form, c, yt));
-                if st > 0.0 {
-                    errs.push((sf / st - 1.0).abs());
-                }
-            }
-        }
-    }
-    if errs.is_empty() {
-        return None;
-    }
-    errs.sort_by(f32::total_cmp);
-    Some(errs[errs.len() / 2])
+    let errs = (0..shared_levels(fit, truth)).flat_map(|l| level_ratio_errors(fit, truth, l)).map(f32::abs);
+    median_of(errs.collect())
 }
 
 /// Per level 0–3, the median over R/G/B and luma 0.2…0.8 (clamped as above) of the
@@ -42,20 +52,7 @@ pub fn noise_level_errors(fit: &Noise, truth: &Noise) -> Option<Vec<f32>> {
     if !fit.present || !truth.present {
         return None;
     }
-    let per_level = fit.levels.iter().zip(&truth.levels).take(4).map(|(lf, lt)| {
-        let mut errs: Vec<f32> = (0..3)
-            .flat_map(|c| LUMAS.iter().map(move |&y| (c, y)))
-            .filter_map(|(c, y)| {
-                let yf = y.clamp(fit.luminance_range[0], fit.luminance_range[1]);
-                let yt = y.clamp(truth.luminance_range[0], truth.luminance_range[1]);
-                let (sf, st) = (lf.std(fit.form, c, yf), lt.std(truth.form, c, yt));
-                (st > 0.0).then(|| sf / st - 1.0)
-            })
-            .collect();
-        errs.sort_by(f32::total_cmp);
-        errs.get(errs.len() / 2).copied()
-    });
-    per_level.collect()
+    (0..shared_levels(fit, truth)).map(|l| median_of(level_ratio_errors(fit, truth, l))).collect()
 }
 
 /// The noise headline: level-0 std of the green channel at luma 0.5 (clamped into

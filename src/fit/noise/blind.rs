@@ -592,7 +592,7 @@ impl Band0<'_> {
 }
 
 /// The lowest and highest of the lumas `y` (`None` when empty).
-fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
+pub(super) fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
     let lo = y.iter().cloned().reduce(f32::min)?;
     let hi = y.iter().cloned().reduce(f32::max)?;
     Some([lo, hi])

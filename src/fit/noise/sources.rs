@@ -76,12 +76,13 @@ pub(super) fn level_sources(
                 return LevelSource::Continued { from: coarsest as u32 };
             };
             let y = &points[i].y;
-            let span =
-                [y.iter().cloned().fold(f32::INFINITY, f32::min), y.iter().cloned().fold(f32::NEG_INFINITY, f32::max)];
-            let mean_y = y.iter().sum::<f32>() / y.len().max(1) as f32;
-            let floor = bin_rel_se[i] / (y.len().max(1) as f32).sqrt();
+            let Some(span) = super::blind::luma_span(y) else {
+                return LevelSource::Continued { from: coarsest as u32 };
+            };
+            let mean_y = y.iter().sum::<f32>() / y.len() as f32;
+            let floor = bin_rel_se[i] / (y.len() as f32).sqrt();
             let own = &noise.levels[l];
-            let worst = lumas
+            let sum_sq = lumas
                 .iter()
                 .map(|&yl| {
                     (0..3)
@@ -113,11 +114,11 @@ pub(super) fn level_sources(
                         .sum::<f64>()
                 })
                 .sum::<f64>();
-            let worst = (worst / EVAL_POINTS as f64).sqrt();
+            let rms = (sum_sq / EVAL_POINTS as f64).sqrt();
             LevelSource::Measured {
                 luma: [span[0].clamp(0.0, 1.0), span[1].clamp(0.0, 1.0)],
                 bins: y.len() as u32,
-                relative_stderr: worst as f32,
+                relative_stderr: rms as f32,
             }
         })
         .collect()
