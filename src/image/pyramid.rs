@@ -17,54 +17,64 @@ pub fn reduce(p: &Plane) -> Plane {
 pub fn reduce_slice(data: &[f32], w: usize, h: usize) -> Plane {
     debug_assert_eq!(data.len(), w * h);
     let (w2, h2) = (w.div_ceil(2), h.div_ceil(2));
-    // Rows first: w2 columns at full height. The interior (every tap inside the row)
-    // runs without clamps — the same sums in the same order, 3–4× faster; only the
-    // outputs whose taps leave the row clamp.
-    // Grown a row at a time: each row's zero fill lands in cache just before the row
-    // is written (a zeroed plane up front was a 2.4 MB memset per channel at
-    // 1280×960, 4% of the blind noise fit by perf).
-    let mut tmp: Vec<f32> = Vec::with_capacity(w2 * h);
-    let interior = if w >= 5 { 1..(w - 3) / 2 + 1 } else { 0..0 }; // 2·x2 − 2 ≥ 0 and 2·x2 + 2 ≤ w − 1
-    for row in data.chunks_exact(w) {
-        let start = tmp.len();
-        tmp.resize(start + w2, 0.0);
-        let out = &mut tmp[start..];
-        let edge = |x2: usize| {
-            let cx = 2 * x2 as isize;
-            let mut acc = 0.0;
-            for (k, wk) in K5.iter().enumerate() {
-                acc += wk * row[(cx + k as isize - 2).clamp(0, w as isize - 1) as usize];
-            }
-            acc
-        };
-        // The outputs outside the interior: at most one at the left and two at the
-        // right (a scan of every output for them was ~30% of the reduce by perf).
-        for x2 in (0..interior.start).chain(interior.end.max(interior.start)..w2) {
-            out[x2] = edge(x2);
-        }
-        for (o, t) in out[interior.clone()].iter_mut().zip(row[2 * interior.start.max(1) - 2..].windows(5).step_by(2)) {
-            *o = K5[0] * t[0] + K5[1] * t[1] + K5[2] * t[2] + K5[3] * t[3] + K5[4] * t[4];
-        }
-    }
-    // Each output row starts as its first tap's product (not zeros plus it: the
-    // same sums, without a memset of the plane — 5% of the blind noise fit by perf).
+    // Rows first (w2 columns per source row), then columns — but streamed: an output
+    // row reads the horizontal pass of source rows 2·y2 − 2 … 2·y2 + 2 (clamped), and
+    // consecutive output rows share three of them, so five filtered rows held in a
+    // ring (slot = row mod 5: a window's distinct rows are ≤ 5 consecutive ones) stand
+    // in for a w2×h intermediate plane — 2.4 MB written and read again per channel
+    // at 1280×960 that no longer leave the cache. Each filtered row is computed once,
+    // the same sums in the same order as the plane held: the same values.
+    let mut ring = vec![0.0f32; 5 * w2];
+    let mut held = [usize::MAX; 5];
     let mut out = Vec::with_capacity(w2 * h2);
     for y2 in 0..h2 {
         let cy = 2 * y2 as isize;
-        let row = |k: usize| {
-            let yi = (cy + k as isize - 2).clamp(0, h as isize - 1) as usize;
-            &tmp[yi * w2..(yi + 1) * w2]
-        };
-        let start = out.len();
-        out.extend(row(0).iter().map(|sv| K5[0] * sv));
-        let o = &mut out[start..];
-        for (k, wk) in K5.iter().enumerate().skip(1) {
-            for (ov, sv) in o.iter_mut().zip(row(k)) {
-                *ov += wk * sv;
+        let rows: [usize; 5] = std::array::from_fn(|k| (cy + k as isize - 2).clamp(0, h as isize - 1) as usize);
+        for &r in &rows {
+            if held[r % 5] != r {
+                reduce_row(&data[r * w..(r + 1) * w], &mut ring[(r % 5) * w2..(r % 5 + 1) * w2]);
+                held[r % 5] = r;
             }
         }
+        let at = |k: usize| &ring[(rows[k] % 5) * w2..(rows[k] % 5 + 1) * w2];
+        let (r0, r1, r2, r3, r4) = (at(0), at(1), at(2), at(3), at(4));
+        // Each output starts as its first tap's product and adds the others in tap
+        // order (the plane form's five passes, fused: the same operations per value).
+        out.extend((0..w2).map(|x| {
+            let mut v = K5[0] * r0[x];
+            v += K5[1] * r1[x];
+            v += K5[2] * r2[x];
+            v += K5[3] * r3[x];
+            v += K5[4] * r4[x];
+            v
+        }));
     }
     Plane::from_vec(w2, h2, out)
+}
+
+/// The horizontal pass of `reduce` on one row (`out`: ceil(w/2) values). The
+/// interior (every tap inside the row) runs without clamps — the same sums in the
+/// same order, 3–4× faster; only the outputs whose taps leave the row clamp.
+fn reduce_row(row: &[f32], out: &mut [f32]) {
+    let w = row.len();
+    let w2 = out.len();
+    let interior = if w >= 5 { 1..(w - 3) / 2 + 1 } else { 0..0 }; // 2·x2 − 2 ≥ 0 and 2·x2 + 2 ≤ w − 1
+    let edge = |x2: usize| {
+        let cx = 2 * x2 as isize;
+        let mut acc = 0.0;
+        for (k, wk) in K5.iter().enumerate() {
+            acc += wk * row[(cx + k as isize - 2).clamp(0, w as isize - 1) as usize];
+        }
+        acc
+    };
+    // The outputs outside the interior: at most one at the left and two at the
+    // right (a scan of every output for them was ~30% of the reduce by perf).
+    for x2 in (0..interior.start).chain(interior.end.max(interior.start)..w2) {
+        out[x2] = edge(x2);
+    }
+    for (o, t) in out[interior.clone()].iter_mut().zip(row[2 * interior.start.max(1) - 2..].windows(5).step_by(2)) {
+        *o = K5[0] * t[0] + K5[1] * t[1] + K5[2] * t[2] + K5[3] * t[3] + K5[4] * t[4];
+    }
 }
 
 /// 1-D expand of `src` (length n) to length `m`: out[x] = 2 Σ_j K5[x − 2j + 2] src[j],
@@ -96,14 +106,9 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
     // same products summed in the same order as `expand_taps`).
     let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
     let m_hi = (w.saturating_sub(1)).min(width.saturating_sub(1) / 2); // exclusive
-                                                                       // Grown a row at a time (see `reduce_slice`).
-    let mut tmp: Vec<f32> = Vec::with_capacity(width * h);
-    for row in p.data.chunks_exact(w) {
-        let start = tmp.len();
-        tmp.resize(start + width, 0.0);
-        let out = &mut tmp[start..];
+    let expand_row = |row: &[f32], out: &mut [f32]| {
         // The outputs outside the written-out interior (x < 2 or x / 2 ≥ m_hi): at
-        // most two at each end, visited directly (as in `reduce_slice`).
+        // most two at each end, visited directly (as in `reduce_row`).
         for x in (0..2.min(width)).chain((2 * m_hi).max(2)..width) {
             out[x] = xtaps[x].iter().map(|&(j, wt)| wt * row[j]).sum();
         }
@@ -113,22 +118,48 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
                 pair[1] = o1 * t[1] + o1 * t[2];
             }
         }
-    }
-    // Rows start as their first tap's product (see `reduce_slice`).
+    };
+    // Rows first, streamed as in `reduce_slice`: an output row reads the horizontal
+    // pass of at most three consecutive source rows, held in a ring (slot = row
+    // mod 3) instead of a width×h plane; each computed once, so the same values.
+    let mut ring = vec![0.0f32; 3 * width];
+    let mut held = [usize::MAX; 3];
     let mut out = Vec::with_capacity(width * height);
     for y in 0..height {
-        let start = out.len();
-        let mut taps = expand_taps(y, h).into_iter().filter(|&(_, wt)| wt != 0.0);
-        let src = |j: usize| &tmp[j * width..(j + 1) * width];
-        match taps.next() {
-            Some((j, wt)) => out.extend(src(j).iter().map(|sv| wt * sv)),
-            None => out.resize(start + width, 0.0),
-        }
-        let o = &mut out[start..];
-        for (j, wt) in taps {
-            for (ov, sv) in o.iter_mut().zip(src(j)) {
-                *ov += wt * sv;
+        let taps = expand_taps(y, h);
+        let live = taps.iter().take_while(|t| t.1 != 0.0).count();
+        for &(j, _) in &taps[..live] {
+            if held[j % 3] != j {
+                expand_row(&p.data[j * w..(j + 1) * w], &mut ring[(j % 3) * width..(j % 3 + 1) * width]);
+                held[j % 3] = j;
             }
+        }
+        let src = |k: usize| (&ring[(taps[k].0 % 3) * width..(taps[k].0 % 3 + 1) * width], taps[k].1);
+        // Each output is its first tap's product plus the others in tap order (the
+        // plane form's passes, fused: the same operations per value).
+        match live {
+            3 => {
+                let ((s0, w0), (s1, w1), (s2, w2)) = (src(0), src(1), src(2));
+                out.extend((0..width).map(|x| {
+                    let mut v = w0 * s0[x];
+                    v += w1 * s1[x];
+                    v += w2 * s2[x];
+                    v
+                }));
+            }
+            2 => {
+                let ((s0, w0), (s1, w1)) = (src(0), src(1));
+                out.extend((0..width).map(|x| {
+                    let mut v = w0 * s0[x];
+                    v += w1 * s1[x];
+                    v
+                }));
+            }
+            1 => {
+                let (s0, w0) = src(0);
+                out.extend(s0.iter().map(|sv| w0 * sv));
+            }
+            _ => out.resize(out.len() + width, 0.0),
         }
     }
     Plane::from_vec(width, height, out)
