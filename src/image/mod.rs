@@ -106,8 +106,43 @@ impl Plane {
         };
         let (x1, y1) = (x0 + last as f32 * dx, y0 + last as f32 * dy);
         if self.bilinear_interior(x0, y0) && self.bilinear_interior(x1, y1) {
-            for (j, o) in out.iter_mut().enumerate() {
-                *o = self.sample_bilinear_inside(x0 + j as f32 * dx, y0 + j as f32 * dy);
+            if self.data.len() >= u32::MAX as usize {
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = self.sample_bilinear_inside(x0 + j as f32 * dx, y0 + j as f32 * dy);
+                }
+                return;
+            }
+            // `sample_bilinear_inside` per node, split into three loops per chunk of
+            // nodes: positions, weights and tap indices (lane-wise: truncation is the
+            // floor inside, u32 indices fit the plane), the four taps' reads (the only
+            // scalar part), and the two-way interpolation (lane-wise). The same
+            // operations per node in the same order, so the same values; one node per
+            // iteration did every step in scalar registers.
+            const CHUNK: usize = 32;
+            let w = self.width;
+            for (c, chunk) in out.chunks_mut(CHUNK).enumerate() {
+                let n = chunk.len();
+                let (mut fx, mut fy, mut at) = ([0.0f32; CHUNK], [0.0f32; CHUNK], [0u32; CHUNK]);
+                for k in 0..n {
+                    let j = (c * CHUNK + k) as f32;
+                    let (x, y) = (x0 + j * dx, y0 + j * dy);
+                    let (xi, yi) = (x as i32, y as i32);
+                    fx[k] = x - xi as f32;
+                    fy[k] = y - yi as f32;
+                    at[k] = yi as u32 * w as u32 + xi as u32;
+                }
+                let (mut a, mut b, mut cc, mut d) =
+                    ([0.0f32; CHUNK], [0.0f32; CHUNK], [0.0f32; CHUNK], [0.0f32; CHUNK]);
+                for k in 0..n {
+                    let i = at[k] as usize;
+                    let q = &self.data[i..i + w + 2];
+                    (a[k], b[k], cc[k], d[k]) = (q[0], q[1], q[w], q[w + 1]);
+                }
+                for k in 0..n {
+                    let top = a[k] + (b[k] - a[k]) * fx[k];
+                    let bottom = cc[k] + (d[k] - cc[k]) * fx[k];
+                    chunk[k] = top + (bottom - top) * fy[k];
+                }
             }
         } else {
             for (j, o) in out.iter_mut().enumerate() {
