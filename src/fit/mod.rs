@@ -73,6 +73,8 @@ pub struct FitInputs<'a> {
     pub defocus_deblurred: Option<&'a Rgb>,
     pub depth: Option<&'a Plane>,
     pub depth_units: DepthUnits,
+    /// Per-pixel flow in px/frame; a non-finite vector marks unknown motion
+    /// there (skipped by every fit, like invalid depth).
     pub flow: Option<&'a Flow>,
     /// Where the reference images hold (> 0.5) and where they do not (≤ 0.5 or
     /// non-finite). References made from video (`analysis::temporal`: other frames
@@ -291,18 +293,14 @@ fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
     if let Some(v) = inp.reference_valid {
         size("reference-valid", v.width, v.height)?;
     }
+    // Flow may likewise mark pixels whose motion is unknown (occlusions, a
+    // provider's holes) with NaN/Inf: every reader samples it at chosen pixels and
+    // skips those (and flow past the frame's diagonal), as it skips invalid depth.
+    // Not scanned here: the fits read ~1% of it, and the scan of its two 4.9 MB
+    // planes at 1280×960 was ~1.5 ms of the fast tier's ~38 (BENCHMARKS.md).
+    // `io::load_flow` still refuses a file holding one, by position.
     if let Some(f) = inp.flow {
         size("flow", f.width, f.height)?;
-        // The first non-finite value in pixel order (dx before dy within a pixel).
-        let first = [&f.dx, &f.dy]
-            .iter()
-            .enumerate()
-            .filter_map(|(channel, v)| crate::image::first_non_finite(v).map(|i| (i, channel)))
-            .min();
-        if let Some((i, channel)) = first {
-            let value = [&f.dx, &f.dy][channel][i];
-            return Err(FitError::NonFinite { input: "flow", x: i % w, y: i / w, channel, value });
-        }
     }
     if !(opts.dof_node_spacing_px > 0.0 && opts.dof_node_spacing_px <= 2.0) {
         return Err(FitError::Option {
