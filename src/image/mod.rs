@@ -106,7 +106,9 @@ impl Plane {
         };
         let (x1, y1) = (x0 + last as f32 * dx, y0 + last as f32 * dy);
         if self.bilinear_interior(x0, y0) && self.bilinear_interior(x1, y1) {
-            if self.data.len() >= u32::MAX as usize {
+            // (Planes of 2³¹ values or more, whose coordinates and indices would
+            // not fit the lanes' 32 bits, take one node at a time.)
+            if self.data.len() >= i32::MAX as usize {
                 for (j, o) in out.iter_mut().enumerate() {
                     *o = self.sample_bilinear_inside(x0 + j as f32 * dx, y0 + j as f32 * dy);
                 }
@@ -114,10 +116,10 @@ impl Plane {
             }
             // `sample_bilinear_inside` per node, split into three loops per chunk of
             // nodes: positions, weights and tap indices (lane-wise: truncation is the
-            // floor inside, u32 indices fit the plane), the four taps' reads (the only
-            // scalar part), and the two-way interpolation (lane-wise). The same
-            // operations per node in the same order, so the same values; one node per
-            // iteration did every step in scalar registers.
+            // floor inside, and 32-bit coordinates and indices fit the plane), the
+            // four taps' reads (the only scalar part), and the two-way interpolation
+            // (lane-wise). The same operations per node in the same order, so the
+            // same values; one node per iteration did every step in scalar registers.
             const CHUNK: usize = 32;
             let w = self.width;
             for (c, chunk) in out.chunks_mut(CHUNK).enumerate() {
