@@ -16,6 +16,8 @@
 //! - `PERFECT=1`: the frame's own scene with independent noise as the neighbour
 //!   (`SHIFT=u,v`: that noise resampled at a sub-pixel offset);
 //! - `REASON=1`: both fits' reasons;
+//! - `SCENE=procedural`: a procedural texture of hard-edged shapes on the
+//!   Motorcycle's depth instead of the photograph (a second scene);
 //! - `SOURCES=1`: both fits' level sources (measured ± stated error, or continued),
 //!   and how often a measured level's error lies within its stated error.
 #[path = "../tests/common/mod.rs"]
@@ -24,7 +26,7 @@ use blind_augment::analysis::temporal::align;
 use blind_augment::fit::{fit, Effects, FitInputs, FitOptions, Neighbour, Tier};
 use blind_augment::image::Plane;
 use blind_augment::model::{LevelSource, Noise, NOISE_LEVELS};
-use blind_augment::synth::sequence::{motorcycle, SequenceFrame, SequenceSpec};
+use blind_augment::synth::sequence::{motorcycle, procedural, SequenceFrame, SequenceSpec};
 use common::analysed;
 
 fn main() {
@@ -36,7 +38,13 @@ fn main() {
         .ok()
         .map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
         .unwrap_or_else(|| vec![0.45, 0.72, 0.72]);
-    let scene = motorcycle().expect("bundled scene");
+    let mut scene = motorcycle().expect("bundled scene");
+    // SCENE=procedural: the Motorcycle's depth under a procedural texture of
+    // hard-edged shapes (`synth::sequence::procedural`, as `calib_probe`'s): a
+    // second scene for the priors read on the Motorcycle (`SOURCES=1`, `RESIDUE=1`).
+    if std::env::var("SCENE").is_ok_and(|s| s == "procedural") {
+        scene = procedural(&scene, (w / 320).max(1), 11);
+    }
     let mut spec = SequenceSpec::motorcycle(&scene, w, w * 3 / 4, 150, None);
     let (a, b) = ([3e-5f32, 2e-5, 5e-5], [6e-4f32, 4e-4, 9e-4]);
     // LOWPASS=s: instead of synth's per-level grain (white within each band), the
