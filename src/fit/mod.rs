@@ -481,7 +481,14 @@ fn sanitize(model: &mut CameraModel) {
     }
 }
 
-fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<NoisePlotData>) {
+/// `luma`: the frame's luma where a blind exposure or defocus fit of the same call
+/// builds it anyway (`SharedLuma`), for the blind noise fit's blocking scan.
+fn fit_noise(
+    inp: &FitInputs,
+    opts: &FitOptions,
+    tier: Tier,
+    luma: Option<&SharedLuma>,
+) -> (Noise, Option<NoisePlotData>) {
     if !opts.effects.noise {
         return (Noise::absent(Diagnostics::not_fitted("not requested (--only)")), None);
     }
@@ -489,7 +496,21 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
         (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, inp.reference_valid, opts),
         _ => {
             let per_level = opts.noise_fast_samples_per_level;
-            let (with, data) = noise::fit_fast(inp.image, inp.neighbour.as_ref(), per_level);
+            // The shared luma first (where another blind fit reads it too): right
+            // after the frame's finiteness check, while its channels are cached.
+            // Built inside the blocking stage it cost more than it saved (same-moment
+            // A/B, BENCHMARKS.md); timed here, as the noise fit's `blur.shared_luma`
+            // (0 where another fit built it first).
+            let built = Instant::now();
+            if let Some(l) = luma {
+                l.full();
+            }
+            let shared_luma_s = luma.map(|_| built.elapsed().as_secs_f64());
+            let (mut with, data) = noise::fit_fast_with_luma(inp.image, inp.neighbour.as_ref(), per_level, luma);
+            if let Some(t) = shared_luma_s {
+                with.diagnostics.fit_time_s += t;
+                with.diagnostics.stages_s.insert("blur.shared_luma".into(), t);
+            }
             match (&with.blocking, inp.neighbour.is_some()) {
                 // A block codec's inter-frame prediction copies a frame's noise into
                 // the next (skipped blocks; predicted ones carry it under their
@@ -501,7 +522,7 @@ fn fit_noise(inp: &FitInputs, opts: &FitOptions, tier: Tier) -> (Noise, Option<N
                 // (a second fit, on such frames only: the grid is found inside the
                 // fit, and `fit_noise_fast` keeps the raw difference for probes).
                 (Some(_), true) => {
-                    let (mut alone, data) = noise::fit_fast(inp.image, None, per_level);
+                    let (mut alone, data) = noise::fit_fast_with_luma(inp.image, None, per_level, luma);
                     alone.diagnostics.fit_time_s += with.diagnostics.fit_time_s;
                     alone.diagnostics.reason += "; the aligned neighbour was not used: a block codec carries noise \
                         from frame to frame, so their difference reads it low";
@@ -611,8 +632,13 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
     let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
     let luma = SharedLuma::new(inp.image);
+    // The blind exposure and defocus fits read the frame's luma; where one of them
+    // runs, the blind noise fit reads it too (built once, by whichever comes first).
+    let blind_reads_luma = (fx.motion_blur && mb_tier == Tier::Fast && inp.flow.is_some())
+        || (fx.depth_of_field && dof_tier == Tier::Fast && inp.depth.is_some());
+    let noise_luma = blind_reads_luma.then_some(&luma);
     let ((noise, mb), dof) = rayon::join(
-        || rayon::join(|| fit_noise(inp, opts, noise_tier), || fit_motion_blur(inp, opts, mb_tier, &luma)),
+        || rayon::join(|| fit_noise(inp, opts, noise_tier, noise_luma), || fit_motion_blur(inp, opts, mb_tier, &luma)),
         || fit_depth_of_field(inp, opts, dof_tier, &luma),
     );
     (model.noise, plots.noise) = noise;

@@ -276,6 +276,19 @@ pub fn fit_fast(
     neighbour: Option<&crate::fit::Neighbour>,
     samples_per_level: usize,
 ) -> (Noise, NoisePlotData) {
+    fit_fast_with_luma(image, neighbour, samples_per_level, None)
+}
+
+/// `fit_fast` given the frame's shared luma where a blind exposure or defocus fit
+/// of the same `fit::fit` call builds it anyway: the blocking scan reads it (built
+/// here if this fit comes first, and timed in its stage) instead of making its rows
+/// from the three channels — the same values.
+pub(in crate::fit) fn fit_fast_with_luma(
+    image: &Rgb,
+    neighbour: Option<&crate::fit::Neighbour>,
+    samples_per_level: usize,
+    luma: Option<&crate::fit::SharedLuma>,
+) -> (Noise, NoisePlotData) {
     let started = Instant::now();
     let mut st = crate::fit::Stages::start();
     // With an aligned neighbour (another exposure of the same scene): the band-pass
@@ -351,7 +364,8 @@ pub fn fit_fast(
     };
     let bands: Vec<&[Plane]> = pyr.iter().map(|(_, b)| &b[..NOISE_LEVELS]).collect();
     st.lap("blur.luma");
-    let blocking = detect_blocking(image, &structure[0], 4);
+    let luma = luma.map(|l| l.full()).filter(|l| (l.width, l.height) == (fw, fh));
+    let blocking = detect_blocking(image, luma, &structure[0], 4);
     st.lap("search.blocking");
     // About `samples_per_level` grid points per level whatever the frame size
     // (`level_stride`).

@@ -10,7 +10,7 @@ use super::*;
 /// noise between them (`worker::Calibrator`).
 pub fn compression_blocking(img: &Rgb) -> Option<crate::model::Blocking> {
     let bands = crate::image::laplacian_pyramid(&img.luma(), 3).bands;
-    detect_blocking(img, &bands[2], 4)
+    detect_blocking(img, None, &bands[2], 4)
 }
 
 /// Periodic block-grid discontinuities of a block-transform codec (JPEG, MPEG-4,
@@ -19,8 +19,15 @@ pub fn compression_blocking(img: &Rgb) -> Option<crate::model::Blocking> {
 /// mask it). Blocking is reported when one phase exceeds the median of the other
 /// seven by `BLOCKING_RATIO` in both directions; unblocked frames measured here stay
 /// below 1.05 (the astronaut, the cat, synthetic noise), the vtest clip's DivX
-/// frames reach ~1.3 (tests/real_noise.rs).
-pub(super) fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Option<crate::model::Blocking> {
+/// frames reach ~1.3 (tests/real_noise.rs). `luma`: the frame's luma where the
+/// caller holds it (read instead of made row by row from the three channels; the
+/// same values, `Rgb::luma`'s sum).
+pub(super) fn detect_blocking(
+    img: &Rgb,
+    luma: Option<&Plane>,
+    structure: &Plane,
+    scale: usize,
+) -> Option<crate::model::Blocking> {
     const PERIOD: usize = 8;
     let (w, h) = (img.width, img.height);
     if w < 4 * PERIOD || h < 4 * PERIOD {
@@ -40,8 +47,10 @@ pub(super) fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Opt
             *o = lw[0] * img.channels[0][i + x] + lw[1] * img.channels[1][i + x] + lw[2] * img.channels[2][i + x];
         }
     };
-    let (mut cur, mut next, mut flat) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
-    luma_row(0, &mut cur);
+    let (mut cur_buf, mut next_buf, mut flat) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
+    if luma.is_none() {
+        luma_row(0, &mut cur_buf);
+    }
     let (mut col, mut ncol, mut row, mut nrow) =
         ([0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD], [0.0f64; PERIOD]);
     // Above 400k pixels every other band of `PERIOD` rows: each band still holds
@@ -55,11 +64,17 @@ pub(super) fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Opt
         if (y / PERIOD) % band_stride != 0 {
             continue;
         }
-        if have != y {
-            luma_row(y, &mut cur);
+        if luma.is_none() {
+            if have != y {
+                luma_row(y, &mut cur_buf);
+            }
+            luma_row(y + 1, &mut next_buf);
+            have = y + 1;
         }
-        luma_row(y + 1, &mut next);
-        have = y + 1;
+        let (cur, next): (&[f32], &[f32]) = match luma {
+            Some(l) => (&l.data[y * w..(y + 1) * w], &l.data[(y + 1) * w..(y + 2) * w]),
+            None => (&cur_buf, &next_buf),
+        };
         // The mask changes only with the structure row (every `scale` frame rows):
         // rebuilt then, one structure value spread over its `scale` columns.
         let sy = (y / scale).min(structure.height - 1);
@@ -97,7 +112,9 @@ pub(super) fn detect_blocking(img: &Rgb, structure: &Plane, scale: usize) -> Opt
         }
         row[y % PERIOD] += rs as f64;
         nrow[y % PERIOD] += rn as f64;
-        std::mem::swap(&mut cur, &mut next);
+        if luma.is_none() {
+            std::mem::swap(&mut cur_buf, &mut next_buf);
+        }
     }
     let peak = |sum: &[f64; PERIOD], n: &[f64; PERIOD]| -> Option<(usize, f32)> {
         let m: Vec<f64> = (0..PERIOD).map(|i| sum[i] / n[i].max(1.0)).collect();

@@ -41,6 +41,7 @@ mod blocking;
 pub use blocking::compression_blocking;
 mod clip;
 mod sources;
+pub(super) use blind::fit_fast_with_luma;
 pub use blind::{
     fit_fast, DEFAULT_FAST_SAMPLES_PER_LEVEL, FAST_ALONE, FAST_WITH_NEIGHBOUR, MIN_FAST_SAMPLES_PER_LEVEL,
 };
