@@ -3,6 +3,7 @@
 //! blocking and (with an aligned neighbour exposure) the difference bands it reads.
 //! The shared regression, windows and clip masks are in `noise/mod.rs`.
 
+use super::bands::{channel_pyramids, Band0};
 use super::blocking::detect_blocking;
 use super::*;
 
@@ -280,9 +281,9 @@ pub fn fit_fast(
 }
 
 /// `fit_fast` given the frame's shared luma where a blind exposure or defocus fit
-/// of the same `fit::fit` call builds it anyway: the blocking scan reads it (built
-/// here if this fit comes first, and timed in its stage) instead of making its rows
-/// from the three channels — the same values.
+/// of the same `fit::fit` call builds it anyway (`fit::fit_noise` builds it just
+/// before): the blocking scan reads it instead of making its rows from the three
+/// channels — the same values.
 pub(in crate::fit) fn fit_fast_with_luma(
     image: &Rgb,
     neighbour: Option<&crate::fit::Neighbour>,
@@ -547,62 +548,6 @@ pub(in crate::fit) fn fit_fast_with_luma(
     }
     noise.blocking = blocking;
     (noise, plot_data(&points))
-}
-
-/// One channel's Gaussian pyramid G[1..=levels] (`.0[l]` is G[l + 1]; G[0] is
-/// `data` itself, not copied) and its band-pass levels 0..levels, by the clamp-free
-/// interior `reduce`/`expand`. Without `band0` the level-0 band is left empty (0×0):
-/// the frame's own is read window by window (`Band0`), never as a plane.
-fn channel_pyramids(data: &[f32], w: usize, h: usize, levels: usize, band0: bool) -> (Vec<Plane>, Vec<Plane>) {
-    let g = gaussian_pyramid(&crate::image::reduce_slice(data, w, h), levels);
-    let bands = (0..levels)
-        .map(|l| {
-            if l == 0 && !band0 {
-                return Plane::from_vec(0, 0, vec![]);
-            }
-            let (fine, fw, fh) =
-                if l == 0 { (data, w, h) } else { (&g[l - 1].data[..], g[l - 1].width, g[l - 1].height) };
-            let mut b = crate::image::expand(&g[l], fw, fh);
-            for (v, gv) in b.data.iter_mut().zip(fine) {
-                *v = gv - *v;
-            }
-            b
-        })
-        .collect();
-    (g, bands)
-}
-
-/// The frame's level-0 band per channel, I_c − expand(G_c[1]), read only in the 9×9
-/// windows of the flat samples that measure it (~13% of a 1280×960 frame's pixels
-/// at the default grid): three full-resolution expands were 3.6 ms of the fit's
-/// 7.4 ms of pyramids. `expand_window9` computes what `expand` would have written,
-/// so every window holds the values the plane held.
-struct Band0<'a> {
-    fine: [&'a [f32]; 3],
-    g1: [&'a Plane; 3],
-    width: usize,
-    height: usize,
-}
-
-impl Band0<'_> {
-    /// The band of channel `c` in the 9×9 window at (x, y), coordinates clamped into
-    /// the frame (as `Plane::get_clamped` reads a border window).
-    fn window(&self, c: usize, x: usize, y: usize) -> [[f32; 9]; 9] {
-        let e = crate::image::expand_window9(self.g1[c], self.width, self.height, x, y);
-        let (w, h) = (self.width as isize, self.height as isize);
-        std::array::from_fn(|j| {
-            let yy = (y as isize + j as isize - 4).clamp(0, h - 1) as usize;
-            std::array::from_fn(|i| {
-                let xx = (x as isize + i as isize - 4).clamp(0, w - 1) as usize;
-                self.fine[c][yy * self.width + xx] - e[j][i]
-            })
-        })
-    }
-
-    /// Whether the window at (x, y) lies inside the frame (`SepWindow::interior`).
-    fn interior(&self, x: usize, y: usize) -> bool {
-        x >= 4 && y >= 4 && x + 4 < self.width && y + 4 < self.height
-    }
 }
 
 /// The lowest and highest of the lumas `y` (`None` when empty).

@@ -36,6 +36,7 @@ use crate::model::{Diagnostics, Noise, NoiseForm, NoiseIntensity, NoiseLevel, St
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod bands;
 mod blind;
 mod blocking;
 pub use blocking::compression_blocking;
