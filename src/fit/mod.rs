@@ -500,7 +500,8 @@ fn fit_noise(
             // after the frame's finiteness check, while its channels are cached.
             // Built inside the blocking stage it cost more than it saved (same-moment
             // A/B, BENCHMARKS.md); timed here, as the noise fit's `blur.shared_luma`
-            // (0 where another fit built it first).
+            // (~0 where another fit built it first; on two threads, any wait for a
+            // build under way).
             let built = Instant::now();
             if let Some(l) = luma {
                 l.full();
