@@ -90,6 +90,10 @@ fn main() {
                 d.status,
                 d.samples_used
             );
+            // `REASON=1`: each fit's reason too.
+            if std::env::var("REASON").is_ok_and(|v| v == "1") {
+                println!("    {}", d.reason);
+            }
         }
     }
 }

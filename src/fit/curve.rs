@@ -98,7 +98,9 @@ fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], it
     let mut beta = [0.0f64; P];
     let mut res = vec![0.0f64; n];
     let mut buf = Vec::with_capacity(n);
-    let mut scale = robust_scale_in(&res, &mut buf);
+    // The scale of the zero residuals is only ever returned by a fit of no steps
+    // (each step selects its own from its residuals).
+    let mut scale = if iters == 0 { robust_scale_in(&res, &mut buf) } else { 0.0 };
     for _ in 0..iters {
         let mut xtwx = nalgebra::SMatrix::<f64, P, P>::zeros();
         let mut xtwy = nalgebra::SVector::<f64, P>::zeros();

@@ -114,6 +114,29 @@ fn fft2(
     buf.copy_from_slice(tmp);
 }
 
+/// `p[i] ← ln(p[i] + 1e-10)` (the floor keeps an exact zero of power finite), eight
+/// lanes at a time by `wide` (Cephes' single-precision `logf`, within ~1 ulp of
+/// libm's); a remainder past a multiple of 8 takes libm's.
+fn ln_of(p: &mut [f32]) {
+    let mut chunks = p.chunks_exact_mut(8);
+    for v in &mut chunks {
+        let lanes: [f32; 8] = std::array::from_fn(|k| v[k]);
+        let l = (wide::f32x8::from(lanes) + wide::f32x8::splat(1e-10)).ln();
+        v.copy_from_slice(&l.to_array());
+    }
+    for v in chunks.into_remainder() {
+        *v = (*v + 1e-10).ln();
+    }
+}
+
+/// Row `r` of the `t`-wide array `s` plus `l`.
+fn add_row(s: &mut [f32], r: usize, l: &[f32]) {
+    let t = l.len();
+    for (o, v) in s[r * t..(r + 1) * t].iter_mut().zip(l) {
+        *o += v;
+    }
+}
+
 /// Radial bins of a `t`×`t` array in FFT layout (wrapped frequencies), bins of 1:
 /// each element's rounded radius, or `t / 2` (past the last bin). Computed once (per
 /// process for the tile sizes used) for the radial averages (`sqrt` + `roundf` per
@@ -268,6 +291,8 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     let mut sums = [vec![0.0f32; t * t], vec![0.0f32; t * t]];
     let mut buf = vec![Complex32::new(0.0, 0.0); t * t];
     let (mut tmp, mut scratch) = (buf.clone(), vec![]);
+    // One row of each unpacked tile's power.
+    let (mut p0, mut p1) = (vec![0.0f32; t], vec![0.0f32; t]);
     // Two real tiles per complex transform: tile 2m in the real part, tile 2m + 1
     // in the imaginary part, Z = A + iB. A real tile's spectrum is Hermitian, so
     // A(f) = (Z(f) + Z̄(−f))/2 and B(f) = (Z(f) − Z̄(−f))/(2i): half the forward
@@ -319,52 +344,76 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
             }
         }
         fft2(&mut buf, &mut tmp, &mut scratch, t, &fwd);
-        // P(−f) = P(f) for a real tile: one logarithm per symmetric pair (i, j),
-        // added to both (half the `ln` calls, which otherwise cost as much as the
-        // FFTs). The transform is transposed (`fft2`); the point reflection is
-        // the same in either layout.
+        // Each tile's log power, row by row: the power of every element into a row
+        // buffer, then its logarithms eight at a time (`add_ln`). The transform is
+        // transposed (`fft2`); the point reflection −f that unpacks the two tiles is
+        // the same in either layout: row r's mirror is row (t − r) mod t, reversed
+        // about column 0.
         let [s0, s1] = &mut sums;
-        for r in 0..t {
-            let mr = if r == 0 { 0 } else { t - r };
-            for c in 0..t {
-                let mc = if c == 0 { 0 } else { t - c };
-                let (i, j) = (r * t + c, mr * t + mc);
-                if j < i {
-                    continue;
+        // Rows 0 … t/2 computed; row r's logarithms also go to its mirror row
+        // (their powers are the same, bit for bit: conjugation and the sum's
+        // operands swapped are exact), so the rows past t/2 compute nothing.
+        let mirror_add = |s: &mut [f32], r: usize, l: &[f32]| {
+            let mr = (t - r) % t;
+            if mr != r {
+                let out = &mut s[mr * t..(mr + 1) * t];
+                out[0] += l[0];
+                for (o, v) in out[1..].iter_mut().zip(l[1..].iter().rev()) {
+                    *o += v;
                 }
-                let (zi, zj) = (buf[i], buf[j].conj());
-                let add = |s: &mut [f32], p: f32| {
-                    let l = (p + 1e-10).ln();
-                    s[i] += l;
-                    if j != i {
-                        s[j] += l;
+            }
+        };
+        for r in 0..=t / 2 {
+            let mr = (t - r) % t;
+            let (row, mirror) = (&buf[r * t..(r + 1) * t], &buf[mr * t..(mr + 1) * t]);
+            match second {
+                Some(_) => {
+                    for c in 0..t {
+                        let (zi, zj) = (row[c], mirror[(t - c) % t].conj());
+                        p0[c] = 0.25 * (zi + zj).norm_sqr();
+                        p1[c] = 0.25 * (zi - zj).norm_sqr();
                     }
-                };
-                if second.is_some() {
-                    add(s0, 0.25 * (zi + zj).norm_sqr());
-                    add(s1, 0.25 * (zi - zj).norm_sqr());
-                } else {
-                    add(s0, zi.norm_sqr());
+                    ln_of(&mut p0);
+                    ln_of(&mut p1);
+                    add_row(s0, r, &p0);
+                    add_row(s1, r, &p1);
+                    mirror_add(s0, r, &p0);
+                    mirror_add(s1, r, &p1);
+                }
+                None => {
+                    for (p, z) in p0.iter_mut().zip(row) {
+                        *p = z.norm_sqr();
+                    }
+                    ln_of(&mut p0);
+                    add_row(s0, r, &p0);
+                    mirror_add(s0, r, &p0);
                 }
             }
         }
     }
     let halves = [tiles.len().div_ceil(2), tiles.len() / 2];
     let bins = radial_bins(t);
-    // The radial cepstrum of a mean log spectrum.
-    let mut cepstrum = |log_spec: &[f32]| -> Vec<f32> {
-        for (b, &v) in buf.iter_mut().zip(log_spec) {
-            *b = Complex32::new(v, 0.0);
-        }
-        // The log spectrum is transposed (see `fft2`); the inverse transposes it back.
-        fft2(&mut buf, &mut tmp, &mut scratch, t, &inv);
-        let cep: Vec<f32> = buf.iter().map(|c| c.re / (t * t) as f32).collect();
-        radial(&cep, &bins, t)
-    };
-    let all: Vec<f32> = sums[0].iter().zip(&sums[1]).map(|(a, b)| (a + b) / tiles.len() as f32).collect();
-    let (dip, z) = ring(&cepstrum(&all))?;
+    // The radial cepstra of the two halves' summed log spectra, from one inverse
+    // transform: each sum is real and even (P(−f) = P(f)), so its cepstrum is real,
+    // and Z = S₀ + iS₁ transforms to C₀ + iC₁. The inverse transform and the radial
+    // average are linear, so the whole set's radial cepstrum, of (S₀ + S₁)/N, is
+    // (R₀ + R₁)/N and each half's R_k/N_k: one inverse 2-D FFT instead of three,
+    // the same cepstra to rounding.
+    for ((b, &a), &c) in buf.iter_mut().zip(&sums[0]).zip(&sums[1]) {
+        *b = Complex32::new(a, c);
+    }
+    // The log spectra are transposed (see `fft2`); the inverse transposes them back.
+    fft2(&mut buf, &mut tmp, &mut scratch, t, &inv);
+    let norm = 1.0 / (t * t) as f32;
+    let cep_re: Vec<f32> = buf.iter().map(|c| c.re * norm).collect();
+    let cep_im: Vec<f32> = buf.iter().map(|c| c.im * norm).collect();
+    let radial_cep = [radial(&cep_re, &bins, t), radial(&cep_im, &bins, t)];
+    let n_tiles = tiles.len() as f32;
+    let cep_all: Vec<f32> = radial_cep[0].iter().zip(&radial_cep[1]).map(|(a, b)| (a + b) / n_tiles).collect();
+    let (dip, z) = ring(&cep_all)?;
     // The radial spectrum for the notch: of all tiles only (the split halves' dips
     // are all their spread needs).
+    let all: Vec<f32> = sums[0].iter().zip(&sums[1]).map(|(a, b)| (a + b) / n_tiles).collect();
     let spec = radial(&all, &bins, t);
     let (radius_px, sigma_px) = sigma_of_dip(dip);
     let notch = notch_contrast(&spec, t, radius_px);
@@ -372,13 +421,13 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
     // Floor: the dip→radius mapping's own spread (2R − dip measured 0.1–1.3 px, so
     // ±0.3 px in R, ±0.15 px in σ), which no split of the tiles reveals.
     let stderr_px = STDERR_FLOOR_PX.max(if halves[1] > 0 {
-        let mean_of = |k: usize| -> Vec<f32> { sums[k].iter().map(|v| v / halves[k] as f32).collect() };
+        let mean_of = |k: usize| -> Vec<f32> { radial_cep[k].iter().map(|v| v / halves[k] as f32).collect() };
         // Each half's dip near the whole set's (`dip_near`): the spread of that ring,
         // not of whatever minimum a half's noisier cepstrum has elsewhere (chelsea
         // under a σ 2 px disc: the whole set's ring at 7.6 px, z 33; one half's at
         // 7.5, the other's global minimum at 38.0, z 4.9 — ± 3.8 px for a σ read
         // within 2.3%).
-        match (dip_near(&cepstrum(&mean_of(0)), dip), dip_near(&cepstrum(&mean_of(1)), dip)) {
+        match (dip_near(&mean_of(0), dip), dip_near(&mean_of(1), dip)) {
             (Some(d0), Some(d1)) => 0.5 * (sigma_of_dip(d0).1 - sigma_of_dip(d1).1).abs(),
             _ => f32::INFINITY,
         }
