@@ -214,19 +214,6 @@ fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32),
     true
 }
 
-/// `v.round()` for v in [−1, 1] (a direction cosine) without the libm call
-/// (`roundf` on baseline x86-64): ties away from zero, as `round`.
-#[inline]
-fn round_unit(v: f32) -> isize {
-    if v >= 0.5 {
-        1
-    } else if v <= -0.5 {
-        -1
-    } else {
-        0
-    }
-}
-
 /// Central-difference gradient of `p` at interior pixel (x, y), per px.
 #[inline]
 fn grad(p: &Plane, x: usize, y: usize) -> (f32, f32) {
@@ -413,10 +400,23 @@ pub fn fit_fast(
                     continue;
                 }
                 let (gx, gy) = grad(y, px, py);
-                let m = m_sq.sqrt();
                 // Non-maximum suppression along the (rounded) gradient direction, on
-                // squared magnitudes (the square root is monotone).
-                let (sx, sy) = (round_unit(gx / m), round_unit(gy / m));
+                // squared magnitudes (the square root is monotone). The direction is the
+                // unit gradient's components rounded (ties away from zero, as `round`):
+                // each compared against half the magnitude instead of divided by it
+                // (m > 0 past the threshold; ×0.5 is exact, so only a quotient within
+                // rounding of ±0.5 could round otherwise).
+                let half_m = 0.5 * m_sq.sqrt();
+                let unit = |g: f32| {
+                    if g >= half_m {
+                        1
+                    } else if g <= -half_m {
+                        -1
+                    } else {
+                        0
+                    }
+                };
+                let (sx, sy) = (unit(gx), unit(gy));
                 let (xi, yi) = (px as isize, py as isize);
                 let (ahead, behind) = (&m2[(1 + sy) as usize], &m2[(1 - sy) as usize]);
                 if m_sq < ahead[(xi + sx) as usize] || m_sq < behind[(xi - sx) as usize] {
