@@ -239,8 +239,14 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
 
 /// Levels 0..=`levels` of the Gaussian pyramid (level 0 is the input).
 pub fn gaussian_pyramid(p: &Plane, levels: usize) -> Vec<Plane> {
+    gaussian_pyramid_of(p.clone(), levels)
+}
+
+/// `gaussian_pyramid` of a plane the caller gives up: level 0 is `p` itself, not a
+/// copy (the blind noise fit's first reductions are 1.2 MB per channel at 1280×960).
+pub fn gaussian_pyramid_of(p: Plane, levels: usize) -> Vec<Plane> {
     let mut out = Vec::with_capacity(levels + 1);
-    out.push(p.clone());
+    out.push(p);
     for l in 0..levels {
         let next = reduce(&out[l]);
         out.push(next);

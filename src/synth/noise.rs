@@ -227,7 +227,8 @@ pub fn noise_field_rgb(content: &Rgb, noise: &Noise, seed: u64) -> Rgb {
     match noise.intensity {
         NoiseIntensity::Luma => noise_field(&content.luma(), noise, seed),
         NoiseIntensity::Channel => {
-            let pyr: Vec<Vec<Plane>> = (0..3).map(|c| gaussian_pyramid(&content.plane(c), NOISE_LEVELS)).collect();
+            let pyr: Vec<Vec<Plane>> =
+                (0..3).map(|c| crate::image::gaussian_pyramid_of(content.plane(c), NOISE_LEVELS)).collect();
             field_at(content.width, content.height, [&pyr[0], &pyr[1], &pyr[2]], noise, seed)
         }
     }

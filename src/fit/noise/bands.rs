@@ -14,7 +14,7 @@ pub(super) fn channel_pyramids(
     levels: usize,
     band0: bool,
 ) -> (Vec<Plane>, Vec<Plane>) {
-    let g = gaussian_pyramid(&crate::image::reduce_slice(data, w, h), levels);
+    let g = crate::image::gaussian_pyramid_of(crate::image::reduce_slice(data, w, h), levels);
     let bands = (0..levels)
         .map(|l| {
             if l == 0 && !band0 {

@@ -31,7 +31,7 @@
 //! 1e-4 (0.026/255: far below visibility).
 
 use super::percentile;
-use crate::image::{gaussian_pyramid, laplacian_pyramid, IntegralImage, Plane, Rgb, LUMA_WEIGHTS};
+use crate::image::{laplacian_pyramid, IntegralImage, Plane, Rgb, LUMA_WEIGHTS};
 use crate::model::{Diagnostics, Noise, NoiseForm, NoiseIntensity, NoiseLevel, Status, NOISE_LEVELS};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -647,7 +647,7 @@ pub fn fit_accurate(
     };
     let bands = pyramids(&residual);
     let own: Vec<Vec<Plane>> =
-        (0..3).into_par_iter().map(|c| gaussian_pyramid(&denoised.plane(c), NOISE_LEVELS)).collect();
+        (0..3).into_par_iter().map(|c| crate::image::gaussian_pyramid_of(denoised.plane(c), NOISE_LEVELS)).collect();
     let own: [Vec<Plane>; 3] = own.try_into().unwrap_or_else(|_| std::array::from_fn(|_| vec![]));
     // The pyramid is linear: luma's levels are the weighted sums of the channels'.
     let luma: Vec<Plane> = (0..own[0].len())
