@@ -43,16 +43,50 @@ pub fn blur_separable_rows(p: &Plane, kernel: &[f32], row: &dyn Fn(usize) -> boo
     }
     let tmp = blur_x_rows(p, kernel, &reach);
     let mut out = vec![0.0f32; w * h];
+    let mut src: Vec<&[f32]> = Vec::with_capacity(kernel.len());
     for y in (0..h).filter(|&y| wanted[y]) {
-        let o = &mut out[y * w..(y + 1) * w];
-        for (k, &wk) in kernel.iter().enumerate() {
+        src.clear();
+        src.extend((0..kernel.len()).map(|k| {
             let yi = (y as isize + k as isize - r as isize).clamp(0, h as isize - 1) as usize;
-            for (ov, &sv) in o.iter_mut().zip(&tmp[yi * w..(yi + 1) * w]) {
-                *ov += wk * sv;
-            }
-        }
+            &tmp[yi * w..(yi + 1) * w]
+        }));
+        taps_into(&mut out[y * w..(y + 1) * w], kernel, |k, x| &src[k][x..]);
     }
     Plane::from_vec(w, h, out)
+}
+
+/// `out[x] = Σ_k kernel[k] · tap(k, x0)[x − x0]`, summed from 0 in tap order (so
+/// the same value as adding one tap's product at a time into a zeroed row), over
+/// blocks of `LANES` outputs held in registers through all the taps: the row is
+/// written once instead of loaded and stored once per tap (`tap(k, x0)` is the
+/// k-th source row from column x0 on).
+#[inline]
+fn taps_into<'a>(out: &mut [f32], kernel: &[f32], tap: impl Fn(usize, usize) -> &'a [f32]) {
+    const LANES: usize = 16;
+    let mut x0 = 0;
+    let w = out.len();
+    while x0 + LANES <= w {
+        let mut acc = [0.0f32; LANES];
+        for (k, &wk) in kernel.iter().enumerate() {
+            let s = &tap(k, x0)[..LANES];
+            for (a, &v) in acc.iter_mut().zip(s) {
+                *a += wk * v;
+            }
+        }
+        out[x0..x0 + LANES].copy_from_slice(&acc);
+        x0 += LANES;
+    }
+    if x0 < w {
+        let n = w - x0;
+        let mut acc = [0.0f32; LANES];
+        for (k, &wk) in kernel.iter().enumerate() {
+            let s = &tap(k, x0)[..n];
+            for (a, &v) in acc.iter_mut().zip(s) {
+                *a += wk * v;
+            }
+        }
+        out[x0..].copy_from_slice(&acc[..n]);
+    }
 }
 
 /// The horizontal pass alone (clamp-to-edge): an anisotropic blur is this with one
@@ -61,8 +95,8 @@ pub fn blur_x(p: &Plane, kernel: &[f32]) -> Plane {
     Plane::from_vec(p.width, p.height, blur_x_rows(p, kernel, &vec![true; p.height]))
 }
 
-/// The horizontal pass on the rows where `rows[y]` (the others 0), one tap at a time
-/// over a padded row.
+/// The horizontal pass on the rows where `rows[y]` (the others 0), over a padded
+/// row (`taps_into`).
 fn blur_x_rows(p: &Plane, kernel: &[f32], rows: &[bool]) -> Vec<f32> {
     let (w, h) = (p.width, p.height);
     let r = kernel.len() / 2;
@@ -77,12 +111,8 @@ fn blur_x_rows(p: &Plane, kernel: &[f32], rows: &[bool]) -> Vec<f32> {
         padded[..r].fill(row[0]);
         padded[r..r + w].copy_from_slice(row);
         padded[r + w..].fill(row[w - 1]);
-        let out = &mut tmp[y * w..(y + 1) * w];
-        for (k, &wk) in kernel.iter().enumerate() {
-            for (o, &v) in out.iter_mut().zip(&padded[k..k + w]) {
-                *o += wk * v;
-            }
-        }
+        let padded = &padded[..];
+        taps_into(&mut tmp[y * w..(y + 1) * w], kernel, |k, x| &padded[k + x..]);
     }
     tmp
 }
