@@ -123,6 +123,28 @@ impl SepWindow {
         self.across(&c)
     }
 
+    /// `mean(p, x, y)` where `v` is p's window at (x, y) (clamped at the border, as
+    /// `local_mean` reads it): the same sums in the same order.
+    #[inline]
+    fn mean_window(&self, v: &[[f32; 9]; 9], interior: bool) -> f32 {
+        if !interior {
+            let mut acc = 0.0;
+            for (wr, vr) in self.w2.iter().zip(v) {
+                for (wt, &x) in wr.iter().zip(vr) {
+                    acc += wt * x;
+                }
+            }
+            return acc;
+        }
+        let mut c = [0.0f32; 9];
+        for (&wj, row) in self.w1.iter().zip(v) {
+            for (a, &x) in c.iter_mut().zip(row) {
+                *a += wj * x;
+            }
+        }
+        self.across(&c)
+    }
+
     /// `mean_sq` of a plane whose window at (x, y) is `v` (`interior`: the window
     /// lies inside the plane): the same sums in the same order, border windows by
     /// `local_mean_sq`'s serial 2-D sum.
@@ -168,6 +190,52 @@ impl SepWindow {
             }
         }
         self.across(&c)
+    }
+}
+
+/// The smoothed luma a level's samples are binned by: a plane of the level's size,
+/// or (level 0) `expand(coarse)` to `width × height` read only in the windows the
+/// samples take (`expand_window9`: the values `expand` writes), which spares a
+/// frame-size plane written and read back (4.9 MB at 1280×960).
+enum Binning<'a> {
+    Plane(&'a Plane),
+    Expanded { coarse: &'a Plane, width: usize, height: usize },
+}
+
+impl Binning<'_> {
+    fn size(&self) -> (usize, usize) {
+        match self {
+            Binning::Plane(p) => (p.width, p.height),
+            Binning::Expanded { width, height, .. } => (*width, *height),
+        }
+    }
+
+    /// `win.mean` of the plane at (x, y).
+    #[inline]
+    fn mean(&self, win: &SepWindow, x: usize, y: usize) -> f32 {
+        match self {
+            Binning::Plane(p) => win.mean(p, x, y),
+            Binning::Expanded { coarse, width, height } => {
+                let v = crate::image::expand_window9(coarse, *width, *height, x, y);
+                win.mean_window(&v, Self::interior(*width, *height, x, y))
+            }
+        }
+    }
+
+    /// `win.mean_sq` of the plane at (x, y).
+    #[inline]
+    fn mean_sq(&self, win: &SepWindow, x: usize, y: usize) -> f32 {
+        match self {
+            Binning::Plane(p) => win.mean_sq(p, x, y),
+            Binning::Expanded { coarse, width, height } => {
+                let v = crate::image::expand_window9(coarse, *width, *height, x, y);
+                win.mean_sq_window(&v, Self::interior(*width, *height, x, y))
+            }
+        }
+    }
+
+    fn interior(width: usize, height: usize, x: usize, y: usize) -> bool {
+        x >= 4 && y >= 4 && x + 4 < width && y + 4 < height
     }
 }
 
@@ -341,12 +409,16 @@ pub(in crate::fit) fn fit_fast_with_luma(
     // expand(G_Y[l+1]) from the coarse luma (reduce is linear): one plane expanded
     // instead of six level-l planes read (`blur.luma` 2.3 → 1.6 ms at 1280×960, the
     // same values to rounding).
+    // Level 0's is not expanded to the frame's size: its samples read it window by
+    // window from the half-resolution luma (`Binning::Expanded`).
     let smooth: Vec<Plane> = (0..NOISE_LEVELS)
         .into_par_iter()
         .map(|l| {
-            // Level l's size: the frame's, or G[l]'s (the level-0 band is not built).
-            let (lw, lh) = if l == 0 { (fw, fh) } else { (pyr[0].0[l - 1].width, pyr[0].0[l - 1].height) };
-            crate::image::expand(&luma_of(gauss(l + 1), &pyr[0].0[l]), lw, lh)
+            let coarse = luma_of(gauss(l + 1), &pyr[0].0[l]);
+            if l == 0 {
+                return coarse;
+            }
+            crate::image::expand(&coarse, pyr[0].0[l - 1].width, pyr[0].0[l - 1].height)
         })
         .collect();
     // The luma bands 2..NOISE_LEVELS + 2: level l's structure is band l + the offset
@@ -404,7 +476,12 @@ pub(in crate::fit) fn fit_fast_with_luma(
         let cross = cross.as_deref().zip(misaligned.as_ref());
         let offset = if cross.is_some() && l >= 1 { NEIGHBOUR_STRUCTURE_OFFSET } else { STRUCTURE_OFFSET };
         let structure = &structure[l + offset - STRUCTURE_OFFSET];
-        let all = measure_level(l, (&bands, &band0), cross, &smooth[l], (structure, offset), &clip, stride0);
+        let binning = if l == 0 {
+            Binning::Expanded { coarse: &smooth[0], width: fw, height: fh }
+        } else {
+            Binning::Plane(&smooth[l])
+        };
+        let all = measure_level(l, (&bands, &band0), cross, &binning, (structure, offset), &clip, stride0);
         // A level whose bins no line explains (fewer than 3 agree) is texture, not
         // noise: measured on the calibration video (Motorcycle, 320×240), keeping
         // every bin there let levels 1–3 read 5–20× the truth on 1 frame in 5.
@@ -590,7 +667,7 @@ fn measure_level(
     l: usize,
     (bands, band0): (&[&[Plane]], &Band0),
     cross: Option<(&[Vec<Plane>], &ClipMask)>,
-    luma: &Plane,
+    luma: &Binning,
     (structure, offset): (&Plane, usize),
     clip: &[ClipMask; 3],
     stride0: f32,
@@ -608,7 +685,7 @@ fn measure_level(
     // Footprint of the measured band in level-0 pixels (as in `collect_samples`); clipping
     // under the structure band only makes a sample look textured, it biases nothing.
     let radius = 5 * scale + 8;
-    let (w, h) = (luma.width, luma.height);
+    let (w, h) = luma.size();
     // (x, y, B(Y), structure, unclipped-channel bits). B(Y²) is read only for the
     // flat samples that report it (`BinMeasure::y2`, ~20% of them): its window sums
     // for every grid point were ~0.4 ms of the fit at 1280×960.
@@ -621,7 +698,7 @@ fn measure_level(
                 continue;
             }
             let s = energy.get((x >> offset).min(energy.width - 1), (y >> offset).min(energy.height - 1));
-            pts.push((x, y, win.mean(luma, x, y), s, ok));
+            pts.push((x, y, luma.mean(&win, x, y), s, ok));
         }
     }
     let m2m = white_noise_median_to_mean(l);
@@ -702,7 +779,7 @@ fn measure_level(
         }
         out.push(BinMeasure {
             y: flat.iter().map(|p| p.2).sum::<f32>() / n,
-            y2: flat.iter().map(|p| win.mean_sq(luma, p.0, p.1)).sum::<f32>() / n,
+            y2: flat.iter().map(|p| luma.mean_sq(&win, p.0, p.1)).sum::<f32>() / n,
             var,
             n: flat.len(),
             rel_se,
