@@ -472,12 +472,15 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
     f.resize(start + m + 1, 0.0);
     p.sample_line(x0, y0, dx, dy, &mut f[start..]);
     let nodes = &f[start..];
-    c.reserve(m + 1);
-    c.push(0.0);
+    // The running trapezoid sums written into the grown vector (pushed one at a
+    // time, the sum and the length lived on the stack between pushes: a store and
+    // a reload on every step of the chain; the same sums).
+    let cs = c.len();
+    c.resize(cs + m + 1, 0.0);
     let mut cum = 0.0f32;
-    for k in nodes.windows(2) {
+    for (o, k) in c[cs + 1..].iter_mut().zip(nodes.windows(2)) {
         cum += half_step * (k[0] + k[1]);
-        c.push(cum);
+        *o = cum;
     }
     cum
 }
