@@ -1,5 +1,6 @@
-//! The blind noise fit's per-channel pyramids, and the frame's level-0 band read
-//! window by window where its flat samples measure it (never built as a plane).
+//! The blind noise fit's per-channel pyramids, the frame's level-0 band and binning
+//! luma read window by window where its samples measure them (never built as
+//! planes), and its separable window sums.
 
 use super::*;
 
@@ -73,5 +74,186 @@ impl Band0<'_> {
     /// Whether the window at (x, y) lies inside the frame (`SepWindow::interior`).
     pub(super) fn interior(&self, x: usize, y: usize) -> bool {
         x >= 4 && y >= 4 && x + 4 < self.width && y + 4 < self.height
+    }
+}
+
+/// The blind tier's window sums in separable form: per window column, a weighted
+/// sum down its 9 rows (9 independent accumulators, which the compiler keeps in
+/// vector lanes), then the columns' weighted sum — Σ_i w_i Σ_j w_j f(v_ji), the
+/// window of `window(l)` (its outer product) up to float rounding. Why: the 2-D
+/// serial sums are 81 dependent additions per sample, bound by the adder's latency
+/// (by perf ~60% of the blind noise fit's sample search at 1280×960). The accurate
+/// tier keeps the serial sums: on a flat frame its regression relies on their exact
+/// cancellation (tests/extremes.rs::flat_textureless_frame; a reordered sum there
+/// lost the noise, see BENCHMARKS.md). Border samples take the clamped 2-D sums.
+pub(super) struct SepWindow {
+    w1: [f32; 9],
+    w2: [[f32; 9]; 9],
+}
+
+impl SepWindow {
+    pub(super) fn new(level: usize) -> Self {
+        Self { w1: window_1d(level), w2: window(level) }
+    }
+
+    #[inline]
+    pub(super) fn interior(p: &Plane, x: usize, y: usize) -> bool {
+        x >= 4 && y >= 4 && x + 4 < p.width && y + 4 < p.height
+    }
+
+    /// Σ_i w_i c_i: the column sums' weighted sum, as a pairwise tree (four
+    /// dependent additions instead of nine in a chain).
+    #[inline]
+    pub(super) fn across(&self, c: &[f32; 9]) -> f32 {
+        let p: [f32; 9] = std::array::from_fn(|i| c[i] * self.w1[i]);
+        ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7])) + p[8]
+    }
+
+    /// Window mean of `p` at (x, y) (every grid point's binning luma; the mean of
+    /// squares, `mean_sq`, only for the flat samples that report it).
+    #[inline]
+    pub(super) fn mean(&self, p: &Plane, x: usize, y: usize) -> f32 {
+        if !Self::interior(p, x, y) {
+            return local_mean(p, x, y, &self.w2);
+        }
+        let mut c = [0.0f32; 9];
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (a, &v) in c.iter_mut().zip(&p.data[start..start + 9]) {
+                *a += wj * v;
+            }
+        }
+        self.across(&c)
+    }
+
+    /// Window mean of the squares of `p` at (x, y).
+    #[inline]
+    pub(super) fn mean_sq(&self, p: &Plane, x: usize, y: usize) -> f32 {
+        if !Self::interior(p, x, y) {
+            return local_mean_sq(p, x, y, &self.w2);
+        }
+        let mut c = [0.0f32; 9];
+        for (j, &wj) in self.w1.iter().enumerate() {
+            let start = (y + j - 4) * p.width + x - 4;
+            for (a, &v) in c.iter_mut().zip(&p.data[start..start + 9]) {
+                *a += wj * (v * v);
+            }
+        }
+        self.across(&c)
+    }
+
+    /// `mean(p, x, y)` where `v` is p's window at (x, y) (clamped at the border, as
+    /// `local_mean` reads it): the same sums in the same order.
+    #[inline]
+    pub(super) fn mean_window(&self, v: &[[f32; 9]; 9], interior: bool) -> f32 {
+        if !interior {
+            let mut acc = 0.0;
+            for (wr, vr) in self.w2.iter().zip(v) {
+                for (wt, &x) in wr.iter().zip(vr) {
+                    acc += wt * x;
+                }
+            }
+            return acc;
+        }
+        let mut c = [0.0f32; 9];
+        for (&wj, row) in self.w1.iter().zip(v) {
+            for (a, &x) in c.iter_mut().zip(row) {
+                *a += wj * x;
+            }
+        }
+        self.across(&c)
+    }
+
+    /// `mean_sq` of a plane whose window at (x, y) is `v` (`interior`: the window
+    /// lies inside the plane): the same sums in the same order, border windows by
+    /// `local_mean_sq`'s serial 2-D sum.
+    #[inline]
+    pub(super) fn mean_sq_window(&self, v: &[[f32; 9]; 9], interior: bool) -> f32 {
+        if !interior {
+            let mut acc = 0.0;
+            for (wr, vr) in self.w2.iter().zip(v) {
+                for (wt, &x) in wr.iter().zip(vr) {
+                    acc += wt * (x * x);
+                }
+            }
+            return acc;
+        }
+        let mut c = [0.0f32; 9];
+        for (&wj, row) in self.w1.iter().zip(v) {
+            for (a, &x) in c.iter_mut().zip(row) {
+                *a += wj * (x * x);
+            }
+        }
+        self.across(&c)
+    }
+
+    /// `mean_prod(p, q, x, y)` where `v` is p's window at (x, y) (see
+    /// `mean_sq_window`; border windows by `local_mean_prod`'s serial sum).
+    #[inline]
+    pub(super) fn mean_prod_window(&self, v: &[[f32; 9]; 9], interior: bool, q: &Plane, x: usize, y: usize) -> f32 {
+        if !interior {
+            let mut acc = 0.0;
+            for (j, (wr, vr)) in self.w2.iter().zip(v).enumerate() {
+                let yy = y as isize + j as isize - 4;
+                for (i, (wt, &a)) in wr.iter().zip(vr).enumerate() {
+                    acc += wt * a * q.get_clamped(x as isize + i as isize - 4, yy);
+                }
+            }
+            return acc;
+        }
+        let mut c = [0.0f32; 9];
+        for (j, (&wj, row)) in self.w1.iter().zip(v).enumerate() {
+            let start = (y + j - 4) * q.width + x - 4;
+            for ((a, &u), &b) in c.iter_mut().zip(row).zip(&q.data[start..start + 9]) {
+                *a += wj * (u * b);
+            }
+        }
+        self.across(&c)
+    }
+}
+
+/// The smoothed luma a level's samples are binned by: a plane of the level's size,
+/// or (level 0) `expand(coarse)` to `width × height` read only in the windows the
+/// samples take (`expand_window9`: the values `expand` writes), which spares a
+/// frame-size plane written and read back (4.9 MB at 1280×960).
+pub(super) enum Binning<'a> {
+    Plane(&'a Plane),
+    Expanded { coarse: &'a Plane, width: usize, height: usize },
+}
+
+impl Binning<'_> {
+    pub(super) fn size(&self) -> (usize, usize) {
+        match self {
+            Binning::Plane(p) => (p.width, p.height),
+            Binning::Expanded { width, height, .. } => (*width, *height),
+        }
+    }
+
+    /// `win.mean` of the plane at (x, y).
+    #[inline]
+    pub(super) fn mean(&self, win: &SepWindow, x: usize, y: usize) -> f32 {
+        match self {
+            Binning::Plane(p) => win.mean(p, x, y),
+            Binning::Expanded { coarse, width, height } => {
+                let v = crate::image::expand_window9(coarse, *width, *height, x, y);
+                win.mean_window(&v, Self::interior(*width, *height, x, y))
+            }
+        }
+    }
+
+    /// `win.mean_sq` of the plane at (x, y).
+    #[inline]
+    pub(super) fn mean_sq(&self, win: &SepWindow, x: usize, y: usize) -> f32 {
+        match self {
+            Binning::Plane(p) => win.mean_sq(p, x, y),
+            Binning::Expanded { coarse, width, height } => {
+                let v = crate::image::expand_window9(coarse, *width, *height, x, y);
+                win.mean_sq_window(&v, Self::interior(*width, *height, x, y))
+            }
+        }
+    }
+
+    pub(super) fn interior(width: usize, height: usize, x: usize, y: usize) -> bool {
+        x >= 4 && y >= 4 && x + 4 < width && y + 4 < height
     }
 }
