@@ -146,22 +146,7 @@ impl SepWindow {
     /// `local_mean` reads it): the same sums in the same order.
     #[inline]
     pub(super) fn mean_window(&self, v: &[[f32; 9]; 9], interior: bool) -> f32 {
-        if !interior {
-            let mut acc = 0.0;
-            for (wr, vr) in self.w2.iter().zip(v) {
-                for (wt, &x) in wr.iter().zip(vr) {
-                    acc += wt * x;
-                }
-            }
-            return acc;
-        }
-        let mut c = [0.0f32; 9];
-        for (&wj, row) in self.w1.iter().zip(v) {
-            for (a, &x) in c.iter_mut().zip(row) {
-                *a += wj * x;
-            }
-        }
-        self.across(&c)
+        self.window_sum_of(v, interior, |x| x)
     }
 
     /// `mean_sq` of a plane whose window at (x, y) is `v` (`interior`: the window
@@ -169,11 +154,18 @@ impl SepWindow {
     /// `local_mean_sq`'s serial 2-D sum.
     #[inline]
     pub(super) fn mean_sq_window(&self, v: &[[f32; 9]; 9], interior: bool) -> f32 {
+        self.window_sum_of(v, interior, |x| x * x)
+    }
+
+    /// The window's weighted sum of f(value) for `mean_window` / `mean_sq_window`:
+    /// separable inside (as `mean`), the serial 2-D sum of `window_sum` at borders.
+    #[inline]
+    fn window_sum_of(&self, v: &[[f32; 9]; 9], interior: bool, f: impl Fn(f32) -> f32) -> f32 {
         if !interior {
             let mut acc = 0.0;
             for (wr, vr) in self.w2.iter().zip(v) {
                 for (wt, &x) in wr.iter().zip(vr) {
-                    acc += wt * (x * x);
+                    acc += wt * f(x);
                 }
             }
             return acc;
@@ -181,7 +173,7 @@ impl SepWindow {
         let mut c = [0.0f32; 9];
         for (&wj, row) in self.w1.iter().zip(v) {
             for (a, &x) in c.iter_mut().zip(row) {
-                *a += wj * (x * x);
+                *a += wj * f(x);
             }
         }
         self.across(&c)
