@@ -113,30 +113,27 @@ impl SepWindow {
     /// squares, `mean_sq`, only for the flat samples that report it).
     #[inline]
     pub(super) fn mean(&self, p: &Plane, x: usize, y: usize) -> f32 {
-        if !Self::interior(p, x, y) {
-            return local_mean(p, x, y, &self.w2);
-        }
-        let mut c = [0.0f32; 9];
-        for (j, &wj) in self.w1.iter().enumerate() {
-            let start = (y + j - 4) * p.width + x - 4;
-            for (a, &v) in c.iter_mut().zip(&p.data[start..start + 9]) {
-                *a += wj * v;
-            }
-        }
-        self.across(&c)
+        self.plane_sum_of(p, x, y, |v| v)
     }
 
     /// Window mean of the squares of `p` at (x, y).
     #[inline]
     pub(super) fn mean_sq(&self, p: &Plane, x: usize, y: usize) -> f32 {
+        self.plane_sum_of(p, x, y, |v| v * v)
+    }
+
+    /// The window's weighted sum of f(value) on a plane for `mean` / `mean_sq`:
+    /// separable inside, the clamped serial 2-D sum (`window_sum`) at borders.
+    #[inline]
+    fn plane_sum_of(&self, p: &Plane, x: usize, y: usize, f: impl Fn(f32) -> f32) -> f32 {
         if !Self::interior(p, x, y) {
-            return local_mean_sq(p, x, y, &self.w2);
+            return window_sum(p, x, y, &self.w2, f);
         }
         let mut c = [0.0f32; 9];
         for (j, &wj) in self.w1.iter().enumerate() {
             let start = (y + j - 4) * p.width + x - 4;
             for (a, &v) in c.iter_mut().zip(&p.data[start..start + 9]) {
-                *a += wj * (v * v);
+                *a += wj * f(v);
             }
         }
         self.across(&c)
