@@ -15,6 +15,14 @@ pub fn reduce(p: &Plane) -> Plane {
 /// copying it into a `Plane` first: at 1280×960 a fresh 5 MB buffer costs more in
 /// page faults than the reduce itself).
 pub fn reduce_slice(data: &[f32], w: usize, h: usize) -> Plane {
+    reduce_slice_visiting(data, w, h, |_| {})
+}
+
+/// `reduce_slice`, calling `visit(y)` for every source row y once, in increasing
+/// order (0 … h − 1), right after the reduce has read it: a caller that needs one
+/// more pass over the same values (the blind noise fit's tile extremes) makes it
+/// while the rows are in cache instead of reading the frame again.
+pub fn reduce_slice_visiting(data: &[f32], w: usize, h: usize, mut visit: impl FnMut(usize)) -> Plane {
     debug_assert_eq!(data.len(), w * h);
     let (w2, h2) = (w.div_ceil(2), h.div_ceil(2));
     // Rows first (w2 columns per source row), then columns — but streamed: an output
@@ -32,7 +40,11 @@ pub fn reduce_slice(data: &[f32], w: usize, h: usize) -> Plane {
         let rows: [usize; 5] = std::array::from_fn(|k| (cy + k as isize - 2).clamp(0, h as isize - 1) as usize);
         for &r in &rows {
             if held[r % 5] != r {
+                // Rows are first needed in increasing order (window y2 holds rows
+                // 2·y2 − 2 … 2·y2 + 2, clamped, and the next one adds the two after them)
+                // and every row is in some window: `visit` sees each row once, in order.
                 reduce_row(&data[r * w..(r + 1) * w], &mut ring[(r % 5) * w2..(r % 5 + 1) * w2]);
+                visit(r);
                 held[r % 5] = r;
             }
         }
@@ -357,6 +369,20 @@ mod tests {
             for (x, y) in a.data.iter().zip(&b.data) {
                 assert!((x - y).abs() <= 3e-7, "expand {w}×{h}: {x} vs {y}");
             }
+        }
+    }
+
+    /// `reduce_slice_visiting` visits every source row once, in increasing order,
+    /// and reduces as `reduce_slice` does (bit for bit): every height 1–13 and two
+    /// larger ones (the ring's clamped first and last windows, odd and even).
+    #[test]
+    fn reduce_visits_every_row_once_in_order() {
+        for (w, h) in (1..14usize).map(|h| (5, h)).chain([(37, 29), (64, 48)]) {
+            let data: Vec<f32> = (0..w * h).map(|i| ((i * 7919 % 101) as f32 / 101.0).cos()).collect();
+            let mut seen = vec![];
+            let p = reduce_slice_visiting(&data, w, h, |y| seen.push(y));
+            assert_eq!(seen, (0..h).collect::<Vec<_>>(), "{w}×{h}");
+            assert!(p.data.iter().zip(&reduce_slice(&data, w, h).data).all(|(a, b)| a.to_bits() == b.to_bits()));
         }
     }
 

@@ -14,8 +14,9 @@ pub(super) fn channel_pyramids(
     h: usize,
     levels: usize,
     band0: bool,
+    visit: impl FnMut(usize),
 ) -> (Vec<Plane>, Vec<Plane>) {
-    let g = crate::image::gaussian_pyramid_of(crate::image::reduce_slice(data, w, h), levels);
+    let g = crate::image::gaussian_pyramid_of(crate::image::reduce_slice_visiting(data, w, h, visit), levels);
     let bands = (0..levels)
         .map(|l| {
             if l == 0 && !band0 {

@@ -23,6 +23,9 @@ pub const MIN_FAST_SAMPLES_PER_LEVEL: usize = BLIND_BINS * BLIND_MIN_PER_BIN;
 /// The blind tier's finest level-0 grid: only 20% of its samples are kept (the
 /// flattest), so it samples denser than the accurate tier.
 const BLIND_STRIDE_PX: usize = 4;
+/// Side of the clip scan's tiles (`TileExtremes`): a sample's footprint is widened
+/// to whole tiles, so small tiles lose few samples near a clipped pixel.
+const CLIP_TILE_PX: usize = 8;
 const BLIND_BINS: usize = 16;
 const BLIND_MIN_PER_BIN: usize = 24;
 /// Largest std ratio of a level to the next finer one that still reads as noise.
@@ -197,7 +200,7 @@ pub(in crate::fit) fn fit_fast_with_luma(
                     .zip(&n.valid.data)
                     .map(|((a, b), v)| if *v > 0.5 { a - b } else { 0.0 })
                     .collect();
-                channel_pyramids(&d, fw, fh, NOISE_LEVELS, true).1
+                channel_pyramids(&d, fw, fh, NOISE_LEVELS, true, |_| {}).1
             })
             .collect()
     });
@@ -209,8 +212,17 @@ pub(in crate::fit) fn fit_fast_with_luma(
     // level l (I's own luma carries the noise) is expand(G_Y[l+1]) = Σ w_c (G_c[l] −
     // band_c[l]); level l's structure measure is the luma band l+2 = Σ w_c band_c[l+2].
     // Level 0 is the frame's own channel (borrowed, not copied).
-    let pyr: Vec<(Vec<Plane>, Vec<Plane>)> =
-        (0..3).into_par_iter().map(|c| channel_pyramids(&image.channels[c], fw, fh, NOISE_LEVELS + 2, false)).collect();
+    // The first reduce hands the clip scan (`TileExtremes`) each band of rows it
+    // has just read, while they are in cache.
+    let (pyr, tiles): (Vec<(Vec<Plane>, Vec<Plane>)>, Vec<TileExtremes>) = (0..3)
+        .into_par_iter()
+        .map(|c| {
+            let ch = &image.channels[c][..];
+            let mut t = TileExtremes::new(fw, fh, CLIP_TILE_PX);
+            let p = channel_pyramids(ch, fw, fh, NOISE_LEVELS + 2, false, |y| t.rows_read(ch, y));
+            (p, t)
+        })
+        .unzip();
     st.lap("blur.pyramids");
     let luma_of = |c: [&[f32]; 3], like: &Plane| -> Plane {
         let w = crate::image::LUMA_WEIGHTS;
@@ -262,9 +274,9 @@ pub(in crate::fit) fn fit_fast_with_luma(
     // About `samples_per_level` grid points per level whatever the frame size
     // (`level_stride`).
     let stride0 = ((image.len() as f64 / samples_per_level.max(1) as f64).sqrt() as f32).max(BLIND_STRIDE_PX as f32);
-    let (limits, clip) = blind_clip_masks(image, 8);
+    let (limits, clip) = blind_clip_masks_from(image, &tiles);
     // Where the neighbour's alignment fails: one table for all channels.
-    let misaligned = neighbour.map(|n| clip_mask_of(image, &limits, 8, Some(n.valid), &[]));
+    let misaligned = neighbour.map(|n| clip_mask_of(image, &limits, CLIP_TILE_PX, Some(n.valid), &[]));
     st.lap("search.clipping");
     // Levels with fewer than 3 usable bins (tiny or fully textured frames) cannot be
     // fitted on their own: they follow the finest measured level by white-noise band

@@ -172,40 +172,94 @@ impl ClipMask {
     }
 }
 
+/// Every `block`×`block` tile's lowest and highest value of one channel, band by
+/// band of `block` rows (`rows_read`: fed as the rows arrive, e.g. by the blind
+/// noise fit's first reduce, `reduce_slice_visiting`, while they are in cache).
+#[cfg_attr(test, derive(Debug, PartialEq))]
+pub(super) struct TileExtremes {
+    block: usize,
+    width: usize,
+    height: usize,
+    bands_done: usize,
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+}
+
+impl TileExtremes {
+    pub(super) fn new(width: usize, height: usize, block: usize) -> Self {
+        let tiles = width.div_ceil(block) * height.div_ceil(block);
+        Self { block, width, height, bands_done: 0, lo: Vec::with_capacity(tiles), hi: Vec::with_capacity(tiles) }
+    }
+
+    /// Rows 0 … `y` of channel `ch` are now available: every band they complete is
+    /// read. Called with increasing `y` (any steps); a band is read once.
+    #[inline]
+    pub(super) fn rows_read(&mut self, ch: &[f32], y: usize) {
+        let (block, w) = (self.block, self.width);
+        while self.bands_done * block < self.height && ((self.bands_done + 1) * block).min(self.height) <= y + 1 {
+            let by = self.bands_done;
+            let band = &ch[by * block * w..((by + 1) * block).min(self.height) * w];
+            // A tile's eight-column strip down the band: the extremes held in eight
+            // lanes through its rows (one load, one min and one max per value, which
+            // vectorise) and folded across the lanes once per tile.
+            // `if` selects, not `f32::min`: the input is finite (checked by `fit`).
+            for x0 in (0..w).step_by(block) {
+                let x1 = (x0 + block).min(w);
+                let (lo, hi) = if x1 - x0 == 8 {
+                    let first: [f32; 8] = std::array::from_fn(|k| band[x0 + k]);
+                    let (mut lo, mut hi) = (first, first);
+                    for row in band.chunks_exact(w).skip(1) {
+                        let v = &row[x0..x0 + 8];
+                        for k in 0..8 {
+                            lo[k] = if v[k] < lo[k] { v[k] } else { lo[k] };
+                            hi[k] = if v[k] > hi[k] { v[k] } else { hi[k] };
+                        }
+                    }
+                    (lo.into_iter().fold(f32::INFINITY, f32::min), hi.into_iter().fold(f32::NEG_INFINITY, f32::max))
+                } else {
+                    band.chunks_exact(w)
+                        .flat_map(|row| &row[x0..x1])
+                        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, u), &v| {
+                            (if v < l { v } else { l }, if v > u { v } else { u })
+                        })
+                };
+                self.lo.push(lo);
+                self.hi.push(hi);
+            }
+            self.bands_done += 1;
+        }
+    }
+}
+
 /// The blind tier's clip limits and per-channel tile masks (`clip_limits` and
 /// `clip_mask_of(img, limits, block, None, &[c])` for each channel c, exactly) from
 /// one pass per channel: every tile's lowest and highest value. A channel's extreme
 /// is the extreme of its tiles' extremes; only tiles that reach it are read again
 /// to count it (a frame clipped over a fifth of its area reads a fifth again), and
-/// a tile holds a clipped pixel exactly when its extreme is the clip level. Two
-/// full passes per channel (the lane-wise counts, then the tile fold) read 3.6 ms
-/// at 1280×960 (`search.clipping`, `BENCH=1 stage_times`); this reads each value
-/// once, as element-wise minima and maxima down each band of `block` rows.
+/// a tile holds a clipped pixel exactly when its extreme is the clip level.
+#[cfg(test)]
 pub(super) fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMask; 3]) {
+    let tiles: Vec<TileExtremes> = (0..3)
+        .map(|c| {
+            let mut t = TileExtremes::new(img.width, img.height, block);
+            t.rows_read(&img.channels[c], img.height.saturating_sub(1));
+            t
+        })
+        .collect();
+    blind_clip_masks_from(img, &tiles)
+}
+
+/// `blind_clip_masks` from the channels' tile extremes (`TileExtremes`, one per
+/// channel in order, every row read).
+pub(super) fn blind_clip_masks_from(img: &Rgb, tiles: &[TileExtremes]) -> (ClipLimits, [ClipMask; 3]) {
     let (w, h) = (img.width, img.height);
     let min_count = clip_min_count(img.len());
-    let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
     let per_channel = |c: usize| -> ((Option<f32>, Option<f32>), ClipMask) {
-        let ch = &img.channels[c];
-        let (mut tlo, mut thi) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
-        let (mut col_lo, mut col_hi) = (vec![0.0f32; w], vec![0.0f32; w]);
-        for by in 0..bh {
-            let rows = by * block..((by + 1) * block).min(h);
-            col_lo.copy_from_slice(&ch[rows.start * w..(rows.start + 1) * w]);
-            col_hi.copy_from_slice(&col_lo);
-            for y in rows.skip(1) {
-                // `if` selects, not `f32::min`: the input is finite (checked by `fit`),
-                // and the plain comparison vectorises to one min/max per lane.
-                for ((l, u), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(&ch[y * w..(y + 1) * w]) {
-                    *l = if v < *l { v } else { *l };
-                    *u = if v > *u { v } else { *u };
-                }
-            }
-            for (a, b) in col_lo.chunks(block).zip(col_hi.chunks(block)) {
-                tlo.push(a.iter().copied().fold(f32::INFINITY, |m, v| if v < m { v } else { m }));
-                thi.push(b.iter().copied().fold(f32::NEG_INFINITY, |m, v| if v > m { v } else { m }));
-            }
-        }
+        let (ch, t) = (&img.channels[c], &tiles[c]);
+        debug_assert_eq!(t.lo.len(), w.div_ceil(t.block) * h.div_ceil(t.block), "every band read");
+        let block = t.block;
+        let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
+        let (tlo, thi) = (&t.lo, &t.hi);
         // How often `e` occurs in the tiles whose extreme it is, up to `min_count`
         // (so at most `min_count` tiles are read again, whatever the frame).
         let count = |tiles: &[f32], e: f32| {
@@ -223,12 +277,12 @@ pub(super) fn blind_clip_masks(img: &Rgb, block: usize) -> (ClipLimits, [ClipMas
         };
         let lo = tlo.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = thi.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let (lo, hi) = clip_levels((lo, count(&tlo, lo)), (hi, count(&thi, hi)), min_count);
+        let (lo, hi) = clip_levels((lo, count(tlo, lo)), (hi, count(thi, hi)), min_count);
         if lo.is_none() && hi.is_none() {
             return ((lo, hi), ClipMask { clipped: None, invalid: None });
         }
         let blocks: Vec<f32> =
-            tlo.iter().zip(&thi).map(|(&a, &b)| (Some(a) == lo || Some(b) == hi) as u8 as f32).collect();
+            tlo.iter().zip(thi).map(|(&a, &b)| (Some(a) == lo || Some(b) == hi) as u8 as f32).collect();
         let ii = IntegralImage::new(&Plane::from_vec(bw, bh, blocks));
         ((lo, hi), ClipMask { clipped: Some((ii, block_shift(block))), invalid: None })
     };

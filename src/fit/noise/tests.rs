@@ -71,6 +71,14 @@ mod valid_mask_tests {
             let limits = clip_limits(&img);
             let (fused, masks) = blind_clip_masks(&img, 8);
             assert_eq!(fused, limits, "{w}×{h}");
+            // Fed band by band as the blind fit's first reduce reads the rows: the
+            // same tiles as read at once.
+            for c in 0..3 {
+                let (mut visited, mut at_once) = (TileExtremes::new(w, h, 8), TileExtremes::new(w, h, 8));
+                crate::image::reduce_slice_visiting(&img.channels[c], w, h, |y| visited.rows_read(&img.channels[c], y));
+                at_once.rows_read(&img.channels[c], h - 1);
+                assert_eq!(visited, at_once, "{w}×{h} channel {c}");
+            }
             for c in 0..3 {
                 let reference = clip_mask_of(&img, &limits, 8, None, &[c]);
                 for y in (0..h).step_by(3) {
