@@ -214,7 +214,8 @@ pub(in crate::fit) fn fit_fast_with_luma(
     // Level 0 is the frame's own channel (borrowed, not copied).
     // The first reduce hands the clip scan (`TileExtremes`) each band of rows it
     // has just read, while they are in cache.
-    let (pyr, tiles): (Vec<(Vec<Plane>, Vec<Plane>)>, Vec<TileExtremes>) = (0..3)
+    type Pyramids = (Vec<Plane>, Vec<Plane>);
+    let (pyr, tiles): (Vec<Pyramids>, Vec<TileExtremes>) = (0..3)
         .into_par_iter()
         .map(|c| {
             let ch = &image.channels[c][..];
