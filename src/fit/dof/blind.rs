@@ -202,6 +202,18 @@ const INTERFERENCE_REACH_PX: f32 = 7.0;
 /// opposite sign: a neighbouring edge).
 const INTERFERENCE_MAX_FRACTION: f32 = 0.2;
 
+/// An edge candidate of the scan (`fit_fast`) on its scanned row: column, rounded
+/// gradient direction, tangent-summed frame gradient, its mean magnitude, and the
+/// frame-to-re-blurred gradient ratio once read.
+#[derive(Clone, Copy)]
+struct Edge {
+    px: usize,
+    s: (isize, isize),
+    g: (f32, f32),
+    m: f32,
+    r: f32,
+}
+
 /// Fewest edges a reduced-effort scan (`FitOptions::fast_effort` < 1: a share of
 /// the rows) must find before its samples are used alone (see `fit_fast`): below
 /// it the other rows are read too, which makes the full scan. Full-effort scans
@@ -403,6 +415,12 @@ pub fn fit_fast(
         let min_sq = EDGE_MIN_GRAD * EDGE_MIN_GRAD;
         // A row's scanned positions over the threshold (at most every position).
         let mut above = vec![0usize; w / step + 1];
+        // Those of them that are gradient maxima with a valid depth, with their
+        // rounded gradient direction.
+        let mut maxima = vec![(0usize, 0isize, 0isize); w / step + 1];
+        // Those whose tangent-averaged gradients pass the thresholds (compacted in
+        // place: the frame's, then the re-blurred frame's with its ratio).
+        let mut edges = vec![Edge { px: 0, s: (0, 0), g: (0.0, 0.0), m: 0.0, r: 0.0 }; w / step + 1];
         // The frame row each of `m2`'s buffers holds: rows py − 1 … py + 1 overlap the
         // previous scanned row's (one row at step 2, two at step 1), and a row held is
         // moved into place instead of computed again.
@@ -428,40 +446,39 @@ pub fn fit_fast(
                 above[n_above] = px;
                 n_above += (m2[1][px] >= min_sq) as usize;
             }
+            // Non-maximum suppression along the (rounded) gradient direction, on
+            // squared magnitudes (the square root is monotone), and the depth's
+            // validity, for every position over the threshold — again gathered without
+            // a branch (~39% survive on the bench frame: a branch per test mispredicted
+            // for a good share of the scan's time). The direction is the unit
+            // gradient's components rounded (ties away from zero, as `round`): each
+            // compared against half the magnitude instead of divided by it (m > 0 past
+            // the threshold; ×0.5 is exact, so only a quotient within rounding of ±0.5
+            // could round otherwise). Survivors keep their raster order.
+            let mut n_max = 0;
             for &px in &above[..n_above] {
                 let m_sq = m2[1][px];
-                let z = depth.get(px, py);
-                if !valid_depth(z, units) {
-                    continue;
-                }
                 let (gx, gy) = grad(y, px, py);
-                // Non-maximum suppression along the (rounded) gradient direction, on
-                // squared magnitudes (the square root is monotone). The direction is the
-                // unit gradient's components rounded (ties away from zero, as `round`):
-                // each compared against half the magnitude instead of divided by it
-                // (m > 0 past the threshold; ×0.5 is exact, so only a quotient within
-                // rounding of ±0.5 could round otherwise).
                 let half_m = 0.5 * m_sq.sqrt();
-                let unit = |g: f32| {
-                    if g >= half_m {
-                        1
-                    } else if g <= -half_m {
-                        -1
-                    } else {
-                        0
-                    }
-                };
+                let unit = |g: f32| (g >= half_m) as isize - (g <= -half_m) as isize;
                 let (sx, sy) = (unit(gx), unit(gy));
-                let (xi, yi) = (px as isize, py as isize);
+                let xi = px as isize;
                 let (ahead, behind) = (&m2[(1 + sy) as usize], &m2[(1 - sy) as usize]);
-                if m_sq < ahead[(xi + sx) as usize] || m_sq < behind[(xi - sx) as usize] {
-                    continue;
-                }
-                // The gradients averaged along the edge (its rounded tangent, ±
-                // `EDGE_TANGENT_TAPS` px; see the constant), and the edge threshold
-                // applied again to the average.
+                // (Every value is finite: `>=` is the scalar test's `!(<)`.)
+                let is_max = (m_sq >= ahead[(xi + sx) as usize]) & (m_sq >= behind[(xi - sx) as usize]);
+                maxima[n_max] = (px, sx, sy);
+                n_max += (is_max & valid_depth(depth.get(px, py), units)) as usize;
+            }
+            // The gradients averaged along the edge (its rounded tangent, ±
+            // `EDGE_TANGENT_TAPS` px; see the constant), and the edge threshold applied
+            // again to the average — the survivors gathered without a branch again
+            // (~66% pass), as are those of the re-blurred frame's threshold next.
+            let k = EDGE_TANGENT_TAPS;
+            let taps = (2 * k + 1) as f32;
+            let mut n_edges = 0;
+            for &(px, sx, sy) in &maxima[..n_max] {
+                let (xi, yi) = (px as isize, py as isize);
                 let (tx, ty) = (-sy, sx);
-                let k = EDGE_TANGENT_TAPS;
                 let inside = |t: isize| {
                     let (x, yy) = (xi + t * tx, yi + t * ty);
                     x >= 2 && yy >= 2 && x < w as isize - 2 && yy < h as isize - 2
@@ -469,36 +486,39 @@ pub fn fit_fast(
                 if !inside(-k) || !inside(k) {
                     continue;
                 }
-                // The frame's mean first: the re-blurred one (bilinear, 16 reads per
-                // tap) only for edges that pass the frame's threshold.
-                let (mut g, mut gr) = ((0.0f32, 0.0f32), (0.0f32, 0.0f32));
+                let mut g = (0.0f32, 0.0f32);
                 for t in -k..=k {
                     let (a, b) = grad(y, (xi + t * tx) as usize, (yi + t * ty) as usize);
                     g = (g.0 + a, g.1 + b);
                 }
-                let taps = (2 * k + 1) as f32;
                 let m = (g.0 * g.0 + g.1 * g.1).sqrt() / taps;
-                if m < EDGE_MIN_GRAD {
-                    continue;
-                }
+                edges[n_edges] = Edge { px, s: (sx, sy), g, m, r: 0.0 };
+                n_edges += (m >= EDGE_MIN_GRAD) as usize;
+            }
+            // The re-blurred frame's mean (bilinear, 16 reads per tap) only for edges
+            // that passed the frame's threshold.
+            let mut n_ratio = 0;
+            for i in 0..n_edges {
+                let e = edges[i];
+                let (xi, yi, (tx, ty)) = (e.px as isize, py as isize, (-e.s.1, e.s.0));
+                let mut gr = (0.0f32, 0.0f32);
                 for t in -k..=k {
                     let (c, d) = re.grad((xi + t * tx) as usize, (yi + t * ty) as usize);
                     gr = (gr.0 + c, gr.1 + d);
                 }
                 let mr = (gr.0 * gr.0 + gr.1 * gr.1).sqrt() / taps;
-                if mr < EDGE_MIN_REBLUR_GRAD {
-                    continue;
-                }
-                let r = m / mr;
-                if r <= 1.0 {
-                    continue;
-                }
+                let r = e.m / mr;
+                edges[n_ratio] = Edge { r, ..e };
+                // (m > 0 and mr finite: r is never NaN, so `>` is `!(<=)`.)
+                n_ratio += ((mr >= EDGE_MIN_REBLUR_GRAD) & (r > 1.0)) as usize;
+            }
+            for &Edge { px, s, g, m, r } in &edges[..n_ratio] {
                 let normal = (g.0 / (m * taps), g.1 / (m * taps));
-                if !isolated(y, (xi, yi), (sx, sy), normal, m) {
+                if !isolated(y, (px as isize, py as isize), s, normal, m) {
                     continue;
                 }
                 sig.push(ZS_SIGMA0 / (r * r - 1.0).sqrt());
-                zs.push(z);
+                zs.push(depth.get(px, py));
                 at.push((py, px));
             }
         }
