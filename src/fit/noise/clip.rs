@@ -199,18 +199,20 @@ impl TileExtremes {
         while self.bands_done * block < self.height && ((self.bands_done + 1) * block).min(self.height) <= y + 1 {
             let by = self.bands_done;
             let band = &ch[by * block * w..((by + 1) * block).min(self.height) * w];
-            // A tile's eight-column strip down the band: the extremes held in eight
-            // lanes through its rows (one load, one min and one max per value, which
-            // vectorise) and folded across the lanes once per tile.
+            // A whole tile of the fit's width (`LANES` columns) down the band: its
+            // extremes held in that many lanes through its rows (one load, one min and
+            // one max per value, which vectorise) and folded across the lanes once
+            // per tile; other widths and a partial last tile value by value.
             // `if` selects, not `f32::min`: the input is finite (checked by `fit`).
+            const LANES: usize = 8;
             for x0 in (0..w).step_by(block) {
                 let x1 = (x0 + block).min(w);
-                let (lo, hi) = if x1 - x0 == 8 {
-                    let first: [f32; 8] = std::array::from_fn(|k| band[x0 + k]);
+                let (lo, hi) = if x1 - x0 == LANES {
+                    let first: [f32; LANES] = std::array::from_fn(|k| band[x0 + k]);
                     let (mut lo, mut hi) = (first, first);
                     for row in band.chunks_exact(w).skip(1) {
-                        let v = &row[x0..x0 + 8];
-                        for k in 0..8 {
+                        let v = &row[x0..x0 + LANES];
+                        for k in 0..LANES {
                             lo[k] = if v[k] < lo[k] { v[k] } else { lo[k] };
                             hi[k] = if v[k] > hi[k] { v[k] } else { hi[k] };
                         }
