@@ -177,6 +177,15 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
     Plane::from_vec(width, height, out)
 }
 
+/// Whether `expand_window9`'s window at output coordinate `v` (of `out` outputs from
+/// `n` source samples) lies in the interior along that axis: every output inside and
+/// every tap inside the source (v − 4 ≥ 2 so that the even taps' m − 1 ≥ 0; v + 4's
+/// m + 1 ≤ n − 1) — where its taps take their closed form.
+#[inline]
+pub fn expand_window9_interior(v: usize, out: usize, n: usize) -> bool {
+    v >= 6 && v + 4 < out && (v + 4) / 2 + 1 < n
+}
+
 /// The values `expand(p, width, height)` holds in the 9×9 window centred on (x, y),
 /// each coordinate clamped into the `width × height` output (row-major: `[row][col]`)
 /// — the same products summed in the same order, so the same values (but for the
@@ -184,13 +193,11 @@ pub fn expand(p: &Plane, width: usize, height: usize) -> Plane {
 /// noise fit reads the level-0 band only at its flat samples' windows (~13% of a
 /// 1280×960 frame), where three full-resolution expands cost 3.6 ms.
 pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize) -> [[f32; 9]; 9] {
-    // Interior: every output coordinate in the window inside the output and every
-    // tap inside the source (x − 4 ≥ 2 so that the even taps' m − 1 ≥ 0; x + 4's
-    // m + 1 ≤ n − 1): the taps in closed form — even 2m: (m−1, m, m+1) weighted
-    // (⅛, ¾, ⅛); odd 2m+1: (m, m+1) weighted (½, ½) — without the tap search
-    // (3× faster per window). The same products in the same order as below.
-    let inside = |v: usize, out: usize, n: usize| v >= 6 && v + 4 < out && (v + 4) / 2 + 1 < n;
-    if inside(x, width, p.width) && inside(y, height, p.height) {
+    // Interior (`expand_window9_interior`): the taps in closed form — even 2m:
+    // (m−1, m, m+1) weighted (⅛, ¾, ⅛); odd 2m+1: (m, m+1) weighted (½, ½) — without
+    // the tap search (3× faster per window). The same products in the same order as
+    // below.
+    if expand_window9_interior(x, width, p.width) && expand_window9_interior(y, height, p.height) {
         let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
         let lo = (y - 4) / 2 - ((y - 4) % 2 == 0) as usize;
         let mut horiz = [[0.0f32; 9]; 7];
@@ -373,8 +380,9 @@ mod tests {
     }
 
     /// `reduce_slice_visiting` visits every source row once, in increasing order,
-    /// and reduces as `reduce_slice` does (bit for bit): every height 1–13 and two
-    /// larger ones (the ring's clamped first and last windows, odd and even).
+    /// and reduces as the plain two-pass reference does (bit for bit): every height
+    /// 1–13 and two larger ones (the ring's clamped first and last windows, odd and
+    /// even).
     #[test]
     fn reduce_visits_every_row_once_in_order() {
         for (w, h) in (1..14usize).map(|h| (5, h)).chain([(37, 29), (64, 48)]) {
@@ -382,7 +390,8 @@ mod tests {
             let mut seen = vec![];
             let p = reduce_slice_visiting(&data, w, h, |y| seen.push(y));
             assert_eq!(seen, (0..h).collect::<Vec<_>>(), "{w}×{h}");
-            assert!(p.data.iter().zip(&reduce_slice(&data, w, h).data).all(|(a, b)| a.to_bits() == b.to_bits()));
+            let want = reduce_reference(&Plane::from_vec(w, h, data.clone()));
+            assert!(p.data.iter().zip(&want.data).all(|(a, b)| a == b), "{w}×{h}");
         }
     }
 

@@ -254,7 +254,7 @@ impl Binning<'_> {
                 // coarse rows and columns, 49 products instead of the expanded window's
                 // ~250 operations); the window's values by `expand_window9` only at the
                 // borders. The same mean to rounding (the sums regrouped).
-                let inside = |v: usize, out: usize, n: usize| v >= 6 && v + 4 < out && (v + 4) / 2 + 1 < n;
+                let inside = crate::image::expand_window9_interior;
                 if inside(x, *width, coarse.width) && inside(y, *height, coarse.height) {
                     let ((cx, bx, nx), (cy, ay, ny)) =
                         (expand_mean_weights(x, &win.w1), expand_mean_weights(y, &win.w1));
