@@ -230,8 +230,8 @@ const EFFORT_MIN_EDGES: usize = 600;
 /// ratio assumes one step: a thin line's two edges cancel in the re-blur and read
 /// δ low, a staircase's add and read it high. Near the border the walk stops
 /// (nothing seen is nothing against).
-fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32), peak: f32) -> bool {
-    let (w, h) = (y.width as isize, y.height as isize);
+fn isolated(g: &GradRows, c: (isize, isize), s: (isize, isize), normal: (f32, f32), peak: f32) -> bool {
+    let (w, h) = (g.w as isize, g.h as isize);
     let step = ((s.0 * s.0 + s.1 * s.1) as f32).sqrt();
     let reach = (INTERFERENCE_REACH_PX / step).ceil() as isize;
     let lim = INTERFERENCE_MAX_FRACTION * peak;
@@ -248,7 +248,7 @@ fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32),
             let mut p = 0.0;
             for j in -k..=k {
                 let (qx, qy) = ((cx + j * t.0) as usize, (cy + j * t.1) as usize);
-                let (gx, gy) = grad(y, qx, qy);
+                let (gx, gy) = g.at(qx, qy);
                 p += gx * normal.0 + gy * normal.1;
             }
             p /= taps;
@@ -261,10 +261,80 @@ fn isolated(y: &Plane, c: (isize, isize), s: (isize, isize), normal: (f32, f32),
     true
 }
 
-/// Central-difference gradient of `p` at interior pixel (x, y), per px.
-#[inline]
-fn grad(p: &Plane, x: usize, y: usize) -> (f32, f32) {
-    (0.5 * (p.get(x + 1, y) - p.get(x - 1, y)), 0.5 * (p.get(x, y + 1) - p.get(x, y - 1)))
+/// Rows the edge scan reads around its scanned row py: the non-maximum suppression
+/// py ± 1, the tangent mean py ± `EDGE_TANGENT_TAPS`, and `isolated`'s walk along
+/// the normal, ⌈`INTERFERENCE_REACH_PX`⌉ steps of a rounded direction (≥ 1 px in y
+/// when it moves in y) and the tangent taps around each.
+const GRAD_ROWS_REACH: usize = INTERFERENCE_REACH_PX as usize + EDGE_TANGENT_TAPS as usize;
+/// Rows `GradRows` holds: a power of two (the slot is the row's low bits) with room
+/// for every row within `GRAD_ROWS_REACH` of the scanned one.
+const GRAD_ROWS: usize = (2 * GRAD_ROWS_REACH + 1).next_power_of_two();
+const _: () = assert!(
+    INTERFERENCE_REACH_PX == GRAD_ROWS_REACH as f32 - EDGE_TANGENT_TAPS as f32 && GRAD_ROWS > 2 * GRAD_ROWS_REACH
+);
+
+/// The frame's central-difference gradients (per px) and their squared magnitudes
+/// for the rows around the edge scan's row, each row computed once over its whole
+/// width (contiguous: it vectorises) and kept in a ring of `GRAD_ROWS` rows. The
+/// scan's three readers — the threshold and non-maximum suppression, the tangent
+/// mean, `isolated`'s walk — took a scalar central difference per tap (four reads
+/// and bounds checks each; ~600 000 taps on the bench frame, over half of them the
+/// walk's), the same value `at` now reads (the same two subtractions and products).
+/// Columns 0 and w − 1 and rows outside [1, h − 2] are never computed: every reader
+/// stays inside them.
+struct GradRows {
+    w: usize,
+    h: usize,
+    /// (gx, gy) per pixel, row slot by row slot.
+    g: Vec<[f32; 2]>,
+    /// gx² + gy² per pixel.
+    m2: Vec<f32>,
+    /// The frame row each slot holds (`usize::MAX`: none).
+    held: [usize; GRAD_ROWS],
+}
+
+impl GradRows {
+    fn new(w: usize, h: usize) -> Self {
+        Self { w, h, g: vec![[0.0; 2]; GRAD_ROWS * w], m2: vec![0.0; GRAD_ROWS * w], held: [usize::MAX; GRAD_ROWS] }
+    }
+
+    /// Make rows py − `GRAD_ROWS_REACH` … py + `GRAD_ROWS_REACH` (those in [1, h − 2])
+    /// of frame `y` available.
+    fn hold_around(&mut self, y: &Plane, py: usize) {
+        let w = self.w;
+        for yy in py.saturating_sub(GRAD_ROWS_REACH).max(1)..(py + GRAD_ROWS_REACH + 1).min(self.h - 1) {
+            let slot = yy % GRAD_ROWS;
+            if self.held[slot] == yy {
+                continue;
+            }
+            let (up, row, down) =
+                (&y.data[(yy - 1) * w..yy * w], &y.data[yy * w..(yy + 1) * w], &y.data[(yy + 1) * w..(yy + 2) * w]);
+            let (g, m2) = (&mut self.g[slot * w..(slot + 1) * w], &mut self.m2[slot * w..(slot + 1) * w]);
+            for x in 1..w - 1 {
+                let (gx, gy) = (0.5 * (row[x + 1] - row[x - 1]), 0.5 * (down[x] - up[x]));
+                g[x] = [gx, gy];
+                m2[x] = gx * gx + gy * gy;
+            }
+            self.held[slot] = yy;
+        }
+    }
+
+    /// Squared gradient magnitudes of held row `yy`.
+    #[inline]
+    fn m2_row(&self, yy: usize) -> &[f32] {
+        let slot = yy % GRAD_ROWS;
+        debug_assert_eq!(self.held[slot], yy);
+        &self.m2[slot * self.w..(slot + 1) * self.w]
+    }
+
+    /// Central-difference gradient at (x, yy), yy a held row and 1 ≤ x ≤ w − 2.
+    #[inline]
+    fn at(&self, x: usize, yy: usize) -> (f32, f32) {
+        let slot = yy % GRAD_ROWS;
+        debug_assert_eq!(self.held[slot], yy);
+        let [gx, gy] = self.g[slot * self.w + x];
+        (gx, gy)
+    }
 }
 
 /// Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7), enough for a calibration table.
@@ -398,20 +468,13 @@ pub fn fit_fast(
     let scan = |rows: &dyn Fn(usize) -> bool| -> (Vec<f32>, Vec<f32>, Vec<(usize, usize)>) {
         let step = full_step;
         let (mut zs, mut sig, mut at) = (vec![], vec![], vec![]);
-        // Squared central-difference gradient magnitudes of rows py − 1, py, py + 1,
-        // each computed over the whole row at once (contiguous, so it vectorises):
-        // ~70% of the scanned pixels fail the edge threshold on them and the
-        // non-maximum suppression reads its neighbours from them (the per-pixel scalar
-        // path took 7.8 ms of 22 at 1280×960).
-        let grad_sq_row = |yy: usize, out: &mut [f32]| {
-            let (up, row, down) =
-                (&y.data[(yy - 1) * w..yy * w], &y.data[yy * w..(yy + 1) * w], &y.data[(yy + 1) * w..(yy + 2) * w]);
-            for x in 1..w - 1 {
-                let (gx, gy) = (0.5 * (row[x + 1] - row[x - 1]), 0.5 * (down[x] - up[x]));
-                out[x] = gx * gx + gy * gy;
-            }
-        };
-        let mut m2 = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
+        // Central-difference gradients and their squared magnitudes of the rows
+        // around py, each row computed over its whole width at once (contiguous, so it
+        // vectorises; the per-pixel scalar path took 7.8 ms of 22 at 1280×960):
+        // ~70% of the scanned pixels fail the edge threshold on them, the non-maximum
+        // suppression reads its neighbours from them, and the tangent mean and the
+        // isolation walk their taps (`GradRows`).
+        let mut grads = GradRows::new(w, h);
         let min_sq = EDGE_MIN_GRAD * EDGE_MIN_GRAD;
         // A row's scanned positions over the threshold (at most every position).
         let mut above = vec![0usize; w / step + 1];
@@ -421,24 +484,9 @@ pub fn fit_fast(
         // Those whose tangent-averaged gradients pass the thresholds (compacted in
         // place: the frame's, then the re-blurred frame's with its ratio).
         let mut edges = vec![Edge { px: 0, s: (0, 0), g: (0.0, 0.0), m: 0.0, r: 0.0 }; w / step + 1];
-        // The frame row each of `m2`'s buffers holds: rows py − 1 … py + 1 overlap the
-        // previous scanned row's (one row at step 2, two at step 1), and a row held is
-        // moved into place instead of computed again.
-        let mut held = [usize::MAX; 3];
         for (_, py) in (2..h.saturating_sub(2)).step_by(step).enumerate().filter(|&(i, _)| rows(i)) {
-            for k in 0..3 {
-                let want = py + k - 1;
-                match (k..3).find(|&j| held[j] == want) {
-                    Some(j) => {
-                        m2.swap(k, j);
-                        held.swap(k, j);
-                    }
-                    None => {
-                        grad_sq_row(want, &mut m2[k]);
-                        held[k] = want;
-                    }
-                }
-            }
+            grads.hold_around(y, py);
+            let m2 = [grads.m2_row(py - 1), grads.m2_row(py), grads.m2_row(py + 1)];
             // The row's positions over the threshold, gathered without a branch per
             // position (~28% pass on the bench frame: an unpredictable branch).
             let mut n_above = 0;
@@ -458,7 +506,7 @@ pub fn fit_fast(
             let mut n_max = 0;
             for &px in &above[..n_above] {
                 let m_sq = m2[1][px];
-                let (gx, gy) = grad(y, px, py);
+                let (gx, gy) = grads.at(px, py);
                 let half_m = 0.5 * m_sq.sqrt();
                 let unit = |g: f32| (g >= half_m) as isize - (g <= -half_m) as isize;
                 let (sx, sy) = (unit(gx), unit(gy));
@@ -488,7 +536,7 @@ pub fn fit_fast(
                 }
                 let mut g = (0.0f32, 0.0f32);
                 for t in -k..=k {
-                    let (a, b) = grad(y, (xi + t * tx) as usize, (yi + t * ty) as usize);
+                    let (a, b) = grads.at((xi + t * tx) as usize, (yi + t * ty) as usize);
                     g = (g.0 + a, g.1 + b);
                 }
                 let m = (g.0 * g.0 + g.1 * g.1).sqrt() / taps;
@@ -514,7 +562,7 @@ pub fn fit_fast(
             }
             for &Edge { px, s, g, m, r } in &edges[..n_ratio] {
                 let normal = (g.0 / (m * taps), g.1 / (m * taps));
-                if !isolated(y, (px as isize, py as isize), s, normal, m) {
+                if !isolated(&grads, (px as isize, py as isize), s, normal, m) {
                     continue;
                 }
                 sig.push(ZS_SIGMA0 / (r * r - 1.0).sqrt());
@@ -640,6 +688,36 @@ fn constant_depth(depth: &Plane, units: DepthUnits) -> Option<[f32; 2]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `GradRows` holds, for every scanned row, every row within `GRAD_ROWS_REACH`
+    /// of it, each the plain central difference bit for bit (a stale slot would
+    /// hand the scan another row's gradients): scanned at steps 1, 2 and 4, on a
+    /// frame taller than the ring, and on one shorter than the reach.
+    #[test]
+    fn grad_rows_hold_every_row_the_scan_reads() {
+        for (w, h) in [(13usize, 71usize), (9, 6)] {
+            let p = Plane::from_vec(w, h, (0..w * h).map(|i| ((i * 37) % 23) as f32 * 0.043 - 0.3).collect());
+            for step in [1usize, 2, 4] {
+                let mut g = GradRows::new(w, h);
+                for py in (2..h - 2).step_by(step) {
+                    g.hold_around(&p, py);
+                    for yy in py.saturating_sub(GRAD_ROWS_REACH).max(1)..(py + GRAD_ROWS_REACH + 1).min(h - 1) {
+                        for x in 1..w - 1 {
+                            let gx = 0.5 * (p.get(x + 1, yy) - p.get(x - 1, yy));
+                            let gy = 0.5 * (p.get(x, yy + 1) - p.get(x, yy - 1));
+                            let (ax, ay) = g.at(x, yy);
+                            assert_eq!(
+                                (ax.to_bits(), ay.to_bits()),
+                                (gx.to_bits(), gy.to_bits()),
+                                "{w}×{h} ({x}, {yy})"
+                            );
+                            assert_eq!(g.m2_row(yy)[x].to_bits(), (gx * gx + gy * gy).to_bits());
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     /// `calibrate`'s binary search needs the raw Zhuo–Sim value to rise strictly
     /// with σ from the first entry above the σ = 0 value on (below it, σ < 0.3 px,
