@@ -255,22 +255,43 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
         let (nx, ny) = ((w - t) / (t / 2) + 1, (h - t) / (t / 2) + 1);
         (0..ny).flat_map(|j| (0..nx).map(move |i| (i * t / 2, j * t / 2))).filter(|&(x, y)| keep(x, y, t)).collect()
     };
-    let textured = |t: usize| -> Vec<(usize, usize)> {
+    // A tile is textured where its mean squared gradient over every 4th pixel each
+    // way (x, y ≡ 1 mod 4 from its origin; a mean, not a maximum: a sparse grid
+    // estimates it as well as a dense one) reaches `TILE_MIN_GRAD_SQ`. Both tile
+    // sizes' origins are multiples of `GRAD_BLOCK_PX`, so every tile is a union of
+    // whole blocks whose lattice points are the tile's: each block's sum is made
+    // once, on first use, and a tile adds its blocks' — a loop per tile read every
+    // point of the half-overlapping tiles four times (~1.7% of the fast tier's time
+    // at 1280×960, by perf). The sums are f64 over f32 terms, so the order moves the
+    // mean by ~1e-16 relative: the same decision unless it sits that close to the
+    // threshold.
+    const GRAD_BLOCK_PX: usize = 64;
+    let bw = w / GRAD_BLOCK_PX;
+    let mut block_sums: Vec<Option<f64>> = vec![None; bw * (h / GRAD_BLOCK_PX)];
+    let mut block_sum = |bx: usize, by: usize| -> f64 {
+        *block_sums[by * bw + bx].get_or_insert_with(|| {
+            let (x0, y0) = (bx * GRAD_BLOCK_PX, by * GRAD_BLOCK_PX);
+            let mut g = 0.0f64;
+            for y in (y0 + 1..y0 + GRAD_BLOCK_PX).step_by(4) {
+                for x in (x0 + 1..x0 + GRAD_BLOCK_PX).step_by(4) {
+                    let gx = 0.5 * (luma.get(x + 1, y) - luma.get(x - 1, y));
+                    let gy = 0.5 * (luma.get(x, y + 1) - luma.get(x, y - 1));
+                    g += (gx * gx + gy * gy) as f64;
+                }
+            }
+            g
+        })
+    };
+    let mut textured = |t: usize| -> Vec<(usize, usize)> {
+        debug_assert_eq!(t % GRAD_BLOCK_PX, 0);
+        let (nb, n) = (t / GRAD_BLOCK_PX, (t / 4) * (t / 4));
         origins(t)
             .into_iter()
             .filter(|&(x0, y0)| {
-                // Mean squared gradient over every 4th pixel each way (a mean, not
-                // a maximum: a sparse grid estimates it as well as a dense one).
-                let (mut g, mut n) = (0.0f64, 0usize);
-                for y in (y0 + 1..y0 + t - 1).step_by(4) {
-                    for x in (x0 + 1..x0 + t - 1).step_by(4) {
-                        let gx = 0.5 * (luma.get(x + 1, y) - luma.get(x - 1, y));
-                        let gy = 0.5 * (luma.get(x, y + 1) - luma.get(x, y - 1));
-                        g += (gx * gx + gy * gy) as f64;
-                        n += 1;
-                    }
-                }
-                g / n.max(1) as f64 >= TILE_MIN_GRAD_SQ as f64
+                let (bx, by) = (x0 / GRAD_BLOCK_PX, y0 / GRAD_BLOCK_PX);
+                let g: f64 =
+                    (by..by + nb).flat_map(|j| (bx..bx + nb).map(move |i| (i, j))).map(|(i, j)| block_sum(i, j)).sum();
+                g / n as f64 >= TILE_MIN_GRAD_SQ as f64
             })
             .collect()
     };
