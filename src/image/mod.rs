@@ -115,51 +115,20 @@ impl Plane {
                 }
                 return;
             }
-            // `sample_bilinear_inside` per node, split into three loops per chunk of
-            // nodes: positions, weights and tap indices (lane-wise), the four taps'
-            // reads (the only scalar part), and the two-way interpolation
-            // (lane-wise). The same operations per node in the same order, so the
-            // same values; one node per iteration did every step in scalar registers.
-            //
-            // The integer parts without float-to-integer conversions (saturating
-            // `as` casts, which stayed scalar with two fix-ups each: ~22% of the
-            // lines' time): inside, 0 ≤ x < 2²², where adding and subtracting 2²³
-            // rounds x to an integer exactly and one comparison makes it the floor,
-            // which for x ≥ 0 is the truncation `as` took, so fx and fy are the same
-            // floats. The index ⌊y⌋·w + ⌊x⌋ < 2²³ is then exact in an f32 too, and
-            // read from the bits of itself plus 2²³.
-            const CHUNK: usize = 32;
-            const TWO_23: f32 = 8_388_608.0;
-            let floor_inside = |v: f32| {
-                let r = (v + TWO_23) - TWO_23;
-                r - if r > v { 1.0 } else { 0.0 }
-            };
-            let w = self.width;
-            let wf = w as f32;
-            for (c, chunk) in out.chunks_mut(CHUNK).enumerate() {
-                let n = chunk.len();
-                let (mut fx, mut fy, mut at) = ([0.0f32; CHUNK], [0.0f32; CHUNK], [0u32; CHUNK]);
-                for k in 0..n {
-                    let j = (c * CHUNK + k) as f32;
-                    let (x, y) = (x0 + j * dx, y0 + j * dy);
-                    let (xf, yf) = (floor_inside(x), floor_inside(y));
-                    fx[k] = x - xf;
-                    fy[k] = y - yf;
-                    at[k] = (yf * wf + xf + TWO_23).to_bits() - TWO_23.to_bits();
-                }
-                let (mut a, mut b, mut cc, mut d) =
-                    ([0.0f32; CHUNK], [0.0f32; CHUNK], [0.0f32; CHUNK], [0.0f32; CHUNK]);
-                for k in 0..n {
-                    let i = at[k] as usize;
-                    let q = &self.data[i..i + w + 2];
-                    (a[k], b[k], cc[k], d[k]) = (q[0], q[1], q[w], q[w + 1]);
-                }
-                for k in 0..n {
-                    let top = a[k] + (b[k] - a[k]) * fx[k];
-                    let bottom = cc[k] + (d[k] - cc[k]) * fx[k];
-                    chunk[k] = top + (bottom - top) * fy[k];
-                }
-            }
+            // `sample_bilinear_inside` per node in chunks of 16, then one of 8, then
+            // single nodes (`line_chunks`): each chunk in three loops — positions,
+            // weights and tap indices (lane-wise), the four taps' reads (the only
+            // scalar part), and the two-way interpolation (lane-wise). The same
+            // operations per node in the same order, so the same values; one node
+            // per iteration did every step in scalar registers. The lengths are
+            // constants, so each loop unrolls whole, without zeroed scratch or
+            // per-chunk length tests: chunks of a run-time length up to 32 took
+            // 62 / 119 / 208 ns for lines of 17 / 33 / 65 nodes, these 51 / 85 /
+            // 154 ns (9 nodes: 45 → 44 ns), `examples/line_bench.rs`.
+            let n16 = out.len() / 16 * 16;
+            let (sixteens, rest) = out.split_at_mut(n16);
+            line_chunks::<16>(&self.data, self.width, (x0, y0, dx, dy), sixteens, 0);
+            line_chunks::<8>(&self.data, self.width, (x0, y0, dx, dy), rest, n16);
         } else {
             for (j, o) in out.iter_mut().enumerate() {
                 *o = self.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy);
@@ -185,6 +154,76 @@ impl Plane {
         let top = a + (b - a) * fx;
         let bottom = c + (d - c) * fx;
         top + (bottom - top) * fy
+    }
+}
+
+/// `Plane::sample_line`'s nodes `first..first + out.len()` of the line (x0, y0) +
+/// j·(dx, dy) on the row-major plane `data` of width `w`, in chunks of `C` and
+/// then one node at a time; both ends in the interior and the plane under 2²³
+/// values (`sample_line` checks both).
+///
+/// The integer parts without float-to-integer conversions (saturating `as`
+/// casts, which stayed scalar with two fix-ups each: ~22% of the lines' time):
+/// inside, 0 ≤ x < 2²², where adding and subtracting 2²³ rounds x to an integer
+/// exactly and one comparison makes it the floor, which for x ≥ 0 is the
+/// truncation `as` took, so fx and fy are the same floats. The index ⌊y⌋·w + ⌊x⌋
+/// < 2²³ is then exact in an f32 too, and read from the bits of itself plus 2²³.
+#[inline(always)]
+fn line_chunks<const C: usize>(
+    data: &[f32],
+    w: usize,
+    (x0, y0, dx, dy): (f32, f32, f32, f32),
+    out: &mut [f32],
+    first: usize,
+) {
+    const TWO_23: f32 = 8_388_608.0;
+    let floor_inside = |v: f32| {
+        let r = (v + TWO_23) - TWO_23;
+        r - if r > v { 1.0 } else { 0.0 }
+    };
+    let wf = w as f32;
+    let base = TWO_23.to_bits();
+    let Some(first_taps) = data.get(..w + 2) else {
+        return;
+    };
+    let mut c0 = first;
+    let mut chunks = out.chunks_exact_mut(C);
+    for chunk in &mut chunks {
+        let (mut fx, mut fy, mut at) = ([0.0f32; C], [0.0f32; C], [0u32; C]);
+        for k in 0..C {
+            let j = (c0 + k) as f32;
+            let (x, y) = (x0 + j * dx, y0 + j * dy);
+            let (xf, yf) = (floor_inside(x), floor_inside(y));
+            fx[k] = x - xf;
+            fy[k] = y - yf;
+            at[k] = (yf * wf + xf + TWO_23).to_bits() - base;
+        }
+        let (mut a, mut b, mut c, mut d) = ([0.0f32; C], [0.0f32; C], [0.0f32; C], [0.0f32; C]);
+        for k in 0..C {
+            let i = at[k] as usize;
+            // (Never the fallback: the interior test put every node's taps inside.
+            // Without a panic path the loop unrolls and the taps stay in registers.)
+            debug_assert!(i + w + 2 <= data.len(), "node {} of the line outside the plane", c0 + k);
+            let q = data.get(i..i + w + 2).unwrap_or(first_taps);
+            (a[k], b[k], c[k], d[k]) = (q[0], q[1], q[w], q[w + 1]);
+        }
+        for k in 0..C {
+            let top = a[k] + (b[k] - a[k]) * fx[k];
+            let bottom = c[k] + (d[k] - c[k]) * fx[k];
+            chunk[k] = top + (bottom - top) * fy[k];
+        }
+        c0 += C;
+    }
+    for (k, o) in chunks.into_remainder().iter_mut().enumerate() {
+        let j = (c0 + k) as f32;
+        let (x, y) = (x0 + j * dx, y0 + j * dy);
+        let (xf, yf) = (floor_inside(x), floor_inside(y));
+        let (fx, fy) = (x - xf, y - yf);
+        let i = ((yf * wf + xf + TWO_23).to_bits() - base) as usize;
+        let q = &data[i..i + w + 2];
+        let top = q[0] + (q[1] - q[0]) * fx;
+        let bottom = q[w] + (q[w + 1] - q[w]) * fx;
+        *o = top + (bottom - top) * fy;
     }
 }
 
@@ -463,7 +502,8 @@ mod tests {
             (f32::NAN, 3.0, 0.2, 0.2),     // NaN
         ];
         for (x0, y0, dx, dy) in lines {
-            for n in [0usize, 1, 2, 7, 40] {
+            // Every split of `sample_line`'s chunks: singles, one of 8, 16s, and each mixed.
+            for n in [0usize, 1, 2, 7, 8, 9, 15, 16, 17, 24, 25, 31, 32, 40] {
                 let mut out = vec![0.0f32; n];
                 p.sample_line(x0, y0, dx, dy, &mut out);
                 for (j, v) in out.iter().enumerate() {
