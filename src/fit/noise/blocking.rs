@@ -35,8 +35,18 @@ pub(super) fn detect_blocking(
     }
     // Flat pixels: structure magnitude below its median (structure is a signed band
     // at 1/scale resolution).
-    let mut s: Vec<f32> = structure.data.iter().map(|v| v.abs()).collect();
-    let med = percentile(&mut s, 0.5);
+    // The median selected on the magnitudes' bit patterns: non-negative floats
+    // (NaN included, its sign cleared like every value's) order as their bits do,
+    // and `total_cmp` orders them the same way, so the value is `percentile`'s, bit
+    // for bit, by integer comparisons.
+    let mut s: Vec<u32> = structure.data.iter().map(|v| v.abs().to_bits()).collect();
+    let med = match s.len().checked_sub(1) {
+        Some(last) => {
+            let k = (last as f64 * 0.5).round() as usize;
+            f32::from_bits(*s.select_nth_unstable(k).1)
+        }
+        None => 0.0,
+    };
     // Row by row, the luma computed on the fly (two rows live, no full-frame plane),
     // the flat mask as 0/1 weights and the phase sums over 8-px chunks: branch-free,
     // so the 8 phases vectorise.
@@ -90,13 +100,17 @@ pub(super) fn detect_blocking(
         }
         let (mut c, mut nc, mut r) = ([0.0f32; PERIOD], [0.0f32; PERIOD], [0.0f32; PERIOD]);
         let n = (w - 1) / PERIOD * PERIOD;
-        for x0 in (0..n).step_by(PERIOD) {
+        // In chunks of one period (fixed-length slices: no bounds check per pixel,
+        // the phases in lanes; each phase's sum in the same order as before).
+        let chunks = flat[..n]
+            .chunks_exact(PERIOD)
+            .zip(cur[..n].chunks_exact(PERIOD))
+            .zip(cur[1..n + 1].chunks_exact(PERIOD).zip(next[..n].chunks_exact(PERIOD)));
+        for ((m, here), (right, below)) in chunks {
             for k in 0..PERIOD {
-                let x = x0 + k;
-                let m = flat[x];
-                c[k] += m * (cur[x + 1] - cur[x]).abs();
-                r[k] += m * (next[x] - cur[x]).abs();
-                nc[k] += m;
+                c[k] += m[k] * (right[k] - here[k]).abs();
+                r[k] += m[k] * (below[k] - here[k]).abs();
+                nc[k] += m[k];
             }
         }
         for x in n..w - 1 {
