@@ -201,17 +201,26 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
         let (e0, e2, o1) = (2.0 * K5[4], 2.0 * K5[2], 2.0 * K5[3]);
         let lo = (y - 4) / 2 - ((y - 4) % 2 == 0) as usize;
         let mut horiz = [[0.0f32; 9]; 7];
+        // Output column x − 4 + i reads source m = (x − 4 + i)/2 and its neighbours:
+        // all within the 7 source values from b − 1 = (x − 4)/2 − 1, read as one
+        // fixed-length array per row (`s[k]` is source b − 1 + k), and the window's
+        // first column even or odd fixes which output reads which taps — so each
+        // row's nine values take constant indices (no bounds check or parity test
+        // per value; the same products in the same order).
+        let b = (x - 4) / 2;
+        let even_start = (x - 4) % 2 == 0;
         for (k, src) in horiz.iter_mut().enumerate().take((y + 4) / 2 + 2 - lo) {
             let row = &p.data[(lo + k) * p.width..(lo + k + 1) * p.width];
-            for (i, h) in src.iter_mut().enumerate() {
-                let xx = x - 4 + i;
-                let m = xx / 2;
-                *h = if xx % 2 == 0 {
-                    e0 * row[m - 1] + e2 * row[m] + e0 * row[m + 1]
-                } else {
-                    o1 * row[m] + o1 * row[m + 1]
-                };
-            }
+            let s: &[f32; 7] = row[b - 1..b + 6].try_into().expect("7 source values");
+            let even = |q: usize| e0 * s[q] + e2 * s[q + 1] + e0 * s[q + 2];
+            let odd = |q: usize| o1 * s[q] + o1 * s[q + 1];
+            *src = if even_start {
+                // i = 2q: m = b + q (taps s[q..q + 3]); i = 2q + 1: m = b + q (s[q + 1], s[q + 2]).
+                [even(0), odd(1), even(1), odd(2), even(2), odd(3), even(3), odd(4), even(4)]
+            } else {
+                // i = 2q: m = b + q (s[q + 1], s[q + 2]); i = 2q + 1: m = b + q + 1 (taps s[q + 1..q + 4]).
+                [odd(1), even(1), odd(2), even(2), odd(3), even(3), odd(4), even(4), odd(5)]
+            };
         }
         return std::array::from_fn(|j| {
             let yy = y - 4 + j;
