@@ -203,7 +203,7 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
         let mut horiz = [[0.0f32; 9]; 7];
         // Output column x − 4 + i reads source m = (x − 4 + i)/2 and its neighbours:
         // all within the 7 source values from b − 1 = (x − 4)/2 − 1, read as one
-        // fixed-length array per row (`s[k]` is source b − 1 + k), and the window's
+        // seven-value slice per row (`s[k]` is source b − 1 + k), and the window's
         // first column even or odd fixes which output reads which taps — so each
         // row's nine values take constant indices (no bounds check or parity test
         // per value; the same products in the same order).
@@ -211,7 +211,7 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
         let even_start = (x - 4) % 2 == 0;
         for (k, src) in horiz.iter_mut().enumerate().take((y + 4) / 2 + 2 - lo) {
             let row = &p.data[(lo + k) * p.width..(lo + k + 1) * p.width];
-            let s: &[f32; 7] = row[b - 1..b + 6].try_into().expect("7 source values");
+            let s = &row[b - 1..b + 6];
             let even = |q: usize| e0 * s[q] + e2 * s[q + 1] + e0 * s[q + 2];
             let odd = |q: usize| o1 * s[q] + o1 * s[q + 1];
             *src = if even_start {
