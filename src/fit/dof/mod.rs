@@ -131,8 +131,9 @@ fn depth_range(z: &[f32]) -> [f32; 2] {
 }
 
 /// The valid depths of every `step`-th pixel in x and y.
-/// (Row by row into a vector sized for all of them: the chained `flat_map` /
-/// `filter` / `collect` took ~77 instructions a value by callgrind.)
+///
+/// Row by row into a vector sized for all of them: the chained `flat_map` /
+/// `filter` / `collect` took ~77 instructions a value by callgrind.
 fn valid_depths(depth: &Plane, units: DepthUnits, step: usize) -> Vec<f32> {
     let (w, h) = (depth.width, depth.height);
     let mut z = Vec::with_capacity(w.div_ceil(step.max(1)) * h.div_ceil(step.max(1)));
@@ -626,8 +627,9 @@ mod range_tests {
     }
 
     /// `frame_depth_span` (its row-wise sampling and integer-key selection) picks
-    /// the subsampled valid depths' `total_cmp` order statistics, bit for bit: over depths with negatives, ±0, ±∞, NaN (invalid,
-    /// skipped) and ties, in both units, on frames below and above the thinning size.
+    /// the subsampled valid depths' `total_cmp` order statistics, bit for bit: over
+    /// depths with negatives, ±0, ±∞, NaN (invalid, skipped) and ties, in both
+    /// units, on frames below and above the thinning size.
     #[test]
     fn frame_depth_span_is_total_cmp_selection() {
         let reference = |depth: &Plane, units: DepthUnits| -> Option<[f32; 2]> {
