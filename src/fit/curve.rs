@@ -94,22 +94,43 @@ struct Irls<const P: usize> {
 /// (P ≤ 3 columns; normal equations accumulated in place, solved by Cholesky).
 /// None if singular.
 fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], iters: usize) -> Option<Irls<P>> {
-    let mut w = vec![1.0f64; n];
     let mut beta = [0.0f64; P];
     let mut res = vec![0.0f64; n];
     let mut buf = Vec::with_capacity(n);
     // The scale of the zero residuals is only ever returned by a fit of no steps
     // (each step selects its own from its residuals).
     let mut scale = if iters == 0 { robust_scale_in(&res, &mut buf) } else { 0.0 };
+    // 1/scale of the previous step's residuals, whose Huber weights this step's
+    // normal equations take; None on the first step (every weight 1).
+    let mut inv_scale: Option<f64> = None;
     for _ in 0..iters {
         let mut xtwx = nalgebra::SMatrix::<f64, P, P>::zeros();
         let mut xtwy = nalgebra::SVector::<f64, P>::zeros();
+        // Each sample's weight is taken where it is used, not in a pass of its own
+        // after the scale: the sums are a chain of dependent additions, and the
+        // weight's division runs beside them (the separate pass's divisions were a
+        // quarter of the thin lens's focus search). The same weights, the same
+        // sums in the same order; and the last step's weights, never used, are no
+        // longer computed.
+        let weight = |i: usize| match inv_scale {
+            None => 1.0,
+            Some(inv) => {
+                // |r|/scale as a product with the reciprocal (one division per step
+                // for it, not one per sample).
+                let a = res[i].abs() * inv;
+                if a <= HUBER_K {
+                    1.0
+                } else {
+                    HUBER_K / a
+                }
+            }
+        };
         for i in 0..n {
-            let r = row(i);
+            let (r, w) = (row(i), weight(i));
             for a in 0..P {
-                xtwy[a] += w[i] * r[a] * y[i];
+                xtwy[a] += w * r[a] * y[i];
                 for b in 0..P {
-                    xtwx[(a, b)] += w[i] * r[a] * r[b];
+                    xtwx[(a, b)] += w * r[a] * r[b];
                 }
             }
         }
@@ -125,13 +146,7 @@ fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], it
             res[i] = y[i] - (0..P).map(|a| r[a] * beta[a]).sum::<f64>();
         }
         scale = robust_scale_in(&res, &mut buf);
-        // |r|/scale as a product with the reciprocal (one division per step, not one
-        // per sample: the search runs ~300 steps over ~1 400 samples).
-        let inv_scale = 1.0 / scale;
-        for i in 0..n {
-            let a = res[i].abs() * inv_scale;
-            w[i] = if a <= HUBER_K { 1.0 } else { HUBER_K / a };
-        }
+        inv_scale = Some(1.0 / scale);
     }
     beta.iter().all(|b| b.is_finite()).then_some(Irls { beta, res, scale })
 }

@@ -98,11 +98,20 @@ fn noise_correlation_walk_is_the_per_lag_sum() {
             sum / count.max(1) as f64
         })
     };
-    for n in [2usize, 3, 4, 5, 6, 7, 8, 9, 127, LINE_PX, 129] {
+    for n in [2usize, 3, 4, 5, 6, 7, 8, 9, 31, 32, 33, 127, LINE_PX, 129] {
         for (x0, y0, deg) in
             [(200.0f32, 150.0f32, 0.0f32), (150.3, 100.7, 10.0), (300.9, 250.2, 200.0), (50.5, 40.25, 95.0)]
+                .into_iter()
+                .chain([(0.0, 0.0, 45.0), (0.999, 2.0, 30.0), (7.5, 300.0, 271.0), (3.0, 3.0, 225.0)])
         {
             let (dx, dy) = (deg.to_radians().cos(), deg.to_radians().sin());
+            // The streak's lines lie inside the frame: positions ≥ 0 (the last one
+            // off it is the 225° line's, past n = 4; a chunk's terms past the end
+            // are formed there and must not count).
+            let last = (n - 1) as f32;
+            if x0 + last * dx < 0.0 || y0 + last * dy < 0.0 {
+                continue;
+            }
             let got = interpolated_noise_correlation(x0, y0, dx, dy, n);
             let want = per_lag(x0, y0, dx, dy, n);
             assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "n {n}, {deg}° from ({x0}, {y0})");
