@@ -316,7 +316,8 @@ impl GradRows {
             let span = slot * w..(slot + 1) * w;
             let (ox, oy, m2) = (&mut self.gx[span.clone()], &mut self.gy[span.clone()], &mut self.m2[span]);
             // Columns 1 … w − 2 as zipped slices (indexed, the bounds checks kept the
-            // loop scalar: ~4 instructions a pixel over every row of the frame).
+            // loop near scalar: 3.3 instructions a pixel over every row of the frame,
+            // 2.0 zipped, by callgrind).
             let inner = 1..w - 1;
             let outs = ox[inner.clone()].iter_mut().zip(&mut oy[inner.clone()]).zip(&mut m2[inner.clone()]);
             let across = row[..w - 2].iter().zip(&row[2..]);
