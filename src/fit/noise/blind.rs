@@ -596,13 +596,10 @@ fn measure_level(
                 None if l == 0 => (None, 1.0),
                 None => (Some(&bands[c][l]), 1.0),
             };
-            let mut v: Vec<f32> = flats[c]
-                .iter()
-                .map(|p| match plane {
-                    Some(plane) => win.mean_sq(plane, p.0, p.1),
-                    None => win.mean_sq_window(&band0.window(c, p.0, p.1), band0.interior(p.0, p.1)),
-                })
-                .collect();
+            let mut v = map_in_raster_order(&flats[c], |p| match plane {
+                Some(plane) => win.mean_sq(plane, p.0, p.1),
+                None => win.mean_sq_window(&band0.window(c, p.0, p.1), band0.interior(p.0, p.1)),
+            });
             let med = percentile(&mut v, 0.5);
             let iqr = percentile(&mut v, 0.75) - percentile(&mut v, 0.25);
             var[c] = med / m2m / gain;
@@ -611,11 +608,30 @@ fn measure_level(
         }
         out.push(BinMeasure {
             y: flat.iter().map(|p| p.2).sum::<f32>() / n,
-            y2: flat.iter().map(|p| luma.mean_sq(&win, p.0, p.1)).sum::<f32>() / n,
+            y2: map_in_raster_order(flat, |p| luma.mean_sq(&win, p.0, p.1)).iter().sum::<f32>() / n,
             var,
             n: flat.len(),
             rel_se,
         });
+    }
+    out
+}
+
+/// `pts.iter().map(f).collect()` — the same values in the same slots, so every
+/// order statistic and sum taken of them after is the same — with `f` called in the
+/// samples' raster order. A bin's flat samples are ordered by their structure, which
+/// scatters them over the frame, and each reads 9×9 windows of full-size planes (the
+/// three channels and the level's coarser Gaussian): in raster order neighbouring
+/// windows share rows and cache lines.
+pub(super) fn map_in_raster_order<T>(
+    pts: &[&(usize, usize, f32, f32, T)],
+    mut f: impl FnMut(&(usize, usize, f32, f32, T)) -> f32,
+) -> Vec<f32> {
+    let mut order: Vec<u32> = (0..pts.len() as u32).collect();
+    order.sort_unstable_by_key(|&i| (pts[i as usize].1, pts[i as usize].0));
+    let mut out = vec![0.0f32; pts.len()];
+    for i in order {
+        out[i as usize] = f(pts[i as usize]);
     }
     out
 }

@@ -261,3 +261,38 @@ mod texture_floor_tests {
         }
     }
 }
+
+mod raster_order_tests {
+    use super::super::blind::map_in_raster_order;
+
+    /// The flat samples' window values: `f` called once per sample, in raster order
+    /// (rows, then columns), and each value written to its sample's own slot, so the
+    /// vector is the one `pts.iter().map(f)` makes — the medians and sums taken of it
+    /// after are the same bit for bit. Scrambled positions on a grid, a single sample
+    /// and none.
+    #[test]
+    fn values_land_in_their_slots_and_are_computed_in_raster_order() {
+        let samples: Vec<(usize, usize, f32, f32, u8)> = (0..97usize)
+            .map(|i| {
+                let k = (i * 37) % 97; // a permutation of 0..97
+                (3 + 11 * (k % 9), 5 + 11 * (k / 9), k as f32, -(k as f32), 7)
+            })
+            .collect();
+        let value = |p: &(usize, usize, f32, f32, u8)| (p.0 * 1000 + p.1) as f32 + 0.25;
+        for n in [0usize, 1, 97] {
+            let pts: Vec<&(usize, usize, f32, f32, u8)> = samples[..n].iter().collect();
+            let mut calls = vec![];
+            let got = map_in_raster_order(&pts, |p| {
+                calls.push((p.1, p.0));
+                value(p)
+            });
+            let want: Vec<f32> = pts.iter().map(|p| value(p)).collect();
+            assert_eq!(
+                got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                want.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+            );
+            assert_eq!(calls.len(), n);
+            assert!(calls.windows(2).all(|w| w[0] < w[1]), "not in raster order: {calls:?}");
+        }
+    }
+}
