@@ -3,7 +3,7 @@
 //! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
 //! where the streak zeros are not identified; its method is documented there).
 
-use super::{push_profile, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
+use super::{profile_midpoint, push_profile, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
 use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
 
@@ -45,23 +45,42 @@ pub(super) fn isotropy_root(
     pixels: Option<&[Sample]>,
     max_samples: usize,
 ) -> Result<IsotropyRoot, usize> {
-    let s = scale as f32;
     let chosen = match pixels {
         Some(px) => px.to_vec(),
         None => candidates(p, flow, scale, max_samples),
     };
+    // The root alone (the coarse scale) starts from g(0) = C(0) − D(0) and is λ 0
+    // where that is ≥ 0 (below). g(0) reads each profile's midpoint only, which
+    // `profile_midpoint` gives bit for bit without building the profile, summed in
+    // the same order as `imbalance` sums: the same g(0), so the same answer, and on
+    // a frame whose coarse root is 0 none of the profiles (the bench frame's coarse
+    // stage 1.5 → 0.3 ms).
+    if !stats {
+        if chosen.len() < MIN_SAMPLES {
+            return Err(chosen.len());
+        }
+        let (mut c, mut d) = (0.0f64, 0.0f64);
+        for &sample in &chosen {
+            let (x, yy, [u, v], dir) = geometry(sample, scale);
+            let b = |(ox, oy): (f32, f32)| profile_midpoint(p, x + ox, yy + oy, dir);
+            let (b0, b1, b2, b3) = (b(u), b((-u.0, -u.1)), b(v), b((-v.0, -v.1)));
+            c += (0.5 * (b0 - b1) as f64).powi(2);
+            d += (0.5 * (b2 - b3) as f64).powi(2);
+        }
+        if c - d >= 0.0 {
+            return Ok(IsotropyRoot::alone(0.0, chosen));
+        }
+    }
     // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
     let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
     // Each sample's flow, for the direction bins of the evidence, and its squared
     // central differences along the two diagonals (u ± v)/√2 (`stats` only).
     let mut flows = vec![];
     let mut oblique: Vec<(f64, f64)> = vec![];
-    for &(px, py, fx, fy) in &chosen {
-        let speed = (fx * fx + fy * fy).sqrt() / s;
-        let (ux, uy) = (fx / (speed * s), fy / (speed * s));
-        let (vx, vy) = (-uy, ux);
-        let (x, yy) = ((px / scale) as f32, (py / scale) as f32);
+    for &sample in &chosen {
+        let (x, yy, [(ux, uy), (vx, vy)], dir) = geometry(sample, scale);
         if stats {
+            let (_, _, fx, fy) = sample;
             flows.push((fx, fy));
             let diff = |(dx, dy): (f32, f32)| {
                 let (dx, dy) = (dx * std::f32::consts::FRAC_1_SQRT_2, dy * std::f32::consts::FRAC_1_SQRT_2);
@@ -70,7 +89,7 @@ pub(super) fn isotropy_root(
             oblique.push((diff((ux + vx, uy + vy)), diff((ux - vx, uy - vy))));
         }
         for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
-            push_profile(&mut prof, p, x + ox, yy + oy, (vx * speed, vy * speed));
+            push_profile(&mut prof, p, x + ox, yy + oy, dir);
         }
         prof.target.push(0.0);
     }
@@ -139,20 +158,7 @@ pub(super) fn isotropy_root(
                 refine(&g, (0.0, f0), (1.0, f1), ROOT_TOL)
             }
         };
-        return Ok(IsotropyRoot {
-            lambda,
-            spread: 0.0,
-            n,
-            along_excess: 0.0,
-            along_excess_se: 0.0,
-            top_excess: 0.0,
-            top_excess_se: 0.0,
-            oblique_contrast: 0.0,
-            oblique_contrast_se: 0.0,
-            band: None,
-            evidence: None,
-            pixels: chosen,
-        });
+        return Ok(IsotropyRoot::alone(lambda, chosen));
     }
     // One pass: every sample's C and D at the grid's λs (`isotropy_pool::GRID`),
     // summed per interleaved subset (the root's spread) and per flow direction (the
@@ -410,6 +416,37 @@ pub(super) struct IsotropyRoot {
     pub(super) pixels: Vec<Sample>,
 }
 
+impl IsotropyRoot {
+    /// The root alone over `pixels` (the coarse scale: no statistics).
+    fn alone(lambda: f32, pixels: Vec<Sample>) -> Self {
+        Self {
+            lambda,
+            spread: 0.0,
+            n: pixels.len(),
+            along_excess: 0.0,
+            along_excess_se: 0.0,
+            top_excess: 0.0,
+            top_excess_se: 0.0,
+            oblique_contrast: 0.0,
+            oblique_contrast_se: 0.0,
+            band: None,
+            evidence: None,
+            pixels,
+        }
+    }
+}
+
+/// A sample's pixel on the plane of `scale` (x, y), the flow's unit direction u and
+/// its normal v, and its profiles' extent: the flow on that plane along v.
+fn geometry((px, py, fx, fy): Sample, scale: usize) -> (f32, f32, [(f32, f32); 2], (f32, f32)) {
+    let s = scale as f32;
+    let speed = (fx * fx + fy * fy).sqrt() / s;
+    let (ux, uy) = (fx / (speed * s), fy / (speed * s));
+    let (vx, vy) = (-uy, ux);
+    let (x, yy) = ((px / scale) as f32, (py / scale) as f32);
+    (x, yy, [(ux, uy), (vx, vy)], (vx * speed, vy * speed))
+}
+
 /// An isotropy sample: its frame pixel and the flow there, read once by the
 /// candidate scan. The profiles and the coarse scale used to read the flow again at
 /// each chosen pixel, after the scan had left those cache lines: a miss on each of
@@ -440,6 +477,36 @@ mod tests {
         assert_eq!(anisotropy_ratios(-0.2, 0.01), [lo, hi]);
         let [lo, hi] = anisotropy_ratios(0.999, 0.0);
         assert!((lo - 0.1 / 1.9).abs() < 1e-12 && (hi - 19.0).abs() < 1e-9, "{lo} {hi}");
+    }
+
+    /// `profile_midpoint` (the coarse root's g(0) without the profiles) is the built
+    /// profile's B(λ 0), bit for bit (exact: the early answer must be the one the
+    /// profiles give): in the interior, where nodes leave the plane (clamped reads),
+    /// at odd and even interval counts, the shortest profile (4 intervals) and past
+    /// the interval cap.
+    #[test]
+    fn profile_midpoint_is_the_built_profiles_value_at_zero() {
+        use crate::fit::motion_blur::profile_intervals;
+        let (w, h) = (61usize, 47usize);
+        let p = Plane::from_vec(w, h, (0..w * h).map(|i| ((i * 37) % 101) as f32 * 0.013 - 0.4).collect());
+        let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
+        let mut want = vec![];
+        let mut intervals = std::collections::BTreeSet::new();
+        for (x, y) in [(30.0f32, 20.0f32), (1.2, 3.7), (59.5, 45.9), (-3.0, 10.0), (30.3, 46.5)] {
+            for dir in
+                [(3.1f32, 0.4f32), (-0.7, 5.9), (0.0, 0.2), (130.0, -20.0), (2.0, 2.0), (0.25, 1.75), (-4.6, -1.3)]
+            {
+                push_profile(&mut prof, &p, x, y, dir);
+                want.push(profile_midpoint(&p, x, y, dir));
+                intervals.insert(profile_intervals(dir));
+            }
+        }
+        assert!(intervals.contains(&4) && intervals.contains(&256), "{intervals:?}");
+        assert!(intervals.iter().any(|m| m % 2 == 1) && intervals.iter().any(|m| m % 2 == 0), "{intervals:?}");
+        let mut at = AtLambda::new(0.0);
+        for (i, v) in want.iter().enumerate() {
+            assert_eq!(prof.blurred_at(i, &mut at).to_bits(), v.to_bits(), "profile {i}");
+        }
     }
 
     /// The diagonals' contrast is the texture's: on an isotropic texture it stays

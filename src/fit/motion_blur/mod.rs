@@ -376,10 +376,31 @@ pub fn fit_accurate(
 
 /// Append the cumulative profile of `p` from (x, y) along `dir` (t ∈ [−½, ½]).
 fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32)) {
-    let len = (dir.0 * dir.0 + dir.1 * dir.1).sqrt();
-    let m = ((len / 0.5).ceil() as usize).clamp(4, MAX_PROFILE_INTERVALS[1]);
-    append_profile(&mut prof.f, &mut prof.c, p, x, y, dir, m);
+    append_profile(&mut prof.f, &mut prof.c, p, x, y, dir, profile_intervals(dir));
     prof.offsets.push(prof.f.len());
+}
+
+/// The intervals of `push_profile`'s profile along `dir`: nodes ≤ ½ px apart.
+fn profile_intervals(dir: (f32, f32)) -> usize {
+    let len = (dir.0 * dir.0 + dir.1 * dir.1).sqrt();
+    ((len / 0.5).ceil() as usize).clamp(4, MAX_PROFILE_INTERVALS[1])
+}
+
+/// B(λ = 0) of the profile `push_profile(p, x, y, dir)` appends — what
+/// `Profiles::blurred_at` returns for it at λ 0 — from the only two nodes that
+/// value reads: the same node positions (`append_profile`'s x₀ + j·dx, which
+/// `Plane::sample_line` reads as `sample_bilinear` does, bit for bit) and the same
+/// interpolation (`MeanArgs::Point`), so the same bits, without the other nodes
+/// or the cumulative sums (`isotropy_root`'s coarse scale asks this first).
+fn profile_midpoint(p: &Plane, x: f32, y: f32, dir: (f32, f32)) -> f32 {
+    let m = profile_intervals(dir);
+    let inv_m = 1.0 / m as f32;
+    let (x0, y0) = (x - 0.5 * dir.0, y - 0.5 * dir.1);
+    let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
+    let (j, a) = MeanArgs::midpoint(m + 1);
+    let node = |j: usize| p.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy);
+    let nodes = [node(j), node(j + 1)];
+    Profiles::mean_with(&nodes, &[], &MeanArgs::Point { j: 0, a })
 }
 
 /// What `Profiles::mean_with` needs of a profile's length and λ: the interval
@@ -393,13 +414,21 @@ enum MeanArgs {
 }
 
 impl MeanArgs {
+    /// The interval holding a profile's midpoint t = 0 and the offset into it (a
+    /// profile of `len` ≥ 2 nodes).
+    #[inline]
+    fn midpoint(len: usize) -> (usize, f32) {
+        let s = 0.5 * (len - 1) as f32;
+        let j = (s as usize).min(len - 2);
+        (j, s - j as f32)
+    }
+
     #[inline]
     fn new(len: usize, lambda: f32) -> Self {
         let m = (len - 1) as f32;
         if lambda < 1e-6 {
-            let s = 0.5 * m;
-            let j = (s as usize).min(len - 2);
-            return Self::Point { j, a: s - j as f32 };
+            let (j, a) = Self::midpoint(len);
+            return Self::Point { j, a };
         }
         let h = 1.0 / m;
         // The interval holding t (from −½) and the offset into it; s ≥ 0, so
