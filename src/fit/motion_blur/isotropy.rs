@@ -480,12 +480,13 @@ mod tests {
     }
 
     /// `profile_midpoint` (the coarse root's g(0) without the profiles) is the built
-    /// profile's B(λ 0), bit for bit (exact: the early answer must be the one the
-    /// profiles give): in the interior, where nodes leave the plane (clamped reads),
+    /// profile's B(λ 0), and `blurred_grid` (lane-wise) is `blurred` at each grid
+    /// node, bit for bit (exact: the early answer and the grid must be what the
+    /// profiles give one node at a time): in the interior, where nodes leave the plane (clamped reads),
     /// at odd and even interval counts, the shortest profile (4 intervals) and past
     /// the interval cap.
     #[test]
-    fn profile_midpoint_is_the_built_profiles_value_at_zero() {
+    fn midpoint_and_grid_pass_are_the_profiles_own_values() {
         use crate::fit::motion_blur::profile_intervals;
         let (w, h) = (61usize, 47usize);
         let p = Plane::from_vec(w, h, (0..w * h).map(|i| ((i * 37) % 101) as f32 * 0.013 - 0.4).collect());
@@ -506,6 +507,17 @@ mod tests {
         let mut at = AtLambda::new(0.0);
         for (i, v) in want.iter().enumerate() {
             assert_eq!(prof.blurred_at(i, &mut at).to_bits(), v.to_bits(), "profile {i}");
+        }
+        // The grid pass's lane-wise means are `blurred`'s at every node, bit for bit
+        // (exact: the same operations per node), on the same profiles.
+        let mut taps = GridTaps::new();
+        let mut grid = [0.0f32; GRID];
+        for i in 0..want.len() {
+            prof.blurred_grid(i, &mut grid, &mut taps);
+            for (j, g) in grid.iter().enumerate() {
+                let one = prof.blurred(i, j as f32 / (GRID - 1) as f32);
+                assert_eq!(g.to_bits(), one.to_bits(), "profile {i}, node {j}: {g} for {one}");
+            }
         }
     }
 
