@@ -61,7 +61,7 @@ pub(super) fn isotropy_root(
         }
         let (mut c, mut d) = (0.0f64, 0.0f64);
         for &sample in &chosen {
-            let (x, yy, [u, v], dir) = geometry(sample, scale);
+            let Geometry { x, y: yy, u, v, dir } = geometry(sample, scale);
             let b = |(ox, oy): (f32, f32)| profile_midpoint(p, x + ox, yy + oy, dir);
             let (b0, b1, b2, b3) = (b(u), b((-u.0, -u.1)), b(v), b((-v.0, -v.1)));
             c += (0.5 * (b0 - b1) as f64).powi(2);
@@ -78,7 +78,7 @@ pub(super) fn isotropy_root(
     let mut flows = vec![];
     let mut oblique: Vec<(f64, f64)> = vec![];
     for &sample in &chosen {
-        let (x, yy, [(ux, uy), (vx, vy)], dir) = geometry(sample, scale);
+        let Geometry { x, y: yy, u: (ux, uy), v: (vx, vy), dir } = geometry(sample, scale);
         if stats {
             let (_, _, fx, fy) = sample;
             flows.push((fx, fy));
@@ -436,15 +436,25 @@ impl IsotropyRoot {
     }
 }
 
-/// A sample's pixel on the plane of `scale` (x, y), the flow's unit direction u and
-/// its normal v, and its profiles' extent: the flow on that plane along v.
-fn geometry((px, py, fx, fy): Sample, scale: usize) -> (f32, f32, [(f32, f32); 2], (f32, f32)) {
+/// A sample on the plane of `scale` (`geometry`).
+struct Geometry {
+    /// Its pixel on that plane.
+    x: f32,
+    y: f32,
+    /// The flow's unit direction u and its normal v.
+    u: (f32, f32),
+    v: (f32, f32),
+    /// Its profiles' extent: the flow's length on that plane, along v.
+    dir: (f32, f32),
+}
+
+fn geometry((px, py, fx, fy): Sample, scale: usize) -> Geometry {
     let s = scale as f32;
     let speed = (fx * fx + fy * fy).sqrt() / s;
     let (ux, uy) = (fx / (speed * s), fy / (speed * s));
     let (vx, vy) = (-uy, ux);
-    let (x, yy) = ((px / scale) as f32, (py / scale) as f32);
-    (x, yy, [(ux, uy), (vx, vy)], (vx * speed, vy * speed))
+    let (x, y) = ((px / scale) as f32, (py / scale) as f32);
+    Geometry { x, y, u: (ux, uy), v: (vx, vy), dir: (vx * speed, vy * speed) }
 }
 
 /// An isotropy sample: its frame pixel and the flow there, read once by the
