@@ -15,8 +15,8 @@ pub mod yuv;
 pub use blur::{blur_separable, blur_separable_rows, blur_x, discrete_gaussian_kernel};
 pub use depth_steps::clear_near_depth_steps;
 pub use pyramid::{
-    expand, expand_window9, expand_window9_interior, gaussian_pyramid, gaussian_pyramid_of, laplacian_pyramid, reduce,
-    reduce_slice, reduce_slice_visiting, LaplacianPyramid,
+    expand, expand_window9, expand_window9_interior, expand_window9_rows, gaussian_pyramid, gaussian_pyramid_of,
+    laplacian_pyramid, reduce, reduce_slice, reduce_slice_visiting, LaplacianPyramid,
 };
 pub use sample::{bicubic_interior, cubic_weights, sample_bicubic, sample_bicubic_rgb_interior};
 

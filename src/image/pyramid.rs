@@ -193,6 +193,25 @@ pub fn expand_window9_interior(v: usize, out: usize, n: usize) -> bool {
 /// noise fit reads the level-0 band only at its flat samples' windows (~13% of a
 /// 1280×960 frame), where three full-resolution expands cost 3.6 ms.
 pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize) -> [[f32; 9]; 9] {
+    let mut out = [[0.0f32; 9]; 9];
+    expand_window9_rows(p, width, height, x, y, |j, row| out[j] = row);
+    out
+}
+
+/// `expand_window9`'s window handed to `row` one row at a time, in order (`row(j,
+/// values)`), the same values: a reader that folds each row into sums as it comes
+/// (the blind noise fit's level-0 band) keeps it in registers, where a returned
+/// 9×9 array went through the stack and each row's wide reload waited on the
+/// narrow stores that wrote it (by perf ~half of `Band0::window`'s time).
+#[inline]
+pub fn expand_window9_rows(
+    p: &Plane,
+    width: usize,
+    height: usize,
+    x: usize,
+    y: usize,
+    mut row: impl FnMut(usize, [f32; 9]),
+) {
     // Interior (`expand_window9_interior`): the taps in closed form — even 2m:
     // (m−1, m, m+1) weighted (⅛, ¾, ⅛); odd 2m+1: (m, m+1) weighted (½, ½) — without
     // the tap search (3× faster per window). The same products in the same order as
@@ -222,7 +241,7 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
                 [odd(1), even(1), odd(2), even(2), odd(3), even(3), odd(4), even(4), odd(5)]
             };
         }
-        return std::array::from_fn(|j| {
+        for j in 0..9 {
             let yy = y - 4 + j;
             let m = yy / 2 - lo;
             let mut out = [0.0f32; 9];
@@ -234,8 +253,9 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
                 out.iter_mut().zip(&horiz[m]).for_each(|(o, h)| *o = o1 * h);
                 out.iter_mut().zip(&horiz[m + 1]).for_each(|(o, h)| *o += o1 * h);
             }
-            out
-        });
+            row(j, out);
+        }
+        return;
     }
     let clamp = |v: usize, k: usize, n: usize| (v as isize + k as isize - 4).clamp(0, n as isize - 1) as usize;
     let xtaps: [[(usize, f32); 3]; 9] = std::array::from_fn(|i| expand_taps(clamp(x, i, width), p.width));
@@ -252,17 +272,17 @@ pub fn expand_window9(p: &Plane, width: usize, height: usize, x: usize, y: usize
             *h = taps.iter().map(|&(j, wt)| wt * row[j]).sum();
         }
     }
-    std::array::from_fn(|j| {
+    for (j, taps) in ytaps.iter().enumerate() {
         let mut out = [0.0f32; 9];
-        let mut taps = ytaps[j].into_iter().filter(|&(_, wt)| wt != 0.0);
-        if let Some((r, wt)) = taps.next() {
+        let mut taps = taps.iter().filter(|&&(_, wt)| wt != 0.0);
+        if let Some(&(r, wt)) = taps.next() {
             out.iter_mut().zip(&horiz[r - lo]).for_each(|(o, h)| *o = wt * h);
         }
-        for (r, wt) in taps {
+        for &(r, wt) in taps {
             out.iter_mut().zip(&horiz[r - lo]).for_each(|(o, h)| *o += wt * h);
         }
-        out
-    })
+        row(j, out);
+    }
 }
 
 /// Levels 0..=`levels` of the Gaussian pyramid (level 0 is the input).

@@ -72,6 +72,17 @@ impl Band0<'_> {
         })
     }
 
+    /// `win.mean_sq_window(&self.window(c, x, y), self.interior(x, y))`, the same
+    /// value: inside the frame each band row is folded into the column sums as
+    /// `expand_window9_rows` hands it over (the same subtraction, square and sum per
+    /// value, in the same order), never stored as a window.
+    pub(super) fn mean_sq(&self, win: &SepWindow, c: usize, x: usize, y: usize) -> f32 {
+        if !self.interior(x, y) {
+            return win.mean_sq_window(&self.window(c, x, y), false);
+        }
+        expanded_mean_sq(win, self.g1[c], (self.width, self.height), x, y, Some(self.fine[c]))
+    }
+
     /// Whether the window at (x, y) lies inside the frame (`SepWindow::interior`).
     pub(super) fn interior(&self, x: usize, y: usize) -> bool {
         x >= 4 && y >= 4 && x + 4 < self.width && y + 4 < self.height
@@ -202,6 +213,41 @@ impl SepWindow {
     }
 }
 
+/// `win.mean_sq_window` of the window (x, y) — inside the `width × height` frame —
+/// of `expand(coarse)`, or with `fine` of the band `fine − expand(coarse)`: each row
+/// folded into the column sums as `expand_window9_rows` hands it over (the same
+/// subtraction, square and sums per value, in the same order), never stored as a
+/// window.
+#[inline]
+fn expanded_mean_sq(
+    win: &SepWindow,
+    coarse: &Plane,
+    (width, height): (usize, usize),
+    x: usize,
+    y: usize,
+    fine: Option<&[f32]>,
+) -> f32 {
+    let mut sums = [0.0f32; 9];
+    crate::image::expand_window9_rows(coarse, width, height, x, y, |j, e| {
+        let wj = win.w1[j];
+        match fine {
+            Some(fine) => {
+                let start = (y + j - 4) * width + x - 4;
+                for ((a, &f), e) in sums.iter_mut().zip(&fine[start..start + 9]).zip(e) {
+                    let v = f - e;
+                    *a += wj * (v * v);
+                }
+            }
+            None => {
+                for (a, e) in sums.iter_mut().zip(e) {
+                    *a += wj * (e * e);
+                }
+            }
+        }
+    });
+    win.across(&sums)
+}
+
 /// The 1-D window weights `w` over outputs v − 4 … v + 4 of `expand`, moved onto the
 /// coarse samples those outputs read (even output 2m: m − 1, m, m + 1 weighted ⅛, ¾,
 /// ⅛; odd 2m + 1: m, m + 1 weighted ½, ½): the first coarse index, the weights, and
@@ -279,8 +325,11 @@ impl Binning<'_> {
         match self {
             Binning::Plane(p) => win.mean_sq(p, x, y),
             Binning::Expanded { coarse, width, height } => {
+                if Self::interior(*width, *height, x, y) {
+                    return expanded_mean_sq(win, coarse, (*width, *height), x, y, None);
+                }
                 let v = crate::image::expand_window9(coarse, *width, *height, x, y);
-                win.mean_sq_window(&v, Self::interior(*width, *height, x, y))
+                win.mean_sq_window(&v, false)
             }
         }
     }
@@ -309,6 +358,33 @@ mod tests {
                 for x in 0..w {
                     let (want, got) = (win.mean(&full, x, y), read.mean(&win, x, y));
                     assert!((got - want).abs() <= 1e-6, "{w}×{h} at ({x}, {y}): {got} vs {want}");
+                }
+            }
+        }
+    }
+
+    /// The row-folded window sums of squares are the stored windows' bit for bit, at
+    /// every pixel (interior and border) of odd and even sizes, at every level's
+    /// window: level 0's band (`Band0::mean_sq`) and the expanded binning luma
+    /// (`Binning::mean_sq`, whose plane form `expand` writes).
+    #[test]
+    fn row_folded_squares_are_the_windows_own() {
+        let coarse = Plane::from_vec(40, 30, (0..1200).map(|i| ((i * 37) % 101) as f32 / 101.0 - 0.2).collect());
+        for (w, h) in [(80, 60), (79, 59)] {
+            let fine: Vec<f32> = (0..w * h).map(|i| ((i * 53) % 97) as f32 / 97.0 - 0.3).collect();
+            let band0 = Band0 { fine: [&fine; 3], g1: [&coarse; 3], width: w, height: h };
+            let full = crate::image::expand(&coarse, w, h);
+            let read = Binning::Expanded { coarse: &coarse, width: w, height: h };
+            for level in 0..4 {
+                let win = SepWindow::new(level);
+                for y in 0..h {
+                    for x in 0..w {
+                        let want = win.mean_sq_window(&band0.window(1, x, y), band0.interior(x, y));
+                        let got = band0.mean_sq(&win, 1, x, y);
+                        assert_eq!(got.to_bits(), want.to_bits(), "band {w}×{h} L{level} at ({x}, {y})");
+                        let (want, got) = (win.mean_sq(&full, x, y), read.mean_sq(&win, x, y));
+                        assert_eq!(got.to_bits(), want.to_bits(), "luma {w}×{h} L{level} at ({x}, {y})");
+                    }
                 }
             }
         }

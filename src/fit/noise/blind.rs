@@ -598,7 +598,7 @@ fn measure_level(
             };
             let mut v = map_in_raster_order(&flats[c], |p| match plane {
                 Some(plane) => win.mean_sq(plane, p.0, p.1),
-                None => win.mean_sq_window(&band0.window(c, p.0, p.1), band0.interior(p.0, p.1)),
+                None => band0.mean_sq(&win, c, p.0, p.1),
             });
             let med = percentile(&mut v, 0.5);
             let iqr = percentile(&mut v, 0.75) - percentile(&mut v, 0.25);
