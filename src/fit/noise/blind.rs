@@ -3,7 +3,7 @@
 //! blocking and (with an aligned neighbour exposure) the difference bands it reads.
 //! The shared regression, windows and clip masks are in `noise/mod.rs`.
 
-use super::bands::{channel_pyramids, Band0, Binning, SepWindow};
+use super::bands::{channel_pyramids, AxisWeights, Band0, Binning, SepWindow};
 use super::blocking::detect_blocking;
 use super::*;
 
@@ -523,14 +523,16 @@ fn measure_level(
     // for every grid point were ~0.4 ms of the fit at 1280×960.
     type Sample = (usize, usize, f32, f32, u8);
     let mut pts: Vec<Sample> = vec![];
+    let xs: Vec<(usize, Option<AxisWeights>)> = grid(w, stride).map(|x| (x, luma.axis_weights(&win, 0, x))).collect();
     for y in grid(h, stride) {
-        for x in grid(w, stride) {
+        let wy = luma.axis_weights(&win, 1, y);
+        for &(x, ref wx) in &xs {
             let ok = (0..3).fold(0u8, |m, c| m | ((!clip[c].touches(x * scale, y * scale, radius, l >= 2) as u8) << c));
             if ok == 0 || cross.is_some_and(|(_, bad)| bad.touches(x * scale, y * scale, radius, l >= 2)) {
                 continue;
             }
             let s = energy.get((x >> offset).min(energy.width - 1), (y >> offset).min(energy.height - 1));
-            pts.push((x, y, luma.mean(&win, x, y), s, ok));
+            pts.push((x, y, luma.mean_with(&win, x, y, wx.as_ref(), wy.as_ref()), s, ok));
         }
     }
     let m2m = white_noise_median_to_mean(l);
