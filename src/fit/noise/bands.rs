@@ -292,13 +292,6 @@ impl Binning<'_> {
         }
     }
 
-    /// `win.mean` of the plane at (x, y).
-    #[inline]
-    pub(super) fn mean(&self, win: &SepWindow, x: usize, y: usize) -> f32 {
-        let (wx, wy) = (self.axis_weights(win, 0, x), self.axis_weights(win, 1, y));
-        self.mean_with(win, x, y, wx.as_ref(), wy.as_ref())
-    }
-
     /// The expanded plane's 1-D window weights moved onto the coarse samples at
     /// column (`axis` 0) or row (1) `v` (`expand_mean_weights`), where that axis's
     /// window reads the coarse plane without clamps; `None` otherwise, and for a
@@ -315,8 +308,8 @@ impl Binning<'_> {
         }
     }
 
-    /// `mean(win, x, y)` given `axis_weights(win, 0, x)` and `axis_weights(win, 1,
-    /// y)`: the same value.
+    /// `win.mean` of the plane at (x, y), given `axis_weights(win, 0, x)` and
+    /// `axis_weights(win, 1, y)`.
     #[inline]
     pub(super) fn mean_with(
         &self,
@@ -387,7 +380,8 @@ mod tests {
             let read = Binning::Expanded { coarse: &coarse, width: w, height: h };
             for y in 0..h {
                 for x in 0..w {
-                    let (want, got) = (win.mean(&full, x, y), read.mean(&win, x, y));
+                    let (wx, wy) = (read.axis_weights(&win, 0, x), read.axis_weights(&win, 1, y));
+                    let (want, got) = (win.mean(&full, x, y), read.mean_with(&win, x, y, wx.as_ref(), wy.as_ref()));
                     assert!((got - want).abs() <= 1e-6, "{w}×{h} at ({x}, {y}): {got} vs {want}");
                 }
             }

@@ -276,8 +276,8 @@ pub fn streak_signature_with(
     let win = super::defocus_spectrum::hann(n);
     let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
     let mut buf = vec![Complex32::new(0.0, 0.0); n];
-    // One line's samples (`Plane::sample_line`).
-    let mut samples = vec![0.0f32; n];
+    // A centre's two lines' samples (`Plane::sample_line`): along and across.
+    let (mut along, mut across) = (vec![0.0f32; n], vec![0.0f32; n]);
     let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     // Per line pair: speed, normalised power at bins k = 1 … n/2, noise correlation.
     // Per line pair, its centre's raster index: the pairs are read column by
@@ -320,11 +320,16 @@ pub fn streak_signature_with(
             let (Some((x0, y0)), Some((a0, b0))) = (start(ux, uy), start(vx, vy)) else {
                 continue;
             };
-            let mut spectrum = |sx: f32, sy: f32, dx: f32, dy: f32| -> Option<(Vec<f32>, f32)> {
-                y.sample_line(sx, sy, dx, dy, &mut samples);
-                // The mean in sample order, then the windowed deviations written once.
-                let mean = samples.iter().fold(0.0f32, |m, &v| m + v) / n as f32;
-                for ((b, &v), &wj) in buf.iter_mut().zip(&samples).zip(&win) {
+            y.sample_line(x0, y0, ux, uy, &mut along);
+            y.sample_line(a0, b0, vx, vy, &mut across);
+            // Each line's mean in sample order, the two side by side: two independent
+            // chains of dependent additions (one line's alone, each step waited on the
+            // last: ~0.4 ms of the fit's 3 780 lines).
+            let sums = along.iter().zip(&across).fold((0.0f32, 0.0f32), |(a, b), (&u, &v)| (a + u, b + v));
+            let mut spectrum = |samples: &[f32], sum: f32| -> Option<(Vec<f32>, f32)> {
+                // The windowed deviations from the mean, written once.
+                let mean = sum / n as f32;
+                for ((b, &v), &wj) in buf.iter_mut().zip(samples).zip(&win) {
                     *b = Complex32::new((v - mean) * wj, 0.0);
                 }
                 fft.process_with_scratch(&mut buf, &mut scratch);
@@ -332,7 +337,7 @@ pub fn streak_signature_with(
                 let total: f32 = p.iter().sum();
                 (total > 1e-12).then(|| (p.into_iter().map(|v| v / total).collect(), total))
             };
-            let (Some((pu, total)), Some((pv, _))) = (spectrum(x0, y0, ux, uy), spectrum(a0, b0, vx, vy)) else {
+            let (Some((pu, total)), Some((pv, _))) = (spectrum(&along, sums.0), spectrum(&across, sums.1)) else {
                 continue;
             };
             if flat(&pu) && flat(&pv) {
@@ -376,9 +381,18 @@ pub fn streak_signature_with(
         let mut across = vec![0.0f64; bins];
         let mut noise = vec![0.0f64; if with_noise { bins } else { 0 }];
         let mut weight = vec![0.0f64; bins];
+        // Each line's splat positions g(k), all its bins' in one pass before the
+        // scattered sums (two divisions each: computed in the sums' loop they were
+        // scalar, ~1/3 of the accumulation by perf; here they vectorise), the same
+        // operations per value.
+        let mut gs = vec![0.0f32; bins];
         for Line { speed, along: p, across: q, noise_r } in lines.iter().skip(subset).step_by(of) {
             let speed = *speed;
-            for (k, (&v, &vq)) in p.iter().zip(q).enumerate() {
+            for (k, g) in gs.iter_mut().enumerate() {
+                // Native bin k+1 sits at φ = (k+1)/n · speed; splat linearly.
+                *g = (k + 1) as f32 * speed / n as f32 / dphi - 1.0;
+            }
+            for (k, ((&v, &vq), &g)) in p.iter().zip(q).zip(&gs).enumerate() {
                 // The line's white-noise power at native bin k+1, in its normalised
                 // units: R₀ + 2R₁cos 2πf + 2R₂cos 4πf over its total power.
                 let vn = if with_noise {
@@ -387,8 +401,6 @@ pub fn streak_signature_with(
                 } else {
                     0.0
                 };
-                // Native bin k+1 sits at φ = (k+1)/n · speed; splat linearly.
-                let g = (k + 1) as f32 * speed / n as f32 / dphi - 1.0;
                 if g < 0.0 {
                     continue;
                 }
