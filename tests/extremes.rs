@@ -179,6 +179,44 @@ fn non_finite_pixels_are_named() {
     assert!(matches!(err, FitError::NonFinite { input: "image", .. }));
 }
 
+/// Where a blind exposure or defocus fit reads the frame's luma, the input check
+/// reads the frame's finiteness from that luma: a non-finite value in any channel
+/// (NaN, ±∞, +∞ and −∞ in two channels of one pixel) is still named at its pixel
+/// and channel, and a frame of finite values whose luma overflows (near f32::MAX)
+/// is not rejected.
+#[test]
+fn non_finite_pixels_are_named_through_the_shared_luma() {
+    let (w, h) = (40, 30);
+    let clean = Rgb::new(w, h, [0.5; 3]);
+    let depth = depth_ramp(w, h, 1.0, 2.0);
+    let flow = Flow::uniform(w, h, 4.0, 0.0);
+    let blind = |img: &Rgb| {
+        let inp = FitInputs { depth: Some(&depth), flow: Some(&flow), ..FitInputs::new(img) };
+        fit(&inp, &FitOptions { tier: Some(Tier::Fast), ..Default::default() })
+    };
+    for (bad, at) in [(vec![(1, f32::NAN)], 1), (vec![(2, f32::INFINITY)], 2), (vec![(0, f32::NEG_INFINITY)], 0)]
+        .into_iter()
+        .chain([(vec![(1, f32::INFINITY), (2, f32::NEG_INFINITY)], 1)])
+    {
+        let mut img = clean.clone();
+        for &(c, v) in &bad {
+            img.channels[c][7 * w + 11] = v;
+        }
+        let err = blind(&img).expect_err("a non-finite frame is an error");
+        assert!(
+            matches!(err, FitError::NonFinite { input: "image", x: 11, y: 7, channel, .. } if channel == at),
+            "{err}"
+        );
+    }
+    let mut huge = clean.clone();
+    for c in 0..3 {
+        huge.channels[c][3 * w + 5] = f32::MAX;
+    }
+    if let Err(e) = blind(&huge) {
+        assert!(!matches!(e, FitError::NonFinite { .. }), "finite values are not rejected: {e}");
+    }
+}
+
 /// Non-finite flow marks unknown motion, as invalid depth does: both tiers skip
 /// those pixels and answer from the rest (NaN, ±∞, in one component or both), and
 /// a flow with no finite vector leaves the exposure *not identifiable* — never an

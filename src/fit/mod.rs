@@ -262,12 +262,17 @@ fn check_rgb(input: &'static str, img: &Rgb, w: usize, h: usize) -> Result<(), F
     Ok(())
 }
 
-fn check_inputs(inp: &FitInputs, opts: &FitOptions) -> Result<(), FitError> {
+/// `luma`: the frame's shared luma where a blind fit will build it: the frame's
+/// finiteness is then read from it (`Rgb::luma_checked`), and the channels are
+/// scanned for the first non-finite value only where the luma is not all finite.
+fn check_inputs(inp: &FitInputs, opts: &FitOptions, luma: Option<&SharedLuma>) -> Result<(), FitError> {
     let (w, h) = (inp.image.width, inp.image.height);
     if w == 0 || h == 0 {
         return Err(FitError::Empty { input: "image" });
     }
-    check_rgb("image", inp.image, w, h)?;
+    if !luma.is_some_and(|l| l.full_is_finite()) {
+        check_rgb("image", inp.image, w, h)?;
+    }
     for (name, r) in [
         ("denoised", inp.denoised),
         ("motion-deblurred", inp.motion_deblurred),
@@ -496,12 +501,10 @@ fn fit_noise(
         (Tier::Accurate, Some(clean)) => noise::fit_accurate(inp.image, clean, inp.reference_valid, opts),
         _ => {
             let per_level = opts.noise_fast_samples_per_level;
-            // The shared luma first (where another blind fit reads it too): right
-            // after the frame's finiteness check, while its channels are cached.
+            // The shared luma first (where another blind fit reads it too; `fit`
+            // builds it as the frame's finiteness check, and adds that time here).
             // Built inside the blocking stage it cost more than it saved (same-moment
-            // A/B, BENCHMARKS.md); timed here, as the noise fit's `blur.shared_luma`
-            // (~0 where another fit built it first; on two threads, any wait for a
-            // build under way).
+            // A/B, BENCHMARKS.md); timed here, as the noise fit's `blur.shared_luma`.
             let built = Instant::now();
             if let Some(l) = luma {
                 l.full();
@@ -543,7 +546,8 @@ fn fit_noise(
 /// planes themselves.
 pub(super) struct SharedLuma<'a> {
     image: &'a Rgb,
-    full: std::sync::OnceLock<Plane>,
+    /// The luma and whether all of it is finite (`Rgb::luma_checked`).
+    full: std::sync::OnceLock<(Plane, bool)>,
     half: std::sync::OnceLock<Plane>,
 }
 
@@ -554,7 +558,12 @@ impl<'a> SharedLuma<'a> {
 
     /// The frame's luma.
     pub(super) fn full(&self) -> &Plane {
-        self.full.get_or_init(|| self.image.luma())
+        &self.full.get_or_init(|| self.image.luma_checked()).0
+    }
+
+    /// Whether every value of `full()` is finite (which builds it).
+    fn full_is_finite(&self) -> bool {
+        self.full.get_or_init(|| self.image.luma_checked()).1
     }
 
     /// `reduce` of the frame's luma (binomial, variance 1 px², the even pixels).
@@ -612,15 +621,6 @@ fn fit_depth_of_field(
 
 /// Fit the camera model of one frame.
 pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
-    check_inputs(inp, opts)?;
-    let (w, h) = (inp.image.width, inp.image.height);
-    let mut model = CameraModel { schema: SCHEMA.to_string(), ..CameraModel::empty(w as u32, h as u32) };
-    model.depth_of_field.units = inp.depth_units;
-    let mut plots = PlotData::default();
-
-    // The three effects are independent: fit them concurrently (rayon::join), so
-    // the wall time on several cores is the slowest effect, not the sum.
-    // Tiers (and missing-reference errors) only for the effects asked for.
     let fx = opts.effects;
     let tier = |wanted: bool, r: Option<&Rgb>, effect, input| {
         if wanted {
@@ -629,20 +629,46 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
             Ok(Tier::Fast)
         }
     };
-    let noise_tier = tier(fx.noise, inp.denoised, "noise", "denoised")?;
-    let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred")?;
-    let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred")?;
+    // (The tiers' errors are returned after the inputs' own, as before.)
+    let noise_tier = tier(fx.noise, inp.denoised, "noise", "denoised");
+    let mb_tier = tier(fx.motion_blur, inp.motion_deblurred, "motion blur", "motion-deblurred");
+    let dof_tier = tier(fx.depth_of_field, inp.defocus_deblurred, "depth of field", "defocus-deblurred");
     let luma = SharedLuma::new(inp.image);
     // The blind exposure and defocus fits read the frame's luma; where one of them
-    // runs, the blind noise fit reads it too (built once, by whichever comes first).
-    let blind_reads_luma = (fx.motion_blur && mb_tier == Tier::Fast && inp.flow.is_some())
-        || (fx.depth_of_field && dof_tier == Tier::Fast && inp.depth.is_some());
+    // runs, the blind noise fit reads it too (built once, by whichever comes first),
+    // and the input check reads the frame's finiteness from it (a 1280×960 frame's
+    // three channels are 14.7 MB, scanned in ~0.5 ms; its luma is a third of that,
+    // checked as it is written). Only for a non-empty frame.
+    let blind_reads_luma = (fx.motion_blur && matches!(mb_tier, Ok(Tier::Fast)) && inp.flow.is_some())
+        || (fx.depth_of_field && matches!(dof_tier, Ok(Tier::Fast)) && inp.depth.is_some());
+    let prebuilt = (blind_reads_luma && inp.image.width > 0 && inp.image.height > 0).then_some(&luma);
+    let built = Instant::now();
+    let luma_s = prebuilt.map(|l| {
+        l.full();
+        built.elapsed().as_secs_f64()
+    });
+    check_inputs(inp, opts, prebuilt)?;
+    let (noise_tier, mb_tier, dof_tier) = (noise_tier?, mb_tier?, dof_tier?);
+    let (w, h) = (inp.image.width, inp.image.height);
+    let mut model = CameraModel { schema: SCHEMA.to_string(), ..CameraModel::empty(w as u32, h as u32) };
+    model.depth_of_field.units = inp.depth_units;
+    let mut plots = PlotData::default();
+
+    // The three effects are independent: fit them concurrently (rayon::join), so
+    // the wall time on several cores is the slowest effect, not the sum.
+    // Tiers (and missing-reference errors) only for the effects asked for.
     let noise_luma = blind_reads_luma.then_some(&luma);
     let ((noise, mb), dof) = rayon::join(
         || rayon::join(|| fit_noise(inp, opts, noise_tier, noise_luma), || fit_motion_blur(inp, opts, mb_tier, &luma)),
         || fit_depth_of_field(inp, opts, dof_tier, &luma),
     );
     (model.noise, plots.noise) = noise;
+    // The luma's build counted where it was before it moved into the input check:
+    // as the blind noise fit's `blur.shared_luma` stage (~0 there now).
+    if let (Some(t), Some(stage)) = (luma_s, model.noise.diagnostics.stages_s.get_mut("blur.shared_luma")) {
+        *stage += t;
+        model.noise.diagnostics.fit_time_s += t;
+    }
     (model.motion_blur, plots.motion_blur) = mb;
     (model.depth_of_field, plots.depth_of_field) = dof;
     sanitize(&mut model);

@@ -305,6 +305,30 @@ impl Rgb {
         out
     }
 
+    /// `luma()` and whether every value of it is finite, in one pass: each block of
+    /// luma is scanned as it is written, while in cache. Luma's weights are all
+    /// positive, so a non-finite value in any channel makes that pixel's luma
+    /// non-finite (±∞ stays infinite or meets −∞ as NaN; NaN stays NaN): a finite
+    /// luma is a finite frame, read at a third of the channels' bytes (the converse
+    /// fails only where finite values near f32::MAX overflow).
+    pub fn luma_checked(&self) -> (Plane, bool) {
+        const BLOCK: usize = 4096;
+        let [r, g, b] = &self.channels;
+        let mut data = Vec::with_capacity(r.len().min(g.len()).min(b.len()));
+        let mut finite = true;
+        for ((r, g), b) in r.chunks(BLOCK).zip(g.chunks(BLOCK)).zip(b.chunks(BLOCK)) {
+            let start = data.len();
+            data.extend(
+                r.iter()
+                    .zip(g)
+                    .zip(b)
+                    .map(|((r, g), b)| LUMA_WEIGHTS[0] * r + LUMA_WEIGHTS[1] * g + LUMA_WEIGHTS[2] * b),
+            );
+            finite &= data[start..].iter().fold(true, |acc, v| acc & v.is_finite());
+        }
+        (Plane::from_vec(self.width, self.height, data), finite)
+    }
+
     /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
     pub fn luma(&self) -> Plane {
         let [r, g, b] = &self.channels;
@@ -458,6 +482,26 @@ mod tests {
         }
         for (x, y) in [(5.999_999, 3.999_999), (6.0, 4.0), (0.0, 0.0), (-0.0, 2.5)] {
             assert_eq!(p.sample_bilinear(x, y).to_bits(), clamped(x, y).to_bits(), "at ({x}, {y})");
+        }
+    }
+
+    /// `luma_checked` is `luma` bit for bit, finite exactly where every luma value
+    /// is, on sizes below, at and past its block length.
+    #[test]
+    fn checked_luma_is_the_luma() {
+        for (w, h) in [(1, 1), (64, 64), (100, 41)] {
+            let mut img = Rgb::new(w, h, [0.0; 3]);
+            for (c, ch) in img.channels.iter_mut().enumerate() {
+                for (i, v) in ch.iter_mut().enumerate() {
+                    *v = ((i * 31 + c * 7) % 113) as f32 / 50.0 - 0.9;
+                }
+            }
+            let (l, finite) = img.luma_checked();
+            let bits = |p: &Plane| p.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&l), bits(&img.luma()), "{w}×{h}");
+            assert!(finite, "{w}×{h}");
+            img.channels[1][w * h - 1] = f32::NAN;
+            assert!(!img.luma_checked().1, "{w}×{h}: NaN in the last pixel");
         }
     }
 
