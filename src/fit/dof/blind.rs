@@ -105,16 +105,21 @@ struct Reblurred {
 impl Reblurred {
     fn new(half: Plane) -> Self {
         let (w, h) = (half.width, half.height);
-        let (mut gx, mut gy) = (vec![0.0f32; w * h], vec![0.0f32; w * h]);
-        if w >= 3 && h >= 3 {
-            let d = &half.data;
-            for y in 1..h - 1 {
-                let (up, row, down) = (&d[(y - 1) * w..y * w], &d[y * w..(y + 1) * w], &d[(y + 1) * w..(y + 2) * w]);
-                let (ox, oy) = (&mut gx[y * w..(y + 1) * w], &mut gy[y * w..(y + 1) * w]);
-                for x in 1..w - 1 {
-                    ox[x] = 0.25 * (row[x + 1] - row[x - 1]);
-                    oy[x] = 0.25 * (down[x] - up[x]);
-                }
+        // Grown row by row, each zeroed while in cache and then written (two
+        // frame-size memsets ahead of the writes were ~1% of the fit's instructions).
+        let (mut gx, mut gy) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
+        let d = &half.data;
+        for y in 0..h {
+            gx.resize((y + 1) * w, 0.0);
+            gy.resize((y + 1) * w, 0.0);
+            if w < 3 || y == 0 || y + 1 >= h {
+                continue;
+            }
+            let (up, row, down) = (&d[(y - 1) * w..y * w], &d[y * w..(y + 1) * w], &d[(y + 1) * w..(y + 2) * w]);
+            let (ox, oy) = (&mut gx[y * w..(y + 1) * w], &mut gy[y * w..(y + 1) * w]);
+            for x in 1..w - 1 {
+                ox[x] = 0.25 * (row[x + 1] - row[x - 1]);
+                oy[x] = 0.25 * (down[x] - up[x]);
             }
         }
         Self { half, gx, gy }

@@ -3,7 +3,7 @@
 //! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
 //! where the streak zeros are not identified; its method is documented there).
 
-use super::{profile_midpoint, push_profile, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
+use super::{profile_intervals, profile_midpoint, push_profile, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
 use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
 
@@ -74,8 +74,19 @@ pub(super) fn isotropy_root(
         }
         g0 = Some(c - d);
     }
-    // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v.
-    let mut prof = Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
+    // Per sample: profiles along v (length |F|/scale) at p+u, p−u, p+v, p−v. The
+    // node vectors sized for all of them first (grown by doubling, their copies
+    // were ~0.5% of the fit's instructions).
+    let nodes: usize = chosen.iter().map(|&s| 4 * (profile_intervals(geometry(s, scale).dir) + 1)).sum();
+    let mut prof = Profiles {
+        f: Vec::with_capacity(nodes),
+        c: Vec::with_capacity(nodes),
+        f2: vec![],
+        c2: vec![],
+        offsets: Vec::with_capacity(4 * chosen.len() + 1),
+        target: Vec::with_capacity(chosen.len()),
+    };
+    prof.offsets.push(0);
     // Each sample's flow, for the direction bins of the evidence, and its squared
     // central differences along the two diagonals (u ± v)/√2 (`stats` only).
     let mut flows = vec![];
