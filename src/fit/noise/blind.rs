@@ -225,12 +225,11 @@ pub(in crate::fit) fn fit_fast_with_luma(
         })
         .unzip();
     st.lap("blur.pyramids");
+    // One pass (the three weighted terms summed in channel order, as three passes
+    // accumulating into the output summed them).
     let luma_of = |c: [&[f32]; 3], like: &Plane| -> Plane {
         let w = crate::image::LUMA_WEIGHTS;
-        let mut out: Vec<f32> = c[0].iter().map(|v| w[0] * v).collect();
-        for k in 1..3 {
-            out.iter_mut().zip(c[k]).for_each(|(o, v)| *o += w[k] * v);
-        }
+        let out = c[0].iter().zip(c[1]).zip(c[2]).map(|((a, b), d)| w[0] * a + w[1] * b + w[2] * d).collect();
         Plane::from_vec(like.width, like.height, out)
     };
     // pyr[c].0[l] is G_c[l + 1].
