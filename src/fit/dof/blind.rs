@@ -83,19 +83,18 @@ fn zhuo_sim_table(kernel: DofKernel) -> &'static Vec<(f32, f32)> {
     })
 }
 
-/// The Zhuo–Sim re-blur (Gaussian of std `ZS_SIGMA0`) of the frame at half
-/// resolution, from `half` = `reduce(y)` (binomial, variance 1 px², keeps the even
-/// pixels; shared with the motion-blur fit's coarse scale): a discrete Gaussian of
-/// the remaining (σ0² − 1)/4 half-resolution px².
+/// The Zhuo–Sim re-blur (Gaussian of std `ZS_SIGMA0`) of the frame at half resolution,
+/// from `half` = `reduce(y)` (binomial, variance 1 px², the even pixels; shared with
+/// the exposure fit): a discrete Gaussian of the remaining (σ0² − 1)/4 half px².
 fn reblur_half(half: &Plane) -> Plane {
     blur_separable(half, &discrete_gaussian_kernel((ZS_SIGMA0 * ZS_SIGMA0 - 1.0) / 4.0))
 }
 
-/// The re-blurred half-resolution frame (`reblur_half`) with its central
-/// differences per full-resolution px, 0.25·(next − previous), at every interior
-/// pixel: made once over the rows (contiguous, so they vectorise) for the edge
-/// scan's ~100 000 re-blurred gradient taps, each of which read 16 values and formed
-/// four differences itself (the same differences, so the same gradients).
+/// The re-blurred half-resolution frame (`reblur_half`) with its central differences
+/// per full-resolution px, 0.25·(next − previous), at every interior pixel: made once,
+/// row by row (contiguous: they vectorise; each row zeroed in cache, not a frame-size
+/// memset ahead), for the edge scan's ~100 000 re-blurred gradient taps, which read 16
+/// values and formed four differences each (the same differences).
 struct Reblurred {
     half: Plane,
     gx: Vec<f32>,
@@ -104,22 +103,18 @@ struct Reblurred {
 
 impl Reblurred {
     fn new(half: Plane) -> Self {
-        let (w, h) = (half.width, half.height);
-        // Grown row by row, each zeroed while in cache and then written (two
-        // frame-size memsets ahead of the writes were ~1% of the fit's instructions).
+        let (w, h, d) = (half.width, half.height, &half.data);
         let (mut gx, mut gy) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
-        let d = &half.data;
         for y in 0..h {
             gx.resize((y + 1) * w, 0.0);
             gy.resize((y + 1) * w, 0.0);
-            if w < 3 || y == 0 || y + 1 >= h {
-                continue;
-            }
-            let (up, row, down) = (&d[(y - 1) * w..y * w], &d[y * w..(y + 1) * w], &d[(y + 1) * w..(y + 2) * w]);
-            let (ox, oy) = (&mut gx[y * w..(y + 1) * w], &mut gy[y * w..(y + 1) * w]);
-            for x in 1..w - 1 {
-                ox[x] = 0.25 * (row[x + 1] - row[x - 1]);
-                oy[x] = 0.25 * (down[x] - up[x]);
+            if w >= 3 && y >= 1 && y + 1 < h {
+                let (up, row, down) = (&d[(y - 1) * w..y * w], &d[y * w..(y + 1) * w], &d[(y + 1) * w..(y + 2) * w]);
+                let (ox, oy) = (&mut gx[y * w..(y + 1) * w], &mut gy[y * w..(y + 1) * w]);
+                for x in 1..w - 1 {
+                    ox[x] = 0.25 * (row[x + 1] - row[x - 1]);
+                    oy[x] = 0.25 * (down[x] - up[x]);
+                }
             }
         }
         Self { half, gx, gy }
