@@ -663,14 +663,19 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
         || fit_depth_of_field(inp, opts, dof_tier, &luma),
     );
     (model.noise, plots.noise) = noise;
-    // The luma's build counted where it was before it moved into the input check:
-    // as the blind noise fit's `blur.shared_luma` stage (~0 there now).
-    if let (Some(t), Some(stage)) = (luma_s, model.noise.diagnostics.stages_s.get_mut("blur.shared_luma")) {
-        *stage += t;
-        model.noise.diagnostics.fit_time_s += t;
-    }
     (model.motion_blur, plots.motion_blur) = mb;
     (model.depth_of_field, plots.depth_of_field) = dof;
+    // The luma's build counted where it was timed before it moved into the input
+    // check (~0 there now): the blind noise fit's `blur.shared_luma` stage, or
+    // without that fit the blind defocus fit's `luma`.
+    if let Some(t) = luma_s {
+        let slots =
+            [(&mut model.noise.diagnostics, "blur.shared_luma"), (&mut model.depth_of_field.diagnostics, "luma")];
+        if let Some((d, stage)) = slots.into_iter().find(|(d, k)| d.stages_s.contains_key(*k)) {
+            *d.stages_s.entry(stage.into()).or_default() += t;
+            d.fit_time_s += t;
+        }
+    }
     sanitize(&mut model);
     Ok(FitOutput { model, plots })
 }
