@@ -330,15 +330,10 @@ impl Rgb {
     }
 
     /// Rec. 601 luma Y = 0.299 R + 0.587 G + 0.114 B.
+    /// (`luma_checked`'s plane: one definition of the sum; its finiteness scan runs
+    /// on blocks still in cache.)
     pub fn luma(&self) -> Plane {
-        let [r, g, b] = &self.channels;
-        let data = r
-            .iter()
-            .zip(g)
-            .zip(b)
-            .map(|((r, g), b)| LUMA_WEIGHTS[0] * r + LUMA_WEIGHTS[1] * g + LUMA_WEIGHTS[2] * b)
-            .collect();
-        Plane::from_vec(self.width, self.height, data)
+        self.luma_checked().0
     }
 
     /// First non-finite value as `(x, y, channel)`, if any.
@@ -485,8 +480,9 @@ mod tests {
         }
     }
 
-    /// `luma_checked` is `luma` bit for bit, finite exactly where every luma value
-    /// is, on sizes below, at and past its block length.
+    /// `luma_checked` is the per-pixel weighted sum in channel order bit for bit,
+    /// finite exactly where every luma value is, on sizes below, at and past its
+    /// block length.
     #[test]
     fn checked_luma_is_the_luma() {
         for (w, h) in [(1, 1), (64, 64), (100, 41)] {
@@ -498,7 +494,11 @@ mod tests {
             }
             let (l, finite) = img.luma_checked();
             let bits = |p: &Plane| p.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&l), bits(&img.luma()), "{w}×{h}");
+            let [r, g, b] = &img.channels;
+            let want: Vec<u32> = (0..w * h)
+                .map(|i| (LUMA_WEIGHTS[0] * r[i] + LUMA_WEIGHTS[1] * g[i] + LUMA_WEIGHTS[2] * b[i]).to_bits())
+                .collect();
+            assert_eq!(bits(&l), want, "{w}×{h}");
             assert!(finite, "{w}×{h}");
             img.channels[1][w * h - 1] = f32::NAN;
             assert!(!img.luma_checked().1, "{w}×{h}: NaN in the last pixel");
