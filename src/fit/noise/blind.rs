@@ -550,8 +550,8 @@ fn measure_level(
             }
         }
     }
-    for mut bin in bins {
-        bin.sort_by(|a, b| a.3.total_cmp(&b.3));
+    for bin in bins {
+        let bin = sorted_stably_by(&bin, |p| p.3);
         // Each channel's flat set: the flattest fraction of the bin's samples where
         // that channel is unclipped; the bin counts when every channel has one.
         let flats: [Vec<_>; 3] = std::array::from_fn(|c| {
@@ -624,6 +624,25 @@ fn measure_level(
 /// scatters them over the frame, and each reads 9×9 windows of full-size planes (the
 /// three channels and the level's coarser Gaussian): in raster order neighbouring
 /// windows share rows and cache lines.
+/// `items` ordered by `key` as a stable `sort_by(total_cmp)` orders them (ties
+/// keep their order), the same order: each item's key mapped to an integer that
+/// orders as `total_cmp` does, packed above its index, and the packed integers
+/// sorted (an unstable sort of distinct integers has one result). The stable sort
+/// of references compared through them took 0.33 ms of the noise fit's bins at
+/// 1280×960 (three levels, ~17 600 samples).
+pub(super) fn sorted_stably_by<'a, T>(items: &[&'a T], key: impl Fn(&T) -> f32) -> Vec<&'a T> {
+    let packed = |(i, t): (usize, &&T)| {
+        // `f32::total_cmp`'s key: negative values' magnitude bits flipped, then the
+        // sign bit flipped so that the signed order reads as unsigned.
+        let bits = key(t).to_bits() as i32;
+        let ordered = (bits ^ (((bits >> 31) as u32) >> 1) as i32) as u32 ^ 0x8000_0000;
+        (u64::from(ordered) << 32) | i as u64
+    };
+    let mut keys: Vec<u64> = items.iter().enumerate().map(packed).collect();
+    keys.sort_unstable();
+    keys.iter().map(|&k| items[(k & 0xffff_ffff) as usize]).collect()
+}
+
 pub(super) fn map_in_raster_order<T>(
     pts: &[&(usize, usize, f32, f32, T)],
     mut f: impl FnMut(&(usize, usize, f32, f32, T)) -> f32,

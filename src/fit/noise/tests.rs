@@ -295,4 +295,29 @@ mod raster_order_tests {
             assert!(calls.windows(2).all(|w| w[0] < w[1]), "not in raster order: {calls:?}");
         }
     }
+
+    /// `sorted_stably_by` orders as the stable `sort_by(total_cmp)` does, ties in
+    /// their given order: many equal keys, ±0, subnormals, ±∞ and NaNs of both
+    /// signs, none and one item.
+    #[test]
+    fn packed_keys_sort_as_the_stable_total_order() {
+        use super::super::blind::sorted_stably_by;
+        let specials =
+            [0.0f32, -0.0, 1e-40, -1e-40, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, -f32::NAN, 1.0, -1.0, f32::MAX];
+        let keys: Vec<f32> = (0..300usize)
+            .map(|i| if i % 7 == 0 { specials[i % specials.len()] } else { ((i * 37) % 13) as f32 * 0.5 - 3.0 })
+            .collect();
+        let items: Vec<(usize, f32)> = keys.iter().copied().enumerate().collect();
+        for n in [0usize, 1, 2, 300] {
+            let refs: Vec<&(usize, f32)> = items[..n].iter().collect();
+            let mut want = refs.clone();
+            want.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let got = sorted_stably_by(&refs, |t| t.1);
+            assert_eq!(
+                got.iter().map(|t| t.0).collect::<Vec<_>>(),
+                want.iter().map(|t| t.0).collect::<Vec<_>>(),
+                "{n}"
+            );
+        }
+    }
 }
