@@ -136,6 +136,53 @@ impl Plane {
         }
     }
 
+    /// `sample_line` along `L` parallel lines of `n` nodes each — line l from
+    /// `starts[l]`, every line with the step (dx, dy) — into `out[l·n..(l + 1)·n]`:
+    /// the same values. Each line's whole chunks of 16 nodes as `sample_line`
+    /// reads them; the nodes after them gathered across the lines into chunks of
+    /// 4 (the isotropy's four 17-node profiles a sample: their last nodes one chunk
+    /// instead of four single nodes), with one interior test for all the lines.
+    pub fn sample_lines<const L: usize>(&self, starts: [(f32, f32); L], dx: f32, dy: f32, n: usize, out: &mut [f32]) {
+        let Some(last) = n.checked_sub(1) else {
+            return;
+        };
+        let inside = starts.iter().all(|&(x0, y0)| {
+            self.bilinear_interior(x0, y0) && self.bilinear_interior(x0 + last as f32 * dx, y0 + last as f32 * dy)
+        });
+        let first_taps = self.data.get(..self.width + 2);
+        let (true, Some(first_taps), true) = (inside, first_taps, self.data.len() < 1 << 23) else {
+            for (&(x0, y0), o) in starts.iter().zip(out.chunks_exact_mut(n)) {
+                self.sample_line(x0, y0, dx, dy, o);
+            }
+            return;
+        };
+        let n16 = n / 16 * 16;
+        for (&(x0, y0), o) in starts.iter().zip(out.chunks_exact_mut(n)) {
+            line_chunks::<16>(&self.data, self.width, (x0, y0, dx, dy), &mut o[..n16], 0);
+        }
+        // The tails, line by line: node j of line l at (x0 + j·dx, y0 + j·dy), as
+        // `line_chunks` places it; (line, node) pairs four to a chunk.
+        let mut quad = [(0usize, 0.0f32, 0.0f32); 4];
+        let mut held = 0;
+        for (l, &(x0, y0)) in starts.iter().enumerate() {
+            for j in n16..n {
+                let jf = j as f32;
+                quad[held] = (l * n + j, x0 + jf * dx, y0 + jf * dy);
+                held += 1;
+                if held == 4 {
+                    let v = bilinear_chunk(&self.data, self.width, first_taps, &quad.map(|t| t.1), &quad.map(|t| t.2));
+                    for (t, v) in quad.iter().zip(v) {
+                        out[t.0] = v;
+                    }
+                    held = 0;
+                }
+            }
+        }
+        for &(at, x, y) in &quad[..held] {
+            out[at] = bilinear_chunk(&self.data, self.width, first_taps, &[x], &[y])[0];
+        }
+    }
+
     /// `sample_bilinear` where a tap leaves the image (kept out of line so that the
     /// interior path inlines into the profile and line loops that call it).
     #[cold]
@@ -189,29 +236,12 @@ fn line_chunks<const C: usize>(
     let mut c0 = first;
     let mut chunks = out.chunks_exact_mut(C);
     for chunk in &mut chunks {
-        let (mut fx, mut fy, mut at) = ([0.0f32; C], [0.0f32; C], [0u32; C]);
+        let (mut xs, mut ys) = ([0.0f32; C], [0.0f32; C]);
         for k in 0..C {
             let j = (c0 + k) as f32;
-            let (x, y) = (x0 + j * dx, y0 + j * dy);
-            let (xf, yf) = (floor_inside(x), floor_inside(y));
-            fx[k] = x - xf;
-            fy[k] = y - yf;
-            at[k] = (yf * wf + xf + TWO_23).to_bits() - base;
+            (xs[k], ys[k]) = (x0 + j * dx, y0 + j * dy);
         }
-        let (mut a, mut b, mut c, mut d) = ([0.0f32; C], [0.0f32; C], [0.0f32; C], [0.0f32; C]);
-        for k in 0..C {
-            let i = at[k] as usize;
-            // (Never the fallback: the interior test put every node's taps inside.
-            // Without a panic path the loop unrolls and the taps stay in registers.)
-            debug_assert!(i + w + 2 <= data.len(), "node {} of the line outside the plane", c0 + k);
-            let q = data.get(i..i + w + 2).unwrap_or(first_taps);
-            (a[k], b[k], c[k], d[k]) = (q[0], q[1], q[w], q[w + 1]);
-        }
-        for k in 0..C {
-            let top = a[k] + (b[k] - a[k]) * fx[k];
-            let bottom = c[k] + (d[k] - c[k]) * fx[k];
-            chunk[k] = top + (bottom - top) * fy[k];
-        }
+        chunk.copy_from_slice(&bilinear_chunk(data, w, first_taps, &xs, &ys));
         c0 += C;
     }
     for (k, o) in chunks.into_remainder().iter_mut().enumerate() {
@@ -225,6 +255,52 @@ fn line_chunks<const C: usize>(
         let bottom = q[w] + (q[w + 1] - q[w]) * fx;
         *o = top + (bottom - top) * fy;
     }
+}
+
+/// The bilinear values at the `C` interior points (xs[k], ys[k]) of the row-major
+/// plane `data` of width `w` (< 2²³ values; `first_taps` its first w + 2), each as
+/// `sample_bilinear_inside` computes it — in three loops: weights and tap indices
+/// (lane-wise), the four taps' reads (the only scalar part), the two-way
+/// interpolation (lane-wise). See `line_chunks` for the floor and the index.
+#[inline(always)]
+fn bilinear_chunk<const C: usize>(
+    data: &[f32],
+    w: usize,
+    first_taps: &[f32],
+    xs: &[f32; C],
+    ys: &[f32; C],
+) -> [f32; C] {
+    const TWO_23: f32 = 8_388_608.0;
+    let floor_inside = |v: f32| {
+        let r = (v + TWO_23) - TWO_23;
+        r - if r > v { 1.0 } else { 0.0 }
+    };
+    let wf = w as f32;
+    let base = TWO_23.to_bits();
+    let (mut fx, mut fy, mut at) = ([0.0f32; C], [0.0f32; C], [0u32; C]);
+    for k in 0..C {
+        let (x, y) = (xs[k], ys[k]);
+        let (xf, yf) = (floor_inside(x), floor_inside(y));
+        fx[k] = x - xf;
+        fy[k] = y - yf;
+        at[k] = (yf * wf + xf + TWO_23).to_bits() - base;
+    }
+    let (mut a, mut b, mut c, mut d) = ([0.0f32; C], [0.0f32; C], [0.0f32; C], [0.0f32; C]);
+    for k in 0..C {
+        let i = at[k] as usize;
+        // (Never the fallback: the interior test put every node's taps inside.
+        // Without a panic path the loop unrolls and the taps stay in registers.)
+        debug_assert!(i + w + 2 <= data.len(), "point ({}, {}) outside the plane", xs[k], ys[k]);
+        let q = data.get(i..i + w + 2).unwrap_or(first_taps);
+        (a[k], b[k], c[k], d[k]) = (q[0], q[1], q[w], q[w + 1]);
+    }
+    let mut out = [0.0f32; C];
+    for k in 0..C {
+        let top = a[k] + (b[k] - a[k]) * fx[k];
+        let bottom = c[k] + (d[k] - c[k]) * fx[k];
+        out[k] = top + (bottom - top) * fy[k];
+    }
+    out
 }
 
 /// The `w`×`h` rectangle at (`x0`, `y0`) of a row-major `width`×`height` image.
@@ -553,6 +629,31 @@ mod tests {
                 for (j, v) in out.iter().enumerate() {
                     let want = p.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy);
                     assert_eq!(v.to_bits(), want.to_bits(), "line ({x0}, {y0}) + j·({dx}, {dy}), n {n}, node {j}");
+                }
+            }
+        }
+    }
+
+    /// `sample_lines` is `sample_line` per line, bit for bit: four parallel lines
+    /// inside, one leaving the plane (every line then read alone), every split of
+    /// the tails into chunks of 4 and single nodes (lengths 0–40).
+    #[test]
+    fn parallel_lines_are_their_own_lines() {
+        let p = Plane::from_vec(41, 37, (0..41 * 37).map(|i| ((i * 53) % 29) as f32 * 0.071 - 0.5).collect());
+        let cases: [([(f32, f32); 4], f32, f32); 3] = [
+            ([(3.3, 4.1), (5.7, 2.2), (4.0, 6.0), (2.5, 3.5)], 0.37, 0.21),
+            ([(20.9, 30.2), (22.1, 31.0), (19.4, 29.9), (21.0, 28.5)], -0.41, -0.33),
+            ([(3.3, 4.1), (-2.0, 3.0), (4.0, 6.0), (2.5, 3.5)], 0.5, 0.1),
+        ];
+        for (starts, dx, dy) in cases {
+            for n in [0usize, 1, 2, 3, 15, 16, 17, 18, 19, 20, 31, 32, 33, 40] {
+                let mut got = vec![0.0f32; 4 * n];
+                p.sample_lines(starts, dx, dy, n, &mut got);
+                for (l, &(x0, y0)) in starts.iter().enumerate() {
+                    let mut want = vec![0.0f32; n];
+                    p.sample_line(x0, y0, dx, dy, &mut want);
+                    let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got[l * n..(l + 1) * n]), bits(&want), "line {l}, n {n}");
                 }
             }
         }

@@ -3,7 +3,7 @@
 //! band and the evidence per flow direction the worker pools (`fit_fast`'s fallback
 //! where the streak zeros are not identified; its method is documented there).
 
-use super::{profile_intervals, profile_midpoint, push_profile, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
+use super::{profile_intervals, profile_midpoint, push_profiles4, AtLambda, GridTaps, Profiles, MIN_SAMPLES};
 use crate::fit::isotropy_pool::{interp, IsotropyEvidence, GRID};
 use crate::image::{Flow, Plane};
 
@@ -102,9 +102,8 @@ pub(super) fn isotropy_root(
             };
             oblique.push((diff((ux + vx, uy + vy)), diff((ux - vx, uy - vy))));
         }
-        for (ox, oy) in [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)] {
-            push_profile(&mut prof, p, x + ox, yy + oy, dir);
-        }
+        let at = [(ux, uy), (-ux, -uy), (vx, vy), (-vx, -vy)].map(|(ox, oy)| (x + ox, yy + oy));
+        push_profiles4(&mut prof, p, at, dir);
         prof.target.push(0.0);
     }
     let n = prof.len();
@@ -480,6 +479,7 @@ pub(super) type Sample = (usize, usize, f32, f32);
 
 #[cfg(test)]
 mod tests {
+    use super::super::push_profile;
     use super::*;
     use crate::image::Rgb;
 
@@ -501,6 +501,30 @@ mod tests {
         assert_eq!(anisotropy_ratios(-0.2, 0.01), [lo, hi]);
         let [lo, hi] = anisotropy_ratios(0.999, 0.0);
         assert!((lo - 0.1 / 1.9).abs() < 1e-12 && (hi - 19.0).abs() < 1e-9, "{lo} {hi}");
+    }
+
+    /// `push_profiles4` appends what four `push_profile` calls append (nodes, running
+    /// sums, offsets), bit for bit: inside, near and across the plane's edge, at
+    /// interval counts whose node counts leave tails of 1–16 nodes.
+    #[test]
+    fn four_profiles_at_once_are_four_profiles() {
+        let (w, h) = (61usize, 47usize);
+        let p = Plane::from_vec(w, h, (0..w * h).map(|i| ((i * 37) % 101) as f32 * 0.013 - 0.4).collect());
+        let empty = || Profiles { f: vec![], c: vec![], f2: vec![], c2: vec![], offsets: vec![0], target: vec![] };
+        for (x, y) in [(30.0f32, 20.0f32), (1.2, 3.7), (59.5, 45.9), (30.3, 46.5)] {
+            for dir in [(3.1f32, 0.4f32), (-0.7, 5.9), (0.0, 0.2), (8.0, -1.0), (2.0, 2.0), (-4.6, -7.3), (20.0, 3.0)] {
+                let at = [(x + 1.0, y), (x - 1.0, y), (x, y + 1.0), (x, y - 1.0)];
+                let (mut one, mut four) = (empty(), empty());
+                for &(px, py) in &at {
+                    push_profile(&mut one, &p, px, py, dir);
+                }
+                push_profiles4(&mut four, &p, at, dir);
+                let bits = |v: &[f32]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&four.f), bits(&one.f), "({x}, {y}) along {dir:?}");
+                assert_eq!(bits(&four.c), bits(&one.c), "({x}, {y}) along {dir:?}");
+                assert_eq!(four.offsets, one.offsets, "({x}, {y}) along {dir:?}");
+            }
+        }
     }
 
     /// `profile_midpoint` (the coarse root's g(0) without the profiles) is the built

@@ -402,9 +402,37 @@ pub fn fit_accurate(
 }
 
 /// Append the cumulative profile of `p` from (x, y) along `dir` (t ∈ [−½, ½]).
+#[cfg(test)]
 fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32)) {
     append_profile(&mut prof.f, &mut prof.c, p, x, y, dir, profile_intervals(dir));
     prof.offsets.push(prof.f.len());
+}
+
+/// `push_profile` at the four points `at` along one `dir` (the isotropy's four
+/// profiles a sample), the same profiles: their nodes read together
+/// (`Plane::sample_lines`: one interior test, the last nodes as one chunk), their
+/// running sums as `append_profile` takes them.
+fn push_profiles4(prof: &mut Profiles, p: &Plane, at: [(f32, f32); 4], dir: (f32, f32)) {
+    let m = profile_intervals(dir);
+    // `append_profile`'s first node and step, per profile.
+    let inv_m = 1.0 / m as f32;
+    let half_step = 0.5 * inv_m;
+    let starts = at.map(|(x, y)| (x - 0.5 * dir.0, y - 0.5 * dir.1));
+    let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
+    let start = prof.f.len();
+    prof.f.resize(start + 4 * (m + 1), 0.0);
+    p.sample_lines(starts, dx, dy, m + 1, &mut prof.f[start..]);
+    for l in 0..4 {
+        let nodes = &prof.f[start + l * (m + 1)..start + (l + 1) * (m + 1)];
+        let cs = prof.c.len();
+        prof.c.resize(cs + m + 1, 0.0);
+        let mut cum = 0.0f32;
+        for (o, k) in prof.c[cs + 1..].iter_mut().zip(nodes.windows(2)) {
+            cum += half_step * (k[0] + k[1]);
+            *o = cum;
+        }
+        prof.offsets.push(start + (l + 1) * (m + 1));
+    }
 }
 
 /// The intervals of `push_profile`'s profile along `dir`: nodes ≤ ½ px apart.

@@ -555,12 +555,13 @@ fn measure_level(
         // Each channel's flat set: the flattest fraction of the bin's samples where
         // that channel is unclipped; the bin counts when every channel has one.
         let flats: [Vec<_>; 3] = std::array::from_fn(|c| {
-            let mine: Vec<_> = bin.iter().filter(|p| p.4 & (1 << c) != 0).copied().collect();
+            let mut mine: Vec<_> = bin.iter().filter(|p| p.4 & (1 << c) != 0).copied().collect();
             let k = (mine.len() as f64 * BLIND_FLAT_FRACTION).ceil() as usize;
             if mine.len() < BLIND_MIN_PER_BIN || k < BLIND_MIN_FLAT {
                 vec![]
             } else {
-                mine[..k].to_vec()
+                mine.truncate(k);
+                mine
             }
         });
         if flats.iter().any(|f| f.is_empty()) {
