@@ -207,14 +207,7 @@ impl Plane {
 /// `Plane::sample_line`'s nodes `first..first + out.len()` of the line (x0, y0) +
 /// j·(dx, dy) on the row-major plane `data` of width `w`, in chunks of `C` and
 /// then one node at a time; both ends in the interior and the plane under 2²³
-/// values (`sample_line` checks both).
-///
-/// The integer parts without float-to-integer conversions (saturating `as`
-/// casts, which stayed scalar with two fix-ups each: ~22% of the lines' time):
-/// inside, 0 ≤ x < 2²², where adding and subtracting 2²³ rounds x to an integer
-/// exactly and one comparison makes it the floor, which for x ≥ 0 is the
-/// truncation `as` took, so fx and fy are the same floats. The index ⌊y⌋·w + ⌊x⌋
-/// < 2²³ is then exact in an f32 too, and read from the bits of itself plus 2²³.
+/// values (`sample_line` checks both); each chunk's nodes by `bilinear_chunk`.
 #[inline(always)]
 fn line_chunks<const C: usize>(
     data: &[f32],
@@ -223,13 +216,6 @@ fn line_chunks<const C: usize>(
     out: &mut [f32],
     first: usize,
 ) {
-    const TWO_23: f32 = 8_388_608.0;
-    let floor_inside = |v: f32| {
-        let r = (v + TWO_23) - TWO_23;
-        r - if r > v { 1.0 } else { 0.0 }
-    };
-    let wf = w as f32;
-    let base = TWO_23.to_bits();
     let Some(first_taps) = data.get(..w + 2) else {
         return;
     };
@@ -246,14 +232,7 @@ fn line_chunks<const C: usize>(
     }
     for (k, o) in chunks.into_remainder().iter_mut().enumerate() {
         let j = (c0 + k) as f32;
-        let (x, y) = (x0 + j * dx, y0 + j * dy);
-        let (xf, yf) = (floor_inside(x), floor_inside(y));
-        let (fx, fy) = (x - xf, y - yf);
-        let i = ((yf * wf + xf + TWO_23).to_bits() - base) as usize;
-        let q = &data[i..i + w + 2];
-        let top = q[0] + (q[1] - q[0]) * fx;
-        let bottom = q[w] + (q[w + 1] - q[w]) * fx;
-        *o = top + (bottom - top) * fy;
+        *o = bilinear_chunk(data, w, first_taps, &[x0 + j * dx], &[y0 + j * dy])[0];
     }
 }
 
@@ -261,7 +240,14 @@ fn line_chunks<const C: usize>(
 /// plane `data` of width `w` (< 2²³ values; `first_taps` its first w + 2), each as
 /// `sample_bilinear_inside` computes it — in three loops: weights and tap indices
 /// (lane-wise), the four taps' reads (the only scalar part), the two-way
-/// interpolation (lane-wise). See `line_chunks` for the floor and the index.
+/// interpolation (lane-wise).
+///
+/// The integer parts without float-to-integer conversions (saturating `as`
+/// casts, which stayed scalar with two fix-ups each: ~22% of the lines' time):
+/// inside, 0 ≤ x < 2²², where adding and subtracting 2²³ rounds x to an integer
+/// exactly and one comparison makes it the floor, which for x ≥ 0 is the
+/// truncation `as` took, so fx and fy are the same floats. The index ⌊y⌋·w + ⌊x⌋
+/// < 2²³ is then exact in an f32 too, and read from the bits of itself plus 2²³.
 #[inline(always)]
 fn bilinear_chunk<const C: usize>(
     data: &[f32],

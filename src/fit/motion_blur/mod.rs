@@ -423,14 +423,7 @@ fn push_profiles4(prof: &mut Profiles, p: &Plane, at: [(f32, f32); 4], dir: (f32
     prof.f.resize(start + 4 * (m + 1), 0.0);
     p.sample_lines(starts, dx, dy, m + 1, &mut prof.f[start..]);
     for l in 0..4 {
-        let nodes = &prof.f[start + l * (m + 1)..start + (l + 1) * (m + 1)];
-        let cs = prof.c.len();
-        prof.c.resize(cs + m + 1, 0.0);
-        let mut cum = 0.0f32;
-        for (o, k) in prof.c[cs + 1..].iter_mut().zip(nodes.windows(2)) {
-            cum += half_step * (k[0] + k[1]);
-            *o = cum;
-        }
+        append_running_sums(&mut prof.c, &prof.f[start + l * (m + 1)..start + (l + 1) * (m + 1)], half_step);
         prof.offsets.push(start + (l + 1) * (m + 1));
     }
 }
@@ -606,13 +599,18 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
     f.resize(start + m + 1, 0.0);
     p.sample_line(x0, y0, dx, dy, &mut f[start..]);
     let nodes = &f[start..];
-    // The running trapezoid sums written into the grown vector (pushed one at a
-    // time, the sum and the length lived on the stack between pushes: a store and
-    // a reload on every step of the chain; the same sums).
+    append_running_sums(c, nodes, half_step)
+}
+
+/// Append the running trapezoid sums C_0 = 0, C_j = C_{j−1} + h·(f_{j−1} + f_j) of
+/// `nodes` to `c`; returns the last. Written into the grown vector (pushed one at
+/// a time, the sum and the length lived on the stack between pushes: a store and
+/// a reload on every step of the chain; the same sums).
+fn append_running_sums(c: &mut Vec<f32>, nodes: &[f32], half_step: f32) -> f32 {
     let cs = c.len();
-    c.resize(cs + m + 1, 0.0);
+    c.resize(cs + nodes.len(), 0.0);
     let mut cum = 0.0f32;
-    for (o, k) in c[cs + 1..].iter_mut().zip(nodes.windows(2)) {
+    for (o, k) in c[cs..].iter_mut().skip(1).zip(nodes.windows(2)) {
         cum += half_step * (k[0] + k[1]);
         *o = cum;
     }
