@@ -391,10 +391,15 @@ pub fn disc_signature(luma: &Plane, keep: impl Fn(usize, usize, usize) -> bool) 
             let (row, mirror) = (&buf[r * t..(r + 1) * t], &buf[mr * t..(mr + 1) * t]);
             match second {
                 Some(_) => {
-                    for c in 0..t {
-                        let (zi, zj) = (row[c], mirror[(t - c) % t].conj());
-                        p0[c] = 0.25 * (zi + zj).norm_sqr();
-                        p1[c] = 0.25 * (zi - zj).norm_sqr();
+                    // Column c's mirror is column (t − c) mod t: 0 for c = 0, then the
+                    // mirror row read backwards from its end (a division per element
+                    // as `% t` was ~20% of this function's own time by perf).
+                    let unpack =
+                        |zi: Complex32, zj: Complex32| (0.25 * (zi + zj).norm_sqr(), 0.25 * (zi - zj).norm_sqr());
+                    (p0[0], p1[0]) = unpack(row[0], mirror[0].conj());
+                    let cols = p0[1..].iter_mut().zip(&mut p1[1..]);
+                    for ((a, b), (&zi, zm)) in cols.zip(row[1..].iter().zip(mirror[1..].iter().rev())) {
+                        (*a, *b) = unpack(zi, zm.conj());
                     }
                     ln_of(&mut p0);
                     ln_of(&mut p1);
