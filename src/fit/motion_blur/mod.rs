@@ -414,11 +414,9 @@ fn push_profile(prof: &mut Profiles, p: &Plane, x: f32, y: f32, dir: (f32, f32))
 /// running sums as `append_profile` takes them.
 fn push_profiles4(prof: &mut Profiles, p: &Plane, at: [(f32, f32); 4], dir: (f32, f32)) {
     let m = profile_intervals(dir);
-    // `append_profile`'s first node and step, per profile.
-    let inv_m = 1.0 / m as f32;
-    let half_step = 0.5 * inv_m;
-    let starts = at.map(|(x, y)| (x - 0.5 * dir.0, y - 0.5 * dir.1));
-    let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
+    let half_step = 0.5 * (1.0 / m as f32);
+    let lines = at.map(|(x, y)| profile_line(x, y, dir, m));
+    let ((dx, dy), starts) = (lines[0].1, lines.map(|l| l.0));
     let start = prof.f.len();
     prof.f.resize(start + 4 * (m + 1), 0.0);
     p.sample_lines(starts, dx, dy, m + 1, &mut prof.f[start..]);
@@ -442,9 +440,7 @@ fn profile_intervals(dir: (f32, f32)) -> usize {
 /// or the cumulative sums (`isotropy_root`'s coarse scale asks this first).
 fn profile_midpoint(p: &Plane, x: f32, y: f32, dir: (f32, f32)) -> f32 {
     let m = profile_intervals(dir);
-    let inv_m = 1.0 / m as f32;
-    let (x0, y0) = (x - 0.5 * dir.0, y - 0.5 * dir.1);
-    let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
+    let ((x0, y0), (dx, dy)) = profile_line(x, y, dir, m);
     let (j, a) = MeanArgs::midpoint(m + 1);
     let node = |j: usize| p.sample_bilinear(x0 + j as f32 * dx, y0 + j as f32 * dy);
     let nodes = [node(j), node(j + 1)];
@@ -591,15 +587,20 @@ fn append_profile(f: &mut Vec<f32>, c: &mut Vec<f32>, p: &Plane, x: f32, y: f32,
     // Node j at (x, y) + (j/m − ½)·dir, stepped from the first node with one
     // reciprocal (no division per node), all m + 1 read as one line
     // (`Plane::sample_line`: the same values as a bilinear read per node).
-    let inv_m = 1.0 / m as f32;
-    let half_step = 0.5 * inv_m;
-    let (x0, y0) = (x - 0.5 * dir.0, y - 0.5 * dir.1);
-    let (dx, dy) = (dir.0 * inv_m, dir.1 * inv_m);
+    let half_step = 0.5 * (1.0 / m as f32);
+    let ((x0, y0), (dx, dy)) = profile_line(x, y, dir, m);
     let start = f.len();
     f.resize(start + m + 1, 0.0);
     p.sample_line(x0, y0, dx, dy, &mut f[start..]);
     let nodes = &f[start..];
     append_running_sums(c, nodes, half_step)
+}
+
+/// A profile's first node (x, y) − ½·dir and its step dir/m (one reciprocal, no
+/// division per node): every reader of a profile's nodes places them so.
+fn profile_line(x: f32, y: f32, dir: (f32, f32), m: usize) -> ((f32, f32), (f32, f32)) {
+    let inv_m = 1.0 / m as f32;
+    ((x - 0.5 * dir.0, y - 0.5 * dir.1), (dir.0 * inv_m, dir.1 * inv_m))
 }
 
 /// Append the running trapezoid sums C_0 = 0, C_j = C_{j−1} + h·(f_{j−1} + f_j) of
