@@ -45,6 +45,7 @@ fn real_defocused_photo_reads_as_a_disc_of_the_measured_size() {
     assert!(dof.present, "{:?}", dof.diagnostics);
     assert_eq!(dof.kernel, DofKernel::Disc);
     let Some(DofCurve::Constant { c }) = dof.curve else { panic!("{:?}", dof.curve) };
+    println!("σ {c:.2} ± {:?} px vs {truth_sigma:.2} — {}", dof.diagnostics.stderr, dof.diagnostics.reason);
     assert!((c / truth_sigma - 1.0).abs() <= 0.25, "σ {c} vs {truth_sigma}");
     assert!(dof.diagnostics.stderr.is_some_and(|e| e > 0.0 && e < 0.5), "{:?}", dof.diagnostics.stderr);
 }
@@ -126,6 +127,7 @@ fn real_text_defocus_reads_as_the_stated_disc() {
     assert!(dof.present, "{:?}", dof.diagnostics);
     assert_eq!(dof.kernel, DofKernel::Disc);
     let Some(DofCurve::Constant { c }) = dof.curve else { panic!("{:?}", dof.curve) };
+    println!("σ {c:.2} ± {:?} px vs {truth_sigma:.2} — {}", dof.diagnostics.stderr, dof.diagnostics.reason);
     assert!((c / truth_sigma - 1.0).abs() <= 0.25, "σ {c} vs {truth_sigma}");
 }
 
