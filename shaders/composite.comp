@@ -4,7 +4,8 @@
 // out = bg·(1 − α) + C + α·n, alpha = bg.a·(1 − α) + α, with C, α the (blurred) premultiplied virtual layer
 // and n the grain field at the virtual content's luma, faded by the blurred alpha
 // so the grain stops where the object does. Encoded (sRGB) space throughout: the
-// camera model was fitted on encoded frames. Twin: synth::layer::composite.
+// camera model was fitted on encoded frames. Stored premultiplied, or straight
+// (colour / alpha) where the XR layer asks for it. Twin: synth::layer::composite.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(rgba16f, set = 0, binding = 0) uniform readonly image2DArray raw_colour;
@@ -21,7 +22,7 @@ layout(push_constant) uniform Push {
     int use_noise;
     int noise_width;     // packed grain field, one vec4 per pixel (see layer_luma.comp)
     int row1;
-    int pad0;
+    int straight_alpha;  // 1: colour divided by the output alpha (see the end of main)
     int pad1;
 } p;
 
@@ -53,5 +54,13 @@ void main() {
     // over passthrough, blended by the compositor). Premultiplied colour never
     // exceeds its alpha.
     float ao = clamp(bg.a * (1.0 - a) + a, 0.0, 1.0);
-    imageStore(out_image, ivec3(xy, layer), vec4(clamp(rgb, 0.0, ao), ao));
+    vec3 pm = clamp(rgb, 0.0, ao);
+    // Straight alpha for the headset's projection layer, submitted with
+    // XR_COMPOSITION_LAYER_UNPREMULTIPLIED_ALPHA_BIT into an sRGB swapchain: the
+    // compositor decodes the colour to linear light and only then multiplies by
+    // alpha (OpenXR 1.1, "Composition Layer Blending"), so a blurred edge becomes
+    // α·decode(c) over the passthrough. Premultiplied encoded values would be
+    // decoded as decode(α·c): a dark halo on every DoF and MB edge.
+    vec3 outc = p.straight_alpha != 0 ? (ao > 0.0 ? pm / ao : vec3(0.0)) : pm;
+    imageStore(out_image, ivec3(xy, layer), vec4(outc, ao));
 }

@@ -122,9 +122,34 @@ fn bad_glb_is_a_clear_error() {
     assert!(err.to_string().contains("half.glb"), "{err}");
     // Animation sampled outside its keyframes clamps; transforms stay finite.
     let scene = Scene::from_glb(TOY, "toy.glb").expect("asset");
-    for t in [-5.0f32, 0.0, 1.234, 1e6] {
+    for t in [-5.0f64, 0.0, 1.234, 1e6] {
         assert!(scene.world_from_nodes(t, Mat4::IDENTITY).iter().all(|m| m.is_finite()), "t = {t}");
     }
+}
+
+/// The animation clock keeps sub-millisecond steps however long the clock has
+/// run: at 3 days (an XrTime epoch a headset awake that long gives) each 11.1 ms
+/// frame step moves the animated nodes, and by about as much as the step before
+/// (an f32 clock there steps by 31 ms: two frames of three would not move, the
+/// third would jump three steps). Tolerance: consecutive steps within ±50% of
+/// each other, generous for a smooth keyframed animation over 11 ms.
+#[test]
+fn animation_clock_is_exact_after_days() {
+    let scene = Scene::from_glb(TOY, "toy.glb").expect("asset");
+    let base = 259_200.0 + 0.3;
+    let step = 0.011_111;
+    let frames = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0];
+    let poses: Vec<Vec<Mat4>> =
+        frames.iter().map(|k| scene.world_from_nodes(base + *k * step, Mat4::IDENTITY)).collect();
+    let moved = |a: &[Mat4], b: &[Mat4]| -> f32 {
+        a.iter()
+            .zip(b)
+            .map(|(m, n)| (*m - *n).to_cols_array().iter().map(|v| v.abs()).fold(0.0, f32::max))
+            .fold(0.0, f32::max)
+    };
+    let steps: Vec<f32> = poses.windows(2).map(|w| moved(&w[0], &w[1])).collect();
+    assert!(steps.iter().all(|&d| d > 1e-5), "frames that do not move: {steps:?}");
+    assert!(steps.windows(2).all(|w| w[1] < 1.5 * w[0] && w[0] < 1.5 * w[1]), "uneven steps: {steps:?}");
 }
 
 /// The renderer confines the G-buffer pass to the rectangle covering the content

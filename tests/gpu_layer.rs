@@ -269,7 +269,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
             let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             // The composite reads the chain's last output: MB's, else DoF's.
             let last = if fx.motion_blur { &out[e * n..(e + 1) * n] } else { &dof_out[e * n..(e + 1) * n] };
-            let cpu = composite(&bg8, &layers[e].colour, Some(last), None, W, full);
+            let cpu = composite(&bg8, &layers[e].colour, Some(last), None, W, full, false);
             let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             check(&format!("{name}_composite_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
         }
@@ -372,6 +372,55 @@ fn layer_disc_dof_matches_cpu_twin() {
             assert!(cpu[40 * W + 18][3] > 0.05, "half {half_res}: no alpha spread");
         }
     }
+    let msgs = ctx.take_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// The composite over a transparent background (the headset's projection layer),
+/// stored premultiplied and straight, against its twin (the same tolerance as the
+/// other composites: MAE ≤ 1/255, p99 ≤ 4/255, 8-bit output of f16 inputs). Where
+/// the blurred alpha is partial, straight colour is premultiplied colour / alpha:
+/// the two stores differ there by far more than the tolerance.
+#[test]
+fn composite_straight_alpha_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("composite_straight_alpha") else { return };
+    let layers = [test_layer(0), test_layer(1)];
+    let bg = vec![[0.0f32; 4]; W * H];
+    let rig = rig(&ctx, &layers, &bg);
+    let m = model(true, false, false);
+    let full = Rect::full(W, H);
+    let n = W * H;
+    let mut outs = vec![];
+    for straight_alpha in [false, true] {
+        let settings = LayerSettings { dof_half_res: false, straight_alpha, ..LayerSettings::default() };
+        let fxs = chain(&ctx, &rig, settings);
+        run(&ctx, &rig, &fxs, &m, 2);
+        let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
+        let gpu: Vec<[f32; 4]> = rig
+            .output
+            .download()
+            .expect("download")
+            .chunks_exact(4)
+            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
+            .collect();
+        for e in 0..2 {
+            let cpu =
+                composite(&bg, &layers[e].colour, Some(&dof_out[e * n..(e + 1) * n]), None, W, full, straight_alpha);
+            let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+            check(&format!("composite_straight{straight_alpha}_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
+        }
+        outs.push(gpu);
+    }
+    // Non-vacuity: partial alpha exists, and there straight ≠ premultiplied.
+    let partial: Vec<usize> = (0..2 * n).filter(|&i| outs[0][i][3] > 0.2 && outs[0][i][3] < 0.8).collect();
+    assert!(partial.len() > 20, "no partially covered pixels ({})", partial.len());
+    let differs = partial.iter().filter(|&&i| (outs[1][i][0] - outs[0][i][0]).abs() > 8.0 / 255.0).count();
+    assert!(
+        differs * 2 > partial.len(),
+        "straight and premultiplied agree on {} of {} edge pixels",
+        partial.len() - differs,
+        partial.len()
+    );
     let msgs = ctx.take_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }

@@ -91,9 +91,11 @@ struct CompositePush {
     use_noise: i32,
     noise_width: i32,
     row1: i32,
-    pad: [i32; 2],
+    straight_alpha: i32,
+    pad: i32,
 }
 const _: () = assert!(std::mem::size_of::<CompositePush>() == 64);
+const _: () = assert!(std::mem::offset_of!(CompositePush, straight_alpha) == 56);
 
 /// Quality settings: the speed/accuracy knobs measured in BENCHMARKS.md.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -116,6 +118,12 @@ pub struct LayerSettings {
     pub render_interval_s: f32,
     /// Synthesise grain (the paper's pyramid; off = no noise even if present).
     pub grain: bool,
+    /// Store the composite with straight (unpremultiplied) alpha: the colour divided
+    /// by the output alpha. The headset's projection layer uses it with
+    /// XR_COMPOSITION_LAYER_UNPREMULTIPLIED_ALPHA_BIT, so the compositor, which
+    /// decodes an sRGB swapchain to linear light before blending, gets α·decode(c)
+    /// at a blurred edge. Off (premultiplied): the desktop's own composites.
+    pub straight_alpha: bool,
 }
 
 impl Default for LayerSettings {
@@ -132,6 +140,7 @@ impl Default for LayerSettings {
             mb_tile_px: 16,
             render_interval_s: 1.0 / 45.0,
             grain: true,
+            straight_alpha: false,
         }
     }
 }
@@ -529,6 +538,7 @@ impl<'a> LayerEffects<'a> {
             rect: [to4(rects[0]), to4(rects[1])],
             size: [self.width as i32, self.height as i32],
             use_fx: source,
+            straight_alpha: self.settings.straight_alpha as i32,
             ..Default::default()
         };
         if let Some((nodes, range)) = noise_table {

@@ -255,6 +255,13 @@ impl<'a> StereoRenderer<'a> {
     /// The render frame interval (s) motion vectors are measured over: the
     /// predicted display period under OpenXR, which changes with the refresh rate
     /// and with space-warp throttling.
+    /// The eyes' focal length (px per radian at the centre): what the model's
+    /// pixel-sized effects are scaled by. The XR loop sets it from each frame's
+    /// views (the field of view is known only once views are located).
+    pub fn set_eye_pixels_per_radian(&mut self, px_per_rad: f32) {
+        self.eye_pixels_per_radian = Some(px_per_rad).filter(|v| v.is_finite() && *v > 0.0);
+    }
+
     pub fn set_render_interval_s(&mut self, interval_s: f32) {
         if interval_s.is_finite() && interval_s > 0.0 {
             self.settings.render_interval_s = interval_s;

@@ -277,10 +277,13 @@ impl Scene {
         Ok(Self { nodes, meshes, materials, textures, channels, duration_s })
     }
 
-    /// Local transforms at time `t_s` (animations loop over `duration_s`).
-    pub fn local_at(&self, t_s: f32) -> Vec<Trs> {
+    /// Local transforms at time `t_s` (animations loop over `duration_s`). The
+    /// time is f64 and wrapped into the animation before it becomes f32: an
+    /// f32 clock of a long-running session steps in whole milliseconds (7.8 ms
+    /// after a day), and motion vectors and motion blur would jump with it.
+    pub fn local_at(&self, t_s: f64) -> Vec<Trs> {
         let mut local: Vec<Trs> = self.nodes.iter().map(|n| n.rest).collect();
-        let t = if self.duration_s > 0.0 { t_s.rem_euclid(self.duration_s) } else { 0.0 };
+        let t = if self.duration_s > 0.0 { t_s.rem_euclid(self.duration_s as f64) as f32 } else { 0.0 };
         for ch in &self.channels {
             let Some(trs) = local.get_mut(ch.node) else { continue };
             let v = sample(ch, t);
@@ -295,7 +298,7 @@ impl Scene {
 
     /// `world_from_node` for every node at time `t_s`, with `world_from_scene`
     /// placing the whole scene.
-    pub fn world_from_nodes(&self, t_s: f32, world_from_scene: Mat4) -> Vec<Mat4> {
+    pub fn world_from_nodes(&self, t_s: f64, world_from_scene: Mat4) -> Vec<Mat4> {
         let local = self.local_at(t_s);
         let mut world: Vec<Option<Mat4>> = vec![None; self.nodes.len()];
         fn resolve(
@@ -322,7 +325,7 @@ impl Scene {
     }
 
     /// World-space corners of every mesh's bounds at time `t_s`.
-    pub fn world_corners(&self, t_s: f32, world_from_scene: Mat4) -> Vec<Vec3> {
+    pub fn world_corners(&self, t_s: f64, world_from_scene: Mat4) -> Vec<Vec3> {
         let world = self.world_from_nodes(t_s, world_from_scene);
         let mut out = Vec::with_capacity(self.meshes.len() * 8);
         for m in &self.meshes {

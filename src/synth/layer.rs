@@ -528,7 +528,10 @@ pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect) -> Vec<f32> {
 /// `composite.comp` for one eye: out = bg·(1 − α) + C + α·n (n: planar RGB grain
 /// of `rect`'s size, or none), alpha = bg.a·(1 − α) + α (premultiplied "over"),
 /// colour clamped to [0, alpha]; the virtual layer is `fx` (or
-/// `raw`) inside `rect` and empty outside it.
+/// `raw`) inside `rect` and empty outside it. `straight_alpha`: the colour is
+/// stored divided by the output alpha (0 where that is 0), as the headset's
+/// projection layer submits it (`LayerSettings::straight_alpha`).
+#[allow(clippy::too_many_arguments)]
 pub fn composite(
     background: &[[f32; 4]],
     raw: &[[f32; 4]],
@@ -536,6 +539,7 @@ pub fn composite(
     noise: Option<&[f32]>,
     width: usize,
     rect: Rect,
+    straight_alpha: bool,
 ) -> Vec<[f32; 4]> {
     let plane = rect.area();
     (0..background.len())
@@ -560,7 +564,15 @@ pub fn composite(
             // Premultiplied "over": opaque over an opaque background; the virtual
             // alpha over a transparent one (the headset's passthrough layer).
             let ao = (background[i][3] * (1.0 - a) + a).clamp(0.0, 1.0);
-            [rgb[0].clamp(0.0, ao), rgb[1].clamp(0.0, ao), rgb[2].clamp(0.0, ao), ao]
+            let pm = rgb.map(|v| v.clamp(0.0, ao));
+            let out = if !straight_alpha {
+                pm
+            } else if ao > 0.0 {
+                pm.map(|v| v / ao)
+            } else {
+                [0.0; 3]
+            };
+            [out[0], out[1], out[2], ao]
         })
         .collect()
 }

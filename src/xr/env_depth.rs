@@ -16,9 +16,13 @@
 //! OpenGL-style projection (z_ndc = 2d − 1) with near plane `nearZ` and far plane
 //! `farZ`, infinite when `farZ < nearZ` or infinite (spec: XrEnvironmentDepthImageMETA);
 //! the view poses are in the acquire's space at the depth's own capture; the images
-//! are kept in SHADER_READ_ONLY_OPTIMAL and their first row is the bottom of the
-//! view (Meta's GLES samples sample them with uv = ndc·0.5 + 0.5, so t = 0 — the
-//! first row in memory — is ndc y = −1). `ROWS_BOTTOM_UP` holds that assumption.
+//! are kept in SHADER_READ_ONLY_OPTIMAL; their first row is the top of the view.
+//! The extension: "The view is never flipped horizontally nor vertically"
+//! (XrEnvironmentDepthImageViewMETA::fov), and under Vulkan an image's origin is
+//! its top-left corner (XR_KHR_vulkan_enable2, "Swapchain Images"). Meta's GLES
+//! samples sample with uv = ndc·0.5 + 0.5 (t = 0, the first row, at ndc y = −1):
+//! the same image under GL's bottom-left origin; where the spec and a GL sample
+//! could be read apart, the spec is followed. `ROWS_BOTTOM_UP` holds the choice.
 #![allow(unsafe_code)]
 
 use super::{call, XrError};
@@ -32,7 +36,7 @@ use openxr::sys::Handle as _;
 use std::time::{Duration, Instant};
 
 /// Whether the depth images' first row is the bottom of the view (see the module doc).
-pub const ROWS_BOTTOM_UP: bool = true;
+pub const ROWS_BOTTOM_UP: bool = false;
 
 /// Layout the runtime keeps the depth images in while the app may read them.
 const IMAGE_LAYOUT: vk::ImageLayout = vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL;

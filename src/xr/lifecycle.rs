@@ -24,6 +24,9 @@ pub enum Action {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EndReason {
     Exited,
+    /// The app's stop request while the session was not running (IDLE): left
+    /// without waiting for EXITING, which a paused session may never reach.
+    Stopped,
     SessionLost,
     InstanceLost,
 }

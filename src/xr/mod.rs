@@ -21,6 +21,7 @@
 
 mod env_depth;
 mod instance;
+mod layers;
 mod lifecycle;
 mod spacewarp;
 mod views;
@@ -114,6 +115,9 @@ pub struct FrameRecord {
     pub index: u64,
     pub predicted_display_time_ns: i64,
     pub predicted_display_period_ns: i64,
+    /// XrTime of the session's first frame: the scene's animation runs on
+    /// `predicted_display_time_ns − time_origin_ns` (`FrameGeometry::new`).
+    pub time_origin_ns: i64,
     /// The camera-model generation the whole frame used.
     pub model_generation: u64,
     /// CPU time of the frame outside xrWaitFrame (s).
@@ -121,6 +125,11 @@ pub struct FrameRecord {
     /// Time blocked in xrWaitFrame (s).
     pub wait_s: f64,
     pub views: [View; 2],
+    /// The runtime located these views for this frame with valid orientation and
+    /// position. False: tracking was lost and `views` are the last tracked ones,
+    /// shown again (the compositor reprojects them); their poses say nothing about
+    /// where the head is now and must not reach the calibration.
+    pub views_tracked: bool,
     /// A reading of CLOCK_MONOTONIC, CLOCK_BOOTTIME and the XrTime of the former
     /// (XR_KHR_convert_timespec_time), taken on the first frame and about once a
     /// second after: what maps camera timestamps onto the XR clock
@@ -149,9 +158,17 @@ pub struct XrSummary {
     pub env_depth_reads: u64,
     pub display_hz: Option<f32>,
     pub frames_rendered: u64,
-    /// Frames submitted with no layers (session SYNCHRONIZED, not yet visible).
+    /// Frames submitted with no layers: the session not visible, or no view tracked yet.
     pub frames_empty: u64,
-    /// Rendered frames whose predicted display time skipped display periods.
+    /// Frames whose views were not tracked (xrLocateViews without both valid
+    /// bits, or unusable values): the last tracked views shown again, or no layer
+    /// before any was tracked.
+    pub frames_untracked: u64,
+    /// Rendered frames that followed a skipped display slot: the frame's predicted
+    /// display time lies more than 1.5 periods (`predicted_display_period`, the
+    /// app's period: twice the display's under space warp) after the previous
+    /// rendered frame's. Counted from the runtime's predictions, not from the
+    /// display, and only between consecutive rendered frames.
     pub missed_frames: u64,
     pub cpu_s: Vec<f64>,
     pub wait_s: Vec<f64>,
@@ -161,6 +178,14 @@ pub struct XrSummary {
     /// Vulkan validation messages (empty when clean).
     pub vulkan_messages: Vec<String>,
 }
+
+/// The display rate the Quest app asks for: Meta's Passthrough Best Practices
+/// ("To maximize the smoothness of passthrough, it is recommended to use a 72Hz
+/// refresh rate for your application. In flicker-free lighting conditions,
+/// passthrough will synchronize the cameras with the display"), and the rate apps
+/// get by default. The render core's frame budget at 72 Hz (13.9 ms) also leaves
+/// the calibration worker room on the CPU; a higher rate is the user's choice.
+pub const PASSTHROUGH_DISPLAY_HZ: f32 = 72.0;
 
 /// How often environment depth is set up again while it is not permitted.
 const ENV_DEPTH_RETRY: Duration = Duration::from_secs(1);
@@ -181,6 +206,8 @@ pub struct FrameGeometry {
 impl FrameGeometry {
     /// `prev`: the previous rendered frame's display time (ns) and eyes, or None
     /// for the first frame (then the eyes stand still over one display period).
+    /// `origin_ns`: the XrTime the scene's animation starts from (the session's
+    /// first frame).
     pub fn new(
         scene: &Scene,
         local_from_scene: Mat4,
@@ -188,11 +215,14 @@ impl FrameGeometry {
         prev: Option<(i64, [crate::render::Eye; 2])>,
         display_ns: i64,
         period_ns: i64,
+        origin_ns: i64,
     ) -> Self {
         let (prev_t_ns, prev_eyes) = prev.unwrap_or((display_ns - period_ns, eyes));
-        // Scene animation time: seconds of XrTime (f64 first: XrTime is ns).
-        let t_s = (display_ns as f64 * 1e-9) as f32;
-        let t_prev_s = (prev_t_ns as f64 * 1e-9) as f32;
+        // Scene animation time: f64 seconds since the session started, from integer
+        // nanoseconds. XrTime's epoch is the runtime's (often boot): as f32 seconds
+        // it would step by 7.8 ms after a day awake, and motion vectors jump.
+        let t_s = (display_ns - origin_ns) as f64 * 1e-9;
+        let t_prev_s = (prev_t_ns - origin_ns) as f64 * 1e-9;
         Self {
             gbuffer: GBufferFrame {
                 eyes,
@@ -220,6 +250,35 @@ fn view_of(v: &xr::View) -> View {
         orientation: Quat::from_xyzw(q.x, q.y, q.z, q.w),
         position_m: Vec3::new(p.x, p.y, p.z),
         fov_rad: [v.fov.angle_left, v.fov.angle_right, v.fov.angle_up, v.fov.angle_down],
+    }
+}
+
+/// Both views of one frame as located and usable: what the renderer draws and
+/// the projection layer submits.
+#[derive(Clone)]
+struct TrackedViews {
+    views: [View; 2],
+    poses: [xr::Posef; 2],
+    eyes: [crate::render::Eye; 2],
+    fovs: [[f32; 4]; 2],
+}
+
+impl TrackedViews {
+    /// The located views, or why they cannot be used. OpenXR 1.1, "View and
+    /// Projection State": "Applications must not read any of the XrView pose
+    /// orientation fields if [XR_VIEW_STATE_ORIENTATION_VALID_BIT] is unset", and
+    /// likewise the positions without XR_VIEW_STATE_POSITION_VALID_BIT. Values
+    /// that are present but unusable (a zero quaternion) are refused too.
+    fn new(flags: xr::ViewStateFlags, located: &[xr::View], size: (u32, u32)) -> Result<Self, String> {
+        let valid = xr::ViewStateFlags::ORIENTATION_VALID | xr::ViewStateFlags::POSITION_VALID;
+        if !flags.contains(valid) {
+            return Err(format!("view state flags {flags:?} lack ORIENTATION_VALID | POSITION_VALID"));
+        }
+        let [l, r] = located else { return Err(format!("{} views located, not 2", located.len())) };
+        let views = [view_of(l), view_of(r)];
+        let (le, lfov) = eye_from_view(&views[0], size.0, size.1).map_err(|e| e.to_string())?;
+        let (re, rfov) = eye_from_view(&views[1], size.0, size.1).map_err(|e| e.to_string())?;
+        Ok(Self { views, poses: [l.pose, r.pose], eyes: [le, re], fovs: [lfov, rfov] })
     }
 }
 
@@ -266,12 +325,18 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     let blend_modes = instance
         .enumerate_environment_blend_modes(system, xr::ViewConfigurationType::PRIMARY_STEREO)
         .map_err(call("xrEnumerateEnvironmentBlendModes"))?;
-    // Passthrough: ALPHA_BLEND where offered (the compositor blends the layer over
-    // the real world), else XR_FB_passthrough under an OPAQUE frame, else nothing.
-    let (blend_mode, use_fb_passthrough) = if blend_modes.contains(&xr::EnvironmentBlendMode::ALPHA_BLEND) {
-        (xr::EnvironmentBlendMode::ALPHA_BLEND, false)
-    } else if enabled.fb_passthrough {
+    // Passthrough: XR_FB_passthrough wherever it is offered — its layer under the
+    // projection layer in an OPAQUE frame, as Meta's XrPassthrough sample submits
+    // (Meta-OpenXR-SDK, Samples/XrSamples/XrPassthrough/Src/XrPassthrough.cpp) —
+    // even where ALPHA_BLEND is listed too: Meta's Passthrough Camera API needs
+    // passthrough running ("Passthrough feature: must be enabled to access the
+    // Passthrough Camera API", Unity-PassthroughCameraApiSamples README), and the
+    // calibration lives on that camera. Else ALPHA_BLEND where offered (the
+    // compositor blends the layer over the real world), else nothing.
+    let (blend_mode, use_fb_passthrough) = if enabled.fb_passthrough {
         (xr::EnvironmentBlendMode::OPAQUE, true)
+    } else if blend_modes.contains(&xr::EnvironmentBlendMode::ALPHA_BLEND) {
+        (xr::EnvironmentBlendMode::ALPHA_BLEND, false)
     } else {
         log::warn!("OpenXR: no passthrough (neither ALPHA_BLEND nor XR_FB_passthrough): virtual content over black");
         (blend_modes.first().copied().unwrap_or(xr::EnvironmentBlendMode::OPAQUE), false)
@@ -415,7 +480,21 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         }
     }
 
-    let mut renderer: Option<StereoRenderer<'_>> = None;
+    // The renderer and its pipelines are built here, after the session and
+    // swapchains and before the first xrBeginFrame, so the first visible frame does
+    // not pay for them (115–330 ms on lavapipe). Straight alpha: see
+    // `layers::projection_flags`. Over passthrough the background is transparent
+    // (the compositor blends the layer over the real world); without it, opaque
+    // black, so the layer is opaque and its alpha unused.
+    let settings = LayerSettings { straight_alpha: true, ..opts.settings };
+    let mut renderer = StereoRenderer::new(&ctx, opts.scene, w, h, settings, None)?;
+    let background_px: [u8; 4] = if see_through { [0, 0, 0, 0] } else { [0, 0, 0, 255] };
+    renderer.set_background(&background_px.repeat((w * h * 2) as usize))?;
+    if let Some(sw) = &space_warp {
+        renderer.enable_space_warp(sw.size.0, sw.size.1)?;
+    }
+    let flags = layers::projection_flags(see_through);
+
     let mut lifecycle = Lifecycle::default();
     let mut summary = XrSummary {
         runtime: format!("{} {}", props.runtime_name, props.runtime_version),
@@ -431,6 +510,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         display_hz,
         frames_rendered: 0,
         frames_empty: 0,
+        frames_untracked: 0,
         missed_frames: 0,
         cpu_s: vec![],
         wait_s: vec![],
@@ -444,7 +524,12 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     let mut prev: Option<(i64, [crate::render::Eye; 2])> = None;
     let mut last_display_ns: Option<i64> = None;
     let mut last_clock_sample: Option<Instant> = None;
-    let transparent = vec![0u8; (w * h * 4 * 2) as usize];
+    // The scene's animation clock: XrTime of the session's first frame (XrTime
+    // counts from a runtime-chosen epoch, often boot; spec "XrTime").
+    let mut time_origin_ns: Option<i64> = None;
+    // The last views whose orientation and position were both valid, as tracked.
+    let mut last_tracked: Option<TrackedViews> = None;
+    let stop_requested = || opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed));
 
     'frames: loop {
         // Drain the event queue every iteration (spec 2.20: an app that stops
@@ -490,12 +575,23 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
                 _ => {}
             }
         }
+        let stop = stop_requested();
         if !lifecycle.running {
+            // Not running (IDLE before READY, or after STOPPING and xrEndSession):
+            // xrRequestExitSession would fail (ERROR_SESSION_NOT_RUNNING), and on
+            // Android a paused app's session stays in IDLE ("Session Lifecycle":
+            // "the runtime will keep the session state at XR_SESSION_STATE_IDLE")
+            // while onDestroy waits for this loop. A stop request leaves at once:
+            // "xrDestroySession can be called when the session is in any session state".
+            if stop {
+                log::info!("OpenXR: stop requested while the session is not running: leaving");
+                summary.end = EndReason::Stopped;
+                break 'frames;
+            }
             // IDLE/READY wait: poll without spinning (no frame loop yet or any more).
             std::thread::sleep(Duration::from_millis(5));
             continue;
         }
-        let stop = opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed));
         if (stop || opts.frames.is_some_and(|n| summary.frames_rendered >= n)) && !exit_requested {
             session.request_exit().map_err(call("xrRequestExitSession"))?;
             exit_requested = true;
@@ -515,11 +611,44 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         frame_stream.begin().map_err(call("xrBeginFrame"))?;
         let display_ns = state.predicted_display_time.as_nanos();
         let period_ns = state.predicted_display_period.as_nanos();
+        let origin_ns = *time_origin_ns.get_or_insert(display_ns);
+        let empty_frame = |stream: &mut xr::FrameStream<xr::Vulkan>| {
+            stream.end(state.predicted_display_time, blend_mode, &[]).map_err(call("xrEndFrame"))
+        };
         if !state.should_render || !lifecycle.visible() {
-            frame_stream.end(state.predicted_display_time, blend_mode, &[]).map_err(call("xrEndFrame"))?;
+            empty_frame(&mut frame_stream)?;
             summary.frames_empty += 1;
+            // Motion and missed slots are counted across rendered frames in a row.
             prev = None;
+            last_display_ns = None;
             continue;
+        }
+        // Views first: a frame without usable views submits nothing else.
+        let (view_flags, located) = session
+            .locate_views(xr::ViewConfigurationType::PRIMARY_STEREO, state.predicted_display_time, &space)
+            .map_err(call("xrLocateViews"))?;
+        let tracked = match TrackedViews::new(view_flags, &located, (w, h)) {
+            Ok(v) => {
+                last_tracked = Some(v.clone());
+                Some(v)
+            }
+            Err(why) => {
+                if summary.frames_untracked == 0 || last_tracked.is_none() {
+                    log::warn!("OpenXR: views not tracked ({why}): showing the last tracked views");
+                }
+                None
+            }
+        };
+        let views_tracked = tracked.is_some();
+        let Some(views) = tracked.or_else(|| last_tracked.clone()) else {
+            // Nothing tracked yet: no projection layer (a frame may have none).
+            empty_frame(&mut frame_stream)?;
+            summary.frames_untracked += 1;
+            summary.frames_empty += 1;
+            continue;
+        };
+        if !views_tracked {
+            summary.frames_untracked += 1;
         }
         // The clock mapping drifts slowly (the runtime's clock against CLOCK_MONOTONIC):
         // once a second is plenty; a failure is logged, never fatal. Taken on rendered
@@ -551,27 +680,10 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         };
         // One camera-model snapshot for the whole frame (hot-swap contract).
         let snapshot = opts.models.latest();
-        let (_flags, located) = session
-            .locate_views(xr::ViewConfigurationType::PRIMARY_STEREO, state.predicted_display_time, &space)
-            .map_err(call("xrLocateViews"))?;
-        let [lv, rv] = match located.as_slice() {
-            [l, r] => [view_of(l), view_of(r)],
-            _ => return Err(call("xrLocateViews")(xr::sys::Result::ERROR_VALIDATION_FAILURE)),
-        };
-        let (le, lfov) = eye_from_view(&lv, w, h)?;
-        let (re, rfov) = eye_from_view(&rv, w, h)?;
-        let eyes = [le, re];
-        let geometry = FrameGeometry::new(opts.scene, opts.local_from_scene, eyes, prev, display_ns, period_ns);
-        if renderer.is_none() {
-            let mut r = StereoRenderer::new(&ctx, opts.scene, w, h, opts.settings, Some(le.focal_px))?;
-            r.set_background(&transparent)?;
-            if let Some(sw) = &space_warp {
-                r.enable_space_warp(sw.size.0, sw.size.1)?;
-            }
-            renderer = Some(r);
-        }
-        let Some(r) = renderer.as_mut() else { unreachable!("created above") };
-        r.set_render_interval_s(geometry.render_interval_s);
+        let geometry =
+            FrameGeometry::new(opts.scene, opts.local_from_scene, views.eyes, prev, display_ns, period_ns, origin_ns);
+        renderer.set_eye_pixels_per_radian(views.eyes[0].focal_px);
+        renderer.set_render_interval_s(geometry.render_interval_s);
         let input = geometry.input();
 
         let index = swapchain.acquire_image().map_err(call("xrAcquireSwapchainImage"))?;
@@ -582,7 +694,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             Some(sw) => Some(sw.acquire()?),
             None => None,
         };
-        let rendered = r.render_to(&snapshot, &input, true, Some(target), warp_target);
+        let rendered = renderer.render_to(&snapshot, &input, true, Some(target), warp_target);
         // Release even after a failed render: no swapchain may stay acquired.
         swapchain.release_image().map_err(call("xrReleaseSwapchainImage"))?;
         if let Some(sw) = space_warp.as_mut() {
@@ -590,92 +702,23 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         }
         rendered?;
 
-        let full = |(w, h): (u32, u32)| xr::Rect2Di {
-            offset: xr::Offset2Di { x: 0, y: 0 },
-            extent: xr::Extent2Di { width: w as i32, height: h as i32 },
+        let submission = layers::Submission {
+            space: &space,
+            poses: views.poses,
+            fovs: views.fovs,
+            swapchain: swapchain.as_raw(),
+            size: (w, h),
+            space_warp: space_warp.as_ref(),
+            passthrough_layer: passthrough.as_ref().map(|(_, layer)| layer.as_raw()),
+            flags,
         };
-        let sub_image = |chain: xr::sys::Swapchain, size, e: usize| xr::sys::SwapchainSubImage {
-            swapchain: chain,
-            image_rect: full(size),
-            image_array_index: e as u32,
-        };
-        // Per eye: the space-warp info (motion vectors and depth of this frame; the
-        // LOCAL space does not move between frames, so its delta pose is identity).
-        let warp_info: Vec<xr::sys::CompositionLayerSpaceWarpInfoFB> = match &space_warp {
-            Some(sw) => (0..2)
-                .map(|e| xr::sys::CompositionLayerSpaceWarpInfoFB {
-                    ty: xr::sys::CompositionLayerSpaceWarpInfoFB::TYPE,
-                    next: std::ptr::null(),
-                    layer_flags: xr::sys::CompositionLayerSpaceWarpInfoFlagsFB::EMPTY,
-                    motion_vector_sub_image: sub_image(sw.vectors.as_raw(), sw.size, e),
-                    app_space_delta_pose: xr::Posef::IDENTITY,
-                    depth_sub_image: sub_image(sw.depth.as_raw(), sw.size, e),
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                    near_z: crate::render::spacewarp::PLANES_M.0,
-                    far_z: crate::render::spacewarp::PLANES_M.1,
-                })
-                .collect(),
-            None => vec![],
-        };
-        let fovs = [lfov, rfov];
-        let proj_views: Vec<xr::sys::CompositionLayerProjectionView> = (0..2)
-            .map(|e| {
-                let f = fovs[e];
-                xr::sys::CompositionLayerProjectionView {
-                    ty: xr::sys::CompositionLayerProjectionView::TYPE,
-                    next: warp_info.get(e).map_or(std::ptr::null(), |i| i as *const _ as *const _),
-                    pose: located[e].pose,
-                    fov: xr::Fovf { angle_left: f[0], angle_right: f[1], angle_up: f[2], angle_down: f[3] },
-                    sub_image: sub_image(swapchain.as_raw(), (w, h), e),
-                }
-            })
-            .collect();
-        // Over passthrough the layer's (blurred, premultiplied) alpha blends the
-        // virtual edges into the real image (spec 10.6.1: premultiplied unless
-        // UNPREMULTIPLIED_ALPHA is set).
-        let flags = if see_through {
-            xr::CompositionLayerFlags::BLEND_TEXTURE_SOURCE_ALPHA
-        } else {
-            xr::CompositionLayerFlags::EMPTY
-        };
-        // Raw layer structs: openxr 0.22's builders can neither chain the space-warp
-        // info nor build XrCompositionLayerPassthroughFB.
-        let projection = xr::sys::CompositionLayerProjection {
-            ty: xr::sys::CompositionLayerProjection::TYPE,
-            next: std::ptr::null(),
-            layer_flags: flags,
-            space: space.as_raw(),
-            view_count: 2,
-            views: proj_views.as_ptr(),
-        };
-        let passthrough_layer = passthrough.as_ref().map(|(_, layer)| xr::sys::CompositionLayerPassthroughFB {
-            ty: xr::sys::CompositionLayerPassthroughFB::TYPE,
-            next: std::ptr::null(),
-            flags: xr::CompositionLayerFlags::EMPTY,
-            space: <xr::sys::Space as xr::sys::Handle>::NULL,
-            layer_handle: layer.as_raw(),
-        });
-        // SAFETY: CompositionLayerBase is repr(transparent) over the layer header
-        // every layer struct begins with (spec 10.5); the structs, the views and the
-        // space-warp infos they point to outlive the xrEndFrame call that reads them.
-        let layers: Vec<&xr::CompositionLayerBase<'_, xr::Vulkan>> = unsafe {
-            passthrough_layer
-                .as_ref()
-                .map(|p| {
-                    &*(p as *const xr::sys::CompositionLayerPassthroughFB
-                        as *const xr::CompositionLayerBase<'_, xr::Vulkan>)
-                })
-                .into_iter()
-                .chain([&*(&projection as *const xr::sys::CompositionLayerProjection
-                    as *const xr::CompositionLayerBase<'_, xr::Vulkan>)])
-                .collect()
-        };
-        frame_stream.end(state.predicted_display_time, blend_mode, &layers).map_err(call("xrEndFrame"))?;
+        layers::end_frame(&mut frame_stream, state.predicted_display_time, blend_mode, &submission)
+            .map_err(call("xrEndFrame"))?;
 
         let cpu_s = cpu_start.elapsed().as_secs_f64();
         if let Some(last) = last_display_ns {
-            // A display slot skipped: more than 1.5 periods since the last frame.
+            // A display slot skipped: this frame's predicted display time more than
+            // 1.5 of the reported periods after the previous rendered frame's.
             if (display_ns - last) as f64 > 1.5 * period_ns as f64 {
                 summary.missed_frames += 1;
             }
@@ -685,10 +728,12 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             index: summary.frames_rendered,
             predicted_display_time_ns: display_ns,
             predicted_display_period_ns: period_ns,
+            time_origin_ns: origin_ns,
             model_generation: snapshot.generation,
             cpu_s,
             wait_s,
-            views: [lv, rv],
+            views: views.views,
+            views_tracked,
             clock,
             env_depth: depth,
         };
@@ -699,12 +744,10 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         summary.cpu_s.push(cpu_s);
         summary.wait_s.push(wait_s);
         summary.periods_ns.push(period_ns);
-        prev = Some((display_ns, eyes));
+        prev = Some((display_ns, views.eyes));
     }
 
-    if let Some(r) = &renderer {
-        r.finish()?;
-    }
+    renderer.finish()?;
     summary.states = lifecycle.history.clone();
     summary.vulkan_messages = ctx.take_messages();
     // Explicit teardown in the documented order (the drops would do the same).

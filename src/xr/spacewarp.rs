@@ -2,6 +2,16 @@
 //! layers each at the runtime's recommended motion-vector size, acquired and
 //! released with the colour swapchain every frame; the render core fills them
 //! (render::spacewarp).
+//!
+//! Conventions, from the extension's text (XrCompositionLayerSpaceWarpInfoFB):
+//! the motion vector is `CurrNDC − PrevNDC` of the same surface point; the render
+//! core writes the G-buffer's pixel motion (current − previous, +y down) × 2 / eye
+//! size, which is that difference in Vulkan's NDC (+y down; XR_EXT_frame_synthesis,
+//! which supersedes this extension, names "Vulkan-style conventions" for a Vulkan
+//! app). Depth is window depth over `minDepth = 0`, `maxDepth = 1` between `nearZ`
+//! and `farZ` (render::spacewarp::PLANES_M). The depth swapchain "should be created
+//! with XR_SWAPCHAIN_USAGE_SAMPLED_BIT | XR_SWAPCHAIN_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT":
+//! the compositor samples both images, so both carry SAMPLED.
 
 use super::{call, XrError};
 use ash::vk;
@@ -83,7 +93,7 @@ pub(super) fn space_warp_swapchains(
     let create = |format: u32, usage: xr::SwapchainUsageFlags| {
         session.create_swapchain(&xr::SwapchainCreateInfo {
             create_flags: xr::SwapchainCreateFlags::EMPTY,
-            usage_flags: usage | xr::SwapchainUsageFlags::TRANSFER_DST,
+            usage_flags: usage | xr::SwapchainUsageFlags::SAMPLED | xr::SwapchainUsageFlags::TRANSFER_DST,
             format,
             sample_count: 1,
             width: size.0,

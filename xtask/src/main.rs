@@ -19,6 +19,23 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."))
 }
 
+/// Where cargo puts what it builds: `CARGO_TARGET_DIR` when set (a relative one is
+/// read from the directory the builds run in, the workspace root: see `cargo`),
+/// else `<workspace>/target`.
+fn target_dir() -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR").filter(|v| !v.is_empty()) {
+        Some(dir) => {
+            let dir = PathBuf::from(dir);
+            if dir.is_absolute() {
+                dir
+            } else {
+                root().join(dir)
+            }
+        }
+        None => root().join("target"),
+    }
+}
+
 fn cargo(args: &[&str]) -> Result<String> {
     eprintln!("$ cargo {}", args.join(" "));
     let out = Command::new(env!("CARGO"))
@@ -36,7 +53,7 @@ fn cargo(args: &[&str]) -> Result<String> {
 }
 
 fn bench() -> Result<()> {
-    let dir = root().join("target/bench");
+    let dir = target_dir().join("bench");
     std::fs::create_dir_all(&dir).context("creating target/bench")?;
     let quality = cargo(&["bench", "--bench", "quality"])?;
     std::fs::write(dir.join("quality.md"), quality).context("writing target/bench/quality.md")?;
@@ -63,7 +80,7 @@ fn xr_runtime(release: bool) -> Result<()> {
         args.push("--release");
     }
     cargo(&args)?;
-    let dir = root().join("target").join(if release { "release" } else { "debug" });
+    let dir = target_dir().join(if release { "release" } else { "debug" });
     let lib = dir.join("libba_xr_runtime.so");
     anyhow::ensure!(lib.exists(), "{} was not built", lib.display());
     let template = std::fs::read_to_string(root().join("tests/xr-runtime/runtime.json.in"))
@@ -85,8 +102,8 @@ fn xr_runtime(release: bool) -> Result<()> {
 fn xr_bench() -> Result<String> {
     xr_runtime(true)?;
     cargo(&["build", "--release", "--bin", "blind-augment"])?;
-    let manifest = root().join("target/release/ba_xr_runtime.json");
-    let bin = root().join("target/release/blind-augment");
+    let manifest = target_dir().join("release/ba_xr_runtime.json");
+    let bin = target_dir().join("release/blind-augment");
     let mut out = String::new();
     for (eye, extensions) in [
         ("256x256", "passthrough,refresh_rate"),

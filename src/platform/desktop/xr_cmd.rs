@@ -30,7 +30,8 @@ pub fn format_summary(s: &XrSummary) -> String {
     let period_ms = percentile(&s.periods_ns.iter().map(|&p| p as f64).collect::<Vec<_>>(), 0.5) * 1e-6;
     format!(
         "runtime: {}\nsystem: {} on {}\neye: {}×{} (format {}), blend {:?}, passthrough {}, space warp {}, display {}\n\
-         frames: {} rendered, {} submitted empty (not yet visible), {} missed display slots\n\
+         frames: {} rendered, {} submitted empty (not visible, or no view tracked yet), {} untracked (the last tracked views shown), \
+         {} after a skipped display slot (from predicted display times)\n\
          CPU per frame (outside xrWaitFrame): median {:.2} ms, p95 {:.2} ms, max {:.2} ms\n\
          waiting in xrWaitFrame: {:.0}% of the loop; predicted display period {:.2} ms\n\
          session states: {}\nended: {:?}",
@@ -46,6 +47,7 @@ pub fn format_summary(s: &XrSummary) -> String {
         s.display_hz.map_or("runtime default".into(), |h| format!("{h} Hz")),
         s.frames_rendered,
         s.frames_empty,
+        s.frames_untracked,
         s.missed_frames,
         ms(percentile(&s.cpu_s, 0.5)),
         ms(percentile(&s.cpu_s, 0.95)),
@@ -101,7 +103,7 @@ pub fn run(args: XrArgs) -> Result<()> {
         );
     }
     match summary.end {
-        EndReason::Exited => Ok(()),
+        EndReason::Exited | EndReason::Stopped => Ok(()),
         EndReason::SessionLost => anyhow::bail!("the OpenXR session was lost (the runtime reported LOSS_PENDING)"),
         EndReason::InstanceLost => anyhow::bail!("the OpenXR instance was lost (XrEventDataInstanceLossPending)"),
     }

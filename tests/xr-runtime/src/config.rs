@@ -3,13 +3,15 @@
 //!
 //! | variable | meaning | default |
 //! |---|---|---|
+//! | `BA_XR_PROFILE` | `quest3`: the defaults below become a Meta Quest 3's as Meta documents it (see `Profile`); other variables still override | none |
+//! | `BA_XR_TIME_ORIGIN_S` | XrTime at instance creation, s (headsets count from boot) | 259200 (3 days) |
 //! | `BA_XR_DISPLAY_HZ` | display refresh rate at start | 90 |
 //! | `BA_XR_REFRESH_RATES` | rates XR_FB_display_refresh_rate offers | 72,90,120 |
 //! | `BA_XR_EYE_SIZE` | recommended image rect per eye, `WxH` | 1680x1760 |
-//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, `env_depth` (XR_META_environment_depth), or `none` | passthrough,refresh_rate,space_warp,convert_timespec |
+//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, `env_depth` (XR_META_environment_depth), or `none` | refresh_rate,space_warp,convert_timespec (quest3: all) |
 //! | `BA_XR_ENV_DEPTH_DENIALS` | refuse this many environment-depth provider creations (XR_ERROR_NOT_PERMITTED_PASSTHROUGH_FB: the spatial-data permission not yet granted) | 0 |
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
-//! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N` | none |
+//! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N`, `pause@N` (the session is stopped and stays IDLE after xrEndSession, as an Android app put in the background: no EXITING), `untracked@N..M` (xrLocateViews for frames N to M − 1 without ORIENTATION_VALID/POSITION_VALID, zero quaternions) | none |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
 //! | `BA_XR_HEAD` | head path: `sway` (±4 cm at 0.5 Hz, ±3° yaw) or `still` | sway |
@@ -29,6 +31,23 @@ pub enum Command {
     Unfocus,
     /// ... and back.
     Focus,
+    /// STOPPING, then IDLE after xrEndSession, and nothing more (spec "Session
+    /// Lifecycle": a session "temporarily paused in the background" stays IDLE).
+    Pause,
+    /// Views not located (no valid bits) from this frame up to the given one.
+    Untracked(u64),
+}
+
+/// A device whose documented behaviour the runtime imitates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Profile {
+    /// Meta Quest 3: XR_FB_passthrough, space warp, XR_META_environment_depth,
+    /// display refresh rates 72, 80, 90 and 120 Hz at 72 Hz by default (Meta's
+    /// display refresh rate docs: "The default display refresh rate for apps is 72
+    /// Hz"), 1680×1760 recommended per eye; OPAQUE and ALPHA_BLEND both listed,
+    /// the harder case for the app's choice: Meta's camera API still needs
+    /// passthrough running through XR_FB_passthrough.
+    Quest3,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,6 +75,9 @@ pub struct Config {
     pub png_frames: Vec<u64>,
     pub report: Option<PathBuf>,
     pub head: Head,
+    pub profile: Option<Profile>,
+    /// XrTime at instance creation (s).
+    pub time_origin_s: f64,
 }
 
 fn var(name: &str) -> Option<String> {
@@ -65,6 +87,12 @@ fn var(name: &str) -> Option<String> {
 impl Config {
     /// Read the environment; a malformed value is an error naming the variable.
     pub fn from_env() -> Result<Self, String> {
+        let profile = match var("BA_XR_PROFILE").as_deref() {
+            None => None,
+            Some("quest3") => Some(Profile::Quest3),
+            Some(other) => return Err(format!("BA_XR_PROFILE: unknown profile {other:?} (known: quest3)")),
+        };
+        let quest3 = profile == Some(Profile::Quest3);
         let display_hz = match var("BA_XR_DISPLAY_HZ") {
             Some(s) => s
                 .trim()
@@ -72,6 +100,7 @@ impl Config {
                 .ok()
                 .filter(|v| v.is_finite() && *v > 0.0 && *v <= 1000.0)
                 .ok_or(format!("BA_XR_DISPLAY_HZ={s:?}: expected a refresh rate in Hz, e.g. 90"))?,
+            None if quest3 => 72.0,
             None => 90.0,
         };
         let refresh_rates = match var("BA_XR_REFRESH_RATES") {
@@ -80,6 +109,7 @@ impl Config {
                 .map(|r| r.trim().parse::<f32>().ok().filter(|v| v.is_finite() && *v > 0.0))
                 .collect::<Option<Vec<_>>>()
                 .ok_or(format!("BA_XR_REFRESH_RATES={s:?}: expected comma-separated rates in Hz"))?,
+            None if quest3 => vec![72.0, 80.0, 90.0, 120.0],
             None => vec![72.0, 90.0, 120.0],
         };
         let eye_size = match var("BA_XR_EYE_SIZE") {
@@ -92,8 +122,17 @@ impl Config {
             }
             None => (1680, 1760),
         };
-        let extensions =
-            var("BA_XR_EXTENSIONS").unwrap_or_else(|| "passthrough,refresh_rate,space_warp,convert_timespec".into());
+        let extensions = var("BA_XR_EXTENSIONS").unwrap_or_else(|| {
+            // Without a profile: a generic runtime, passthrough by ALPHA_BLEND only
+            // (the path Debian's core validation layer accepts: it rejects
+            // XrCompositionLayerPassthroughFB).
+            if quest3 {
+                "passthrough,refresh_rate,space_warp,convert_timespec,env_depth"
+            } else {
+                "refresh_rate,space_warp,convert_timespec"
+            }
+            .into()
+        });
         let mut ext = (false, false, false, false);
         let mut env_depth = false;
         for e in extensions.split(',').map(str::trim) {
@@ -123,15 +162,25 @@ impl Config {
         if let Some(s) = var("BA_XR_SCRIPT") {
             for item in s.split(',').map(str::trim) {
                 let (what, at) = item.split_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
-                let at: u64 = at.parse().map_err(|_| format!("BA_XR_SCRIPT: {item:?}: frame is not a number"))?;
                 let cmd = match what {
                     "exit" => Command::Exit,
                     "loss" => Command::Loss,
                     "instance_loss" => Command::InstanceLoss,
                     "unfocus" => Command::Unfocus,
                     "focus" => Command::Focus,
+                    "pause" => Command::Pause,
+                    "untracked" => {
+                        let (from, to) = at
+                            .split_once("..")
+                            .and_then(|(a, b)| Some((a.parse::<u64>().ok()?, b.parse::<u64>().ok()?)))
+                            .filter(|(a, b)| a < b)
+                            .ok_or(format!("BA_XR_SCRIPT: {item:?}: expected untracked@N..M with N < M"))?;
+                        script.push((from, Command::Untracked(to)));
+                        continue;
+                    }
                     other => return Err(format!("BA_XR_SCRIPT: unknown command {other:?}")),
                 };
+                let at: u64 = at.parse().map_err(|_| format!("BA_XR_SCRIPT: {item:?}: frame is not a number"))?;
                 script.push((at, cmd));
             }
         }
@@ -146,6 +195,15 @@ impl Config {
         let env_depth_denials = match var("BA_XR_ENV_DEPTH_DENIALS") {
             Some(s) => s.trim().parse().map_err(|_| format!("BA_XR_ENV_DEPTH_DENIALS={s:?}: expected a count"))?,
             None => 0,
+        };
+        let time_origin_s = match var("BA_XR_TIME_ORIGIN_S") {
+            Some(s) => s
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v >= 1.0 && *v <= 1e8)
+                .ok_or(format!("BA_XR_TIME_ORIGIN_S={s:?}: expected seconds between 1 and 1e8"))?,
+            None => 3.0 * 86_400.0,
         };
         let head = match var("BA_XR_HEAD").as_deref() {
             None | Some("sway") => Head::Sway,
@@ -168,6 +226,8 @@ impl Config {
             png_frames,
             report: var("BA_XR_REPORT").map(PathBuf::from),
             head,
+            profile,
+            time_origin_s,
         })
     }
 }

@@ -3,7 +3,9 @@
 //! app's device, and acquires that write the depth of a known scene — the plane
 //! `PLANE` in LOCAL space — as seen from each eye 30 ms before the display time
 //! (the depth's own capture, as on a headset: its poses are not the display's).
-//! Row 0 of each layer is the bottom of the view (the app's `ROWS_BOTTOM_UP`); the
+//! Row 0 of each layer is the top of the view: the extension says the view "is
+//! never flipped horizontally nor vertically", and under Vulkan an image's origin is
+//! its top-left corner (XR_KHR_vulkan_enable2, "Swapchain Images"); the
 //! projection has near plane `NEAR_M` and an infinite far plane (farZ = +∞); texels
 //! that see no plane hold 1 (the far plane). Checked as the spec says: one acquire
 //! per frame, inside xrBeginFrame/xrEndFrame, on a started provider. Every acquire
@@ -44,7 +46,7 @@ pub(crate) struct DepthChain {
     next: u32,
 }
 
-/// The plane's depth along each texel's ray, NDC-encoded (row 0 at the bottom).
+/// The plane's depth along each texel's ray, NDC-encoded (row 0 at the top).
 fn render(world_from_view: &Pose, fov: &xr::Fovf, texels: &mut Vec<u16>) {
     let (w, h) = SIZE;
     let (p0, n) = PLANE;
@@ -53,7 +55,7 @@ fn render(world_from_view: &Pose, fov: &xr::Fovf, texels: &mut Vec<u16>) {
     let (l, r, u, d) = (fov.angle_left.tan(), fov.angle_right.tan(), fov.angle_up.tan(), fov.angle_down.tan());
     let to_plane = dot([p0[0] - o[0], p0[1] - o[1], p0[2] - o[2]], n);
     for row in 0..h {
-        let ty = d + (row as f32 + 0.5) * (u - d) / h as f32;
+        let ty = u - (row as f32 + 0.5) * (u - d) / h as f32;
         for col in 0..w {
             let tx = l + (col as f32 + 0.5) * (r - l) / w as f32;
             // View ray (tx, ty, −1): its parameter at the plane is the view depth.

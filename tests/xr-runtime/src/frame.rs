@@ -53,7 +53,7 @@ pub(crate) unsafe extern "system" fn wait_frame(
     }
     // Decide under the lock, sleep without it (other threads may call in meanwhile:
     // the spec allows xrWaitFrame on one thread and the rest on another).
-    let (wake_ns, display_ns, period, should_render, epoch, result) = {
+    let (wake_ns, display_ns, period, should_render, (epoch, origin_ns), result) = {
         let mut guard = lock();
         let Some(rt) = guard.as_mut() else { return xr::Result::ERROR_HANDLE_INVALID };
         if rt.instance_lost {
@@ -95,12 +95,12 @@ pub(crate) unsafe extern "system" fn wait_frame(
             target,
             period,
             should_render,
-            rt.epoch,
+            (rt.epoch, rt.origin_ns()),
             if lost { xr::Result::SESSION_LOSS_PENDING } else { xr::Result::SUCCESS },
         )
     };
-    // Sleep until the wake time (XrTime is 1 s + time since the epoch, see now_ns).
-    let wake = epoch + std::time::Duration::from_nanos((wake_ns - 1_000_000_000).max(0) as u64);
+    // Sleep until the wake time (XrTime is the origin + time since the epoch, see now_ns).
+    let wake = epoch + std::time::Duration::from_nanos((wake_ns - origin_ns).max(0) as u64);
     let now = std::time::Instant::now();
     if wake > now {
         std::thread::sleep(wake - now);
@@ -139,6 +139,8 @@ pub(crate) struct SubmittedView {
     pub swapchain: u64,
     pub rect: xr::Rect2Di,
     pub array_index: u32,
+    /// The swapchain's format is sRGB: sampled, its colour is decoded to linear.
+    pub srgb: bool,
 }
 
 pub(crate) unsafe extern "system" fn end_frame(session: xr::Session, info: *const xr::FrameEndInfo) -> xr::Result {
@@ -189,7 +191,7 @@ pub(crate) unsafe extern "system" fn end_frame(session: xr::Session, info: *cons
             "layers": layer_json,
         }));
         if rt.config.png_frames.contains(&frame_no) {
-            if let Err(e) = write_pngs(rt, frame_no, &layers) {
+            if let Err(e) = write_pngs(rt, frame_no, &layers, info.environment_blend_mode) {
                 eprintln!("ba-xr-runtime: frame {frame_no}: writing PNG: {e}");
                 return xr::Result::ERROR_RUNTIME_FAILURE;
             }
@@ -251,6 +253,18 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                 for v in 0..2 {
                     // SAFETY: `view_count` views at `views`.
                     let view = unsafe { &*p.views.add(v) };
+                    // "xrEndFrame ... XR_ERROR_POSE_INVALID": a projection view's
+                    // pose must be a valid pose (unit quaternion, finite).
+                    let (q, t) = (view.pose.orientation, view.pose.position);
+                    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+                    if !(norm.is_finite()
+                        && (norm - 1.0).abs() < 1e-3
+                        && t.x.is_finite()
+                        && t.y.is_finite()
+                        && t.z.is_finite())
+                    {
+                        return Err(xr::Result::ERROR_POSE_INVALID);
+                    }
                     let sub = view.sub_image;
                     let Some(sc) = rt.swapchains.get(&sub.swapchain.into_raw()) else {
                         return Err(xr::Result::ERROR_HANDLE_INVALID);
@@ -311,12 +325,14 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                         "format": sc.format.as_raw(),
                         "fov": fov_json(&view.fov),
                         "position": [view.pose.position.x, view.pose.position.y, view.pose.position.z],
+                        "orientation": [q.x, q.y, q.z, q.w],
                         "space_warp": sw,
                     }));
                     views.push(SubmittedView {
                         swapchain: sub.swapchain.into_raw(),
                         rect: r,
                         array_index: sub.image_array_index,
+                        srgb: sc.format == ash::vk::Format::R8G8B8A8_SRGB,
                     });
                 }
                 let f = p.layer_flags;
@@ -363,37 +379,79 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
 }
 
 /// The synthetic "camera" image the test runtime shows as passthrough: a smooth
-/// gradient with a coarse checker, so a blend with it is visible in a PNG.
+/// gradient with a coarse checker, so a blend with it is visible in a PNG. Values
+/// are sRGB-encoded, as a camera image on the display.
 fn passthrough_texel(x: u32, y: u32, w: u32, h: u32) -> [f32; 3] {
     let (u, v) = (x as f32 / w.max(1) as f32, y as f32 / h.max(1) as f32);
     let check = if ((x / 32) + (y / 32)).is_multiple_of(2) { 0.08 } else { 0.0 };
     [0.25 + 0.4 * u + check, 0.35 + check, 0.25 + 0.4 * v + check]
 }
 
-/// Write, per eye, the projection layer as submitted (`frame_NNNN_eyeE.png`, RGBA),
-/// the passthrough image where a passthrough layer was submitted
-/// (`frame_NNNN_eyeE_passthrough.png`) and the composition of all layers in order (`frame_NNNN_eyeE_composited.png`):
-/// passthrough where a running passthrough layer stands, then each projection
-/// layer blended by its flags (premultiplied by default, spec 10.6.1). Blending is
-/// on the encoded values, as the desktop composite does; a headset compositor blends
-/// in linear light.
-fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer]) -> Result<(), String> {
+/// sRGB's decoding (IEC 61966-2-1), what sampling an sRGB image does.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// sRGB's encoding, for writing linear values to an 8-bit PNG.
+pub fn linear_to_srgb(v: f32) -> f32 {
+    if v <= 0.0031308 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+fn to8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Write, per eye, the projection layer as submitted (`frame_NNNN_eyeE.png`, RGBA,
+/// the swapchain's bytes), the passthrough image (`frame_NNNN_eyeE_passthrough.png`,
+/// where passthrough shows: a running passthrough layer, or the ALPHA_BLEND
+/// environment blend mode) and what the compositor shows
+/// (`frame_NNNN_eyeE_composited.png`, sRGB-encoded) — composed as OpenXR 1.1 says,
+/// not as the app composes on desktop:
+/// * "Swapchain Image Management": composition is in linear light; an sRGB
+///   swapchain's colour is decoded when sampled, any other format read as linear;
+/// * "Composition Layer Blending": layer alpha is 1 unless
+///   BLEND_TEXTURE_SOURCE_ALPHA is set; UNPREMULTIPLIED_ALPHA first does
+///   `LayerColor.RGB *= LayerColor.A`; then, layer by layer in submission order,
+///   `CompositeColor = LayerColor + CompositeColor·(1 − LayerColor.A)`, starting
+///   from zero; a passthrough layer (XR_FB_passthrough) stands in for the camera
+///   image, opaque;
+/// * "Environment Blend Mode": OPAQUE shows the composite's colour and ignores its
+///   alpha; ALPHA_BLEND blends the composite over the real world by its alpha
+///   (premultiplied, as composed).
+fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer], blend: xr::EnvironmentBlendMode) -> Result<(), String> {
     let Some(dir) = &rt.config.png_dir else { return Ok(()) };
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let vk = rt.vk.as_ref().ok_or("no Vulkan state")?;
     let (w, h) = rt.config.eye_size;
+    let alpha_blend = blend == xr::EnvironmentBlendMode::ALPHA_BLEND;
+    let save_passthrough = |eye: usize| -> Result<(), String> {
+        let mut pt = image::RgbImage::new(w, h);
+        for (x, y, px) in pt.enumerate_pixels_mut() {
+            *px = image::Rgb(passthrough_texel(x, y, w, h).map(to8));
+        }
+        let p = dir.join(format!("frame_{frame:04}_eye{eye}_passthrough.png"));
+        pt.save(&p).map_err(|e| format!("{}: {e}", p.display()))
+    };
+    // The camera image as the compositor uses it: its 8-bit values, decoded.
+    let world = |x: u32, y: u32| passthrough_texel(x, y, w, h).map(|v| srgb_to_linear(to8(v) as f32 / 255.0));
     for eye in 0..2 {
-        let mut canvas = vec![[0.0f32; 3]; (w * h) as usize];
+        // Linear RGBA, premultiplied.
+        let mut canvas = vec![[0.0f32; 4]; (w * h) as usize];
         for layer in layers {
             if layer.passthrough {
-                let mut pt = image::RgbImage::new(w, h);
+                save_passthrough(eye)?;
                 for (i, c) in canvas.iter_mut().enumerate() {
-                    let (x, y) = (i as u32 % w, i as u32 / w);
-                    *c = passthrough_texel(x, y, w, h);
-                    pt.put_pixel(x, y, image::Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)));
+                    let [r, g, b] = world(i as u32 % w, i as u32 / w);
+                    *c = [r, g, b, 1.0];
                 }
-                let p = dir.join(format!("frame_{frame:04}_eye{eye}_passthrough.png"));
-                pt.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
             }
             let Some(view) = layer.views.get(eye) else { continue };
             let sc = rt.swapchains.get(&view.swapchain).ok_or("swapchain gone")?;
@@ -408,22 +466,37 @@ fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer]) -> Result<(), String> 
                     sub.put_pixel(x, y, image::Rgba(px));
                     if x < w && y < h {
                         let c = &mut canvas[(y * w + x) as usize];
+                        // Alpha is never sRGB-encoded (Vulkan's sRGB formats decode RGB only).
                         let a = if layer.source_alpha { px[3] as f32 / 255.0 } else { 1.0 };
+                        let mut colour = [0.0f32; 3];
                         for k in 0..3 {
                             let s = px[k] as f32 / 255.0;
-                            let s = if layer.unpremultiplied { s * a } else { s };
-                            c[k] = s + c[k] * (1.0 - a);
+                            let s = if view.srgb { srgb_to_linear(s) } else { s };
+                            colour[k] = if layer.unpremultiplied { (s * a).clamp(0.0, 1.0) } else { s };
                         }
+                        for k in 0..3 {
+                            c[k] = colour[k] + c[k] * (1.0 - a);
+                        }
+                        c[3] = a + c[3] * (1.0 - a);
                     }
                 }
             }
             let p = dir.join(format!("frame_{frame:04}_eye{eye}.png"));
             sub.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
         }
+        if alpha_blend {
+            save_passthrough(eye)?;
+        }
         let mut out = image::RgbImage::new(w, h);
         for (i, c) in canvas.iter().enumerate() {
-            let px = c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
-            out.put_pixel(i as u32 % w, i as u32 / w, image::Rgb(px));
+            let (x, y) = (i as u32 % w, i as u32 / w);
+            let shown: [f32; 3] = if alpha_blend {
+                let real = world(x, y);
+                std::array::from_fn(|k| c[k] + real[k] * (1.0 - c[3]))
+            } else {
+                [c[0], c[1], c[2]]
+            };
+            out.put_pixel(x, y, image::Rgb(shown.map(|v| to8(linear_to_srgb(v.clamp(0.0, 1.0))))));
         }
         let p = dir.join(format!("frame_{frame:04}_eye{eye}_composited.png"));
         out.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;

@@ -85,15 +85,21 @@ pub(crate) struct Runtime {
 }
 
 impl Runtime {
+    /// XrTime at `epoch` (instance creation): `BA_XR_TIME_ORIGIN_S`. The spec
+    /// ("XrTime") leaves the epoch to the runtime; headsets count from boot, so the
+    /// default is days, and an app that keeps XrTime in f32 seconds shows it.
+    pub fn origin_ns(&self) -> i64 {
+        (self.config.time_origin_s * 1e9).round() as i64
+    }
+
     pub fn now_ns(&self) -> i64 {
-        // XrTime is opaque, monotonic and positive; 1 s of headroom keeps it away from 0.
-        1_000_000_000 + self.epoch.elapsed().as_nanos() as i64
+        self.origin_ns() + self.epoch.elapsed().as_nanos() as i64
     }
 
     /// XrTime of a CLOCK_MONOTONIC reading: the runtime's clock is CLOCK_MONOTONIC
-    /// (what `Instant` reads on Linux) shifted so that `epoch` is at 1 s.
+    /// (what `Instant` reads on Linux) shifted so that `epoch` is at the origin.
     pub fn xr_time_of_monotonic(&self, monotonic_ns: i64) -> i64 {
-        1_000_000_000 + monotonic_ns - self.epoch_monotonic_ns
+        self.origin_ns() + monotonic_ns - self.epoch_monotonic_ns
     }
 
     pub fn handle(&mut self) -> u64 {
@@ -785,7 +791,7 @@ unsafe extern "system" fn convert_time_to_timespec_time(
     if timespec_time.is_null() || time.as_nanos() <= 0 {
         return xr::Result::ERROR_TIME_INVALID;
     }
-    let mono = time.as_nanos() - 1_000_000_000 + rt.epoch_monotonic_ns;
+    let mono = time.as_nanos() - rt.origin_ns() + rt.epoch_monotonic_ns;
     // SAFETY: non-null pointer from the application.
     unsafe {
         *timespec_time = libc::timespec {

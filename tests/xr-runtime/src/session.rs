@@ -14,6 +14,10 @@ pub(crate) struct Session {
     /// Between xrBeginSession and xrEndSession.
     pub running: bool,
     pub exit_requested: bool,
+    /// Paused by the script: after xrEndSession the session stays IDLE.
+    pub paused: bool,
+    /// Views are not located until this many frames have ended (`untracked@N..M`).
+    pub untracked_until: Option<u64>,
     pub lost: bool,
     pub display_hz: f32,
     pub blend_mode: Option<xr::EnvironmentBlendMode>,
@@ -87,6 +91,17 @@ impl Runtime {
                 Command::Focus => {
                     if self.state() == Some(xr::SessionState::VISIBLE) {
                         self.set_state(xr::SessionState::FOCUSED);
+                    }
+                }
+                Command::Pause => {
+                    if let Some(s) = self.session.as_mut() {
+                        s.paused = true;
+                    }
+                    self.stop();
+                }
+                Command::Untracked(until) => {
+                    if let Some(s) = self.session.as_mut() {
+                        s.untracked_until = Some(until);
                     }
                 }
             }
@@ -167,6 +182,8 @@ pub(crate) unsafe extern "system" fn create_session(
             state: xr::SessionState::UNKNOWN,
             running: false,
             exit_requested: false,
+            paused: false,
+            untracked_until: None,
             lost: false,
             display_hz,
             blend_mode: None,
@@ -233,11 +250,13 @@ pub(crate) unsafe extern "system" fn end_session(session: xr::Session) -> xr::Re
             return xr::Result::ERROR_SESSION_NOT_STOPPING;
         }
         s.running = false;
-        let exiting = s.exit_requested;
+        let (exiting, paused) = (s.exit_requested, s.paused);
         rt.log(serde_json::json!({"event": "end_session"}));
         rt.set_state(xr::SessionState::IDLE);
         if exiting {
             rt.set_state(xr::SessionState::EXITING);
+        } else if paused {
+            // In the background: IDLE until resumed, which the script never does.
         } else {
             rt.set_state(xr::SessionState::READY);
         }
@@ -541,6 +560,24 @@ pub(crate) unsafe extern "system" fn locate_views(
         }
         if capacity < 2 {
             return xr::Result::ERROR_SIZE_INSUFFICIENT;
+        }
+        let untracked = rt.session.as_ref().is_some_and(|s| s.untracked_until.is_some_and(|u| s.frame.ended < u));
+        if untracked {
+            // Tracking lost: no valid bits, and values an app must not read (spec
+            // "View and Projection State") — zeroed, as a runtime may leave them.
+            for e in 0..2 {
+                // SAFETY: two views at `views` (capacity ≥ 2).
+                unsafe {
+                    (*views.add(e)).pose = xr::Posef {
+                        orientation: xr::Quaternionf { x: 0.0, y: 0.0, z: 0.0, w: 0.0 },
+                        position: xr::Vector3f { x: 0.0, y: 0.0, z: 0.0 },
+                    };
+                    (*views.add(e)).fov = eye_fov(e);
+                }
+            }
+            // SAFETY: caller's output.
+            unsafe { (*state).view_state_flags = xr::ViewStateFlags::EMPTY };
+            return xr::Result::SUCCESS;
         }
         let t = info.display_time.as_nanos();
         let local_from_head = head_pose(rt.config.head, t);

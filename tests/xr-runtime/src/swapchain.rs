@@ -57,7 +57,7 @@ pub(crate) unsafe extern "system" fn create_swapchain(
         let info = unsafe { &*info };
         match vk.create_swapchain(info) {
             Ok(sc) => {
-                rt.log(serde_json::json!({"event": "swapchain", "format": sc.format.as_raw(), "width": sc.width, "height": sc.height, "array_size": sc.array_size, "depth": sc.depth}));
+                rt.log(serde_json::json!({"event": "swapchain", "format": sc.format.as_raw(), "width": sc.width, "height": sc.height, "array_size": sc.array_size, "depth": sc.depth, "usage": info.usage_flags.into_raw()}));
                 let h = rt.handle();
                 rt.swapchains.insert(h, sc);
                 // SAFETY: caller's output.
