@@ -444,3 +444,35 @@ fn xr_command_prints_a_timing_summary() {
     let log = std::fs::read_to_string(dir.join("core_validation.txt")).unwrap_or_default();
     assert!(!log.contains("VALID_"), "{log}");
 }
+
+/// The binary prints the library's warnings: on a runtime with neither
+/// XR_FB_passthrough nor ALPHA_BLEND the fallback ("no passthrough …") reaches
+/// stderr without RUST_LOG, and RUST_LOG=error silences it.
+#[test]
+fn xr_command_prints_fallback_warnings() {
+    let Some(manifest) = manifest() else { return };
+    let _guard = serial();
+    let run = |rust_log: Option<&str>| {
+        let mut cmd = cli();
+        cmd.args(["xr", "--frames", "3"])
+            .env("XR_RUNTIME_JSON", &manifest)
+            .env("BA_XR_EYE_SIZE", "64x64")
+            .env("BA_XR_EXTENSIONS", "none")
+            .env("BA_XR_BLEND_MODES", "opaque")
+            .env_remove("RUST_LOG");
+        if let Some(l) = rust_log {
+            cmd.env("RUST_LOG", l);
+        }
+        let out = cmd.output().expect("binary runs");
+        (out.status.success(), String::from_utf8_lossy(&out.stderr).to_string())
+    };
+    let (ok, stderr) = run(None);
+    if !ok && !required() && stderr.contains("Vulkan") {
+        eprintln!("skipping: {stderr}");
+        return;
+    }
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("no passthrough"), "the fallback warning is missing from stderr:\n{stderr}");
+    let (ok, quiet) = run(Some("error"));
+    assert!(ok && !quiet.contains("no passthrough"), "RUST_LOG=error still shows warnings:\n{quiet}");
+}

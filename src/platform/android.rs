@@ -3,19 +3,24 @@
 //! AssetManager, the activity lifecycle driving the OpenXR frame loop of
 //! `xr::run` on its own thread, and live calibration: the passthrough camera
 //! (`android_camera`) feeding the calibration worker, whose models the frame loop
-//! renders with. Calibration starts as soon as the camera permissions are granted
-//! — during boundary setup, the worker's start-up burst — and refreshes from
-//! then on; the last model is stored in the app's internal storage and is the
-//! next start's first model. With the spatial-data permission the frame loop also
-//! reads the headset's depth (XR_META_environment_depth), which the camera thread
+//! renders with. The spatial-data permission is asked for and answered before the
+//! OpenXR instance is created (Meta's XrPassthroughOcclusion sample: the app "will
+//! not function correctly" otherwise). Calibration starts as soon as a camera
+//! permission is granted — during boundary setup, the worker's start-up burst —
+//! and refreshes from then on, reopening the camera after a disconnect; the last
+//! model is stored in the app's internal storage and is the next start's first
+//! model. With the spatial-data permission the frame loop also reads the
+//! headset's depth (XR_META_environment_depth), which the camera thread
 //! reprojects into each frame it submits (`analysis::headset_depth`): metric depth
-//! for δ(Z) and pose + depth flow. Wiring only: every decision it relies on is tested
-//! on desktop; this file itself has not run on a headset (no device here).
+//! for δ(Z) and pose + depth flow. Wiring only: every decision it relies on is
+//! tested on desktop; this file itself has not run on a headset (no device here).
 #![allow(unsafe_code)]
 
 use crate::analysis::camera::{
-    camera_pose, choose_camera, forward_camera, head_from_eyes, CameraSide, CaptureResult, ExposureCheck,
-    FrameAssembler, PASSTHROUGH_SIZE,
+    camera_permitted, camera_pose, choose_camera, forward_camera, head_from_eyes, permissions_to_request,
+    ActivityEvent, CameraSide, CaptureResult, ExposureCheck, FrameAssembler, ReopenBackoff, SceneStart, SceneWait,
+    SceneWaitStep, VendorValue, CAMERA_PERMISSION, HEADSET_CAMERA_PERMISSION, META_POSITION_KEY, META_SOURCE_KEY,
+    PASSTHROUGH_SIZE,
 };
 use crate::analysis::headset_depth::HeadsetDepth;
 use crate::analysis::timing::{ClockMap, ClockSample, TimedPose, TimestampSource};
@@ -33,13 +38,23 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-/// The permissions the camera path needs (manifest: uses-permission); asked for
-/// at start. Without them the app renders with the stored or default camera model.
-const CAMERA_PERMISSIONS: [&str; 2] = ["android.permission.CAMERA", "horizonos.permission.HEADSET_CAMERA"];
-/// Spatial data (XR_META_environment_depth): asked for with the camera's; without
-/// it calibration runs on image flow and blind DoF (the frame loop retries the
-/// depth provider, so a grant during the session takes effect).
+/// The permissions the camera path may use (manifest: uses-permission); either
+/// suffices (`analysis::camera::camera_permitted`), asked for at start while
+/// neither is granted. Without one the app renders with the stored or default
+/// camera model.
+const CAMERA_PERMISSIONS: [&str; 2] = [CAMERA_PERMISSION, HEADSET_CAMERA_PERMISSION];
+/// Spatial data (XR_META_environment_depth): asked for with the camera's, and
+/// waited for before the OpenXR instance is created (`SceneWait`); without it
+/// calibration runs on image flow and blind DoF.
 const SCENE_PERMISSION: &str = "com.oculus.permission.USE_SCENE";
+/// How often the wait for the spatial-data permission looks at it again.
+const SCENE_POLL: Duration = Duration::from_millis(100);
+/// The display refresh rate asked of XR_FB_display_refresh_rate. Meta's
+/// Passthrough Best Practices: "To maximize the smoothness of passthrough, it is
+/// recommended to use a 72Hz refresh rate for your application. In flicker-free
+/// lighting conditions, passthrough will synchronize the cameras with the
+/// display" — and this app's content is composited over passthrough.
+const DISPLAY_HZ: f32 = 72.0;
 /// How often the frame loop reads the headset's depth back (Hz): the worker takes
 /// a frame every few hundred ms, and `headset_depth::MAX_AGE_NS` allows 250 ms.
 const ENV_DEPTH_HZ: f32 = 5.0;
@@ -63,17 +78,18 @@ fn asset(app: &AndroidApp, name: &str) -> Result<Vec<u8>, String> {
     Ok(bytes.to_vec())
 }
 
-/// Ask for the camera and spatial-data permissions (Activity.requestPermissions
-/// over JNI) and report which are granted now; the answer to the request comes later, through
-/// the system dialog (NativeActivity has no onRequestPermissionsResult), so the
-/// camera path checks again when it starts.
-fn request_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, bool)>, jni::errors::Error> {
+/// Ask for the camera and spatial-data permissions that are missing
+/// (`permissions_to_request`; Activity.requestPermissions over JNI) and report
+/// which are granted now and which were asked for; the answer comes later,
+/// through the system dialog (NativeActivity has no onRequestPermissionsResult),
+/// so `wait_for_scene_permission` and the camera path check again.
+fn request_permissions(app: &AndroidApp) -> Result<Requested, jni::errors::Error> {
     use jni::objects::{JObject, JValue};
     use jni::{jni_sig, jni_str};
     with_activity(app, |env, activity| {
         let all = [CAMERA_PERMISSIONS[0], CAMERA_PERMISSIONS[1], SCENE_PERMISSION];
         let granted = permission_states(env, activity, &all)?;
-        let missing: Vec<&str> = granted.iter().filter(|(_, g)| !g).map(|(p, _)| *p).collect();
+        let missing = permissions_to_request(&granted);
         if !missing.is_empty() {
             let string_class = env.find_class(jni_str!("java/lang/String"))?;
             let names = env.new_object_array(missing.len() as i32, &string_class, JObject::null())?;
@@ -88,8 +104,16 @@ fn request_permissions(app: &AndroidApp) -> Result<Vec<(&'static str, bool)>, jn
                 &[JValue::Object(&names), JValue::Int(1)],
             )?;
         }
-        Ok(granted)
+        Ok(Requested { granted, asked: missing })
     })
+}
+
+/// What `request_permissions` found and did.
+struct Requested {
+    /// Each permission and whether it was granted before asking.
+    granted: Vec<(&'static str, bool)>,
+    /// Those asked for.
+    asked: Vec<&'static str>,
 }
 
 /// Each of `permissions` and whether it is granted now
@@ -138,16 +162,20 @@ struct LiveInputs {
 
 impl LiveInputs {
     fn on_frame(&self, r: &FrameRecord) {
-        let (q, p) = head_from_eyes(
-            [r.views[0].orientation, r.views[1].orientation],
-            [r.views[0].position_m, r.views[1].position_m],
-        );
-        let mut heads = self.heads.lock().unwrap_or_else(|e| e.into_inner());
-        if heads.len() == MAX_HEADS {
-            heads.pop_front();
+        // Untracked views are the last tracked ones shown again (FrameRecord::
+        // views_tracked): they say nothing about where the head is at this frame's
+        // time, and a pose track holding them would pair frames with wrong poses.
+        if r.views_tracked {
+            let (q, p) = head_from_eyes(
+                [r.views[0].orientation, r.views[1].orientation],
+                [r.views[0].position_m, r.views[1].position_m],
+            );
+            let mut heads = self.heads.lock().unwrap_or_else(|e| e.into_inner());
+            if heads.len() == MAX_HEADS {
+                heads.pop_front();
+            }
+            heads.push_back((r.predicted_display_time_ns, q, p));
         }
-        heads.push_back((r.predicted_display_time_ns, q, p));
-        drop(heads);
         if let Some(d) = &r.env_depth {
             *self.depth.lock().unwrap_or_else(|e| e.into_inner()) = Some(d.clone());
         }
@@ -199,72 +227,136 @@ fn with_activity<T>(
     })
 }
 
-/// Whether every camera permission is granted now.
-fn camera_permitted(app: &AndroidApp) -> Result<bool, jni::errors::Error> {
-    with_activity(app, |env, activity| {
-        Ok(permission_states(env, activity, &CAMERA_PERMISSIONS)?.iter().all(|(_, g)| *g))
+/// Whether a camera permission is granted now (either suffices:
+/// `analysis::camera::camera_permitted`).
+fn camera_permission(app: &AndroidApp) -> Result<bool, jni::errors::Error> {
+    with_activity(app, |env, activity| Ok(camera_permitted(&permission_states(env, activity, &CAMERA_PERMISSIONS)?)))
+}
+
+/// Meta's vendor keys of camera `id` (position, source) as JNI finds them, for
+/// `VendorValue::single_int` to read. How, after Meta's Unity sample
+/// (`PassthroughCameraUtils.cs`): walk `CameraCharacteristics.getKeys()`, compare
+/// each key's `getName()` with the key's name (ignoring case, as the sample does),
+/// and `get()` the value with the key object the camera itself returned — its
+/// Java class is the one the camera service gave the vendor tag (`byte[]` for
+/// Meta's), where a key made here with a class of our choosing
+/// (`new Key(name, Integer.class)`) fails to unmarshal a byte. The NDK cannot
+/// look a vendor tag up by name. None where the key or the call is missing.
+fn meta_keys(app: &AndroidApp, id: &str) -> crate::android_camera::MetaKeys {
+    use jni::objects::{JString, JValue};
+    use jni::{jni_sig, jni_str};
+    let read = with_activity(app, |env, activity| {
+        let service = env.new_string("camera")?;
+        let manager = env
+            .call_method(
+                activity,
+                jni_str!("getSystemService"),
+                jni_sig!("(Ljava/lang/String;)Ljava/lang/Object;"),
+                &[JValue::Object(&service)],
+            )?
+            .l()?;
+        let jid = env.new_string(id)?;
+        let chars = env
+            .call_method(
+                &manager,
+                jni_str!("getCameraCharacteristics"),
+                jni_sig!("(Ljava/lang/String;)Landroid/hardware/camera2/CameraCharacteristics;"),
+                &[JValue::Object(&jid)],
+            )?
+            .l()?;
+        let keys = env.call_method(&chars, jni_str!("getKeys"), jni_sig!("()Ljava/util/List;"), &[])?.l()?;
+        let count = env.call_method(&keys, jni_str!("size"), jni_sig!("()I"), &[])?.i()?;
+        let (mut position, mut source) = (None, None);
+        for i in 0..count {
+            // A frame per key: a camera lists a hundred or more, and each turn
+            // makes a few local references.
+            env.with_local_frame(8, |env| -> Result<(), jni::errors::Error> {
+                let key = env
+                    .call_method(&keys, jni_str!("get"), jni_sig!("(I)Ljava/lang/Object;"), &[JValue::Int(i)])?
+                    .l()?;
+                let name = env.call_method(&key, jni_str!("getName"), jni_sig!("()Ljava/lang/String;"), &[])?.l()?;
+                let name = env.cast_local::<JString>(name)?.try_to_string(env)?;
+                let slot = if name.eq_ignore_ascii_case(META_POSITION_KEY) {
+                    &mut position
+                } else if name.eq_ignore_ascii_case(META_SOURCE_KEY) {
+                    &mut source
+                } else {
+                    return Ok(());
+                };
+                let value = env
+                    .call_method(
+                        &chars,
+                        jni_str!("get"),
+                        jni_sig!("(Landroid/hardware/camera2/CameraCharacteristics$Key;)Ljava/lang/Object;"),
+                        &[JValue::Object(&key)],
+                    )?
+                    .l()?;
+                *slot = Some(vendor_value(env, &value)?);
+                Ok(())
+            })?;
+        }
+        Ok((position, source))
+    });
+    read.unwrap_or_else(|e: jni::errors::Error| {
+        log::warn!("camera {id}: Meta's vendor keys unreadable ({e})");
+        (None, None)
     })
 }
 
-/// Meta's vendor keys of camera `id` (position, source): `CameraCharacteristics`
-/// with `new CameraCharacteristics.Key(name, Integer.class)` (public since API 29),
-/// because the NDK cannot look a vendor tag up by name. None where the key or the
-/// call is missing.
-fn meta_keys(app: &AndroidApp, id: &str) -> crate::android_camera::MetaKeys {
-    use crate::analysis::camera::{META_POSITION_KEY, META_SOURCE_KEY};
-    use jni::objects::JValue;
+/// A vendor key's value by its Java class (see `VendorValue`): `byte[]`, `int[]`
+/// and `Integer` read out, anything else named.
+fn vendor_value(env: &mut jni::Env, value: &jni::objects::JObject) -> Result<VendorValue, jni::errors::Error> {
+    use jni::objects::{JByteArray, JIntArray, JString};
     use jni::{jni_sig, jni_str};
-    let read = |key_name: &str| -> Option<i32> {
-        with_activity(app, |env, activity| {
-            let service = env.new_string("camera")?;
-            let manager = env
-                .call_method(
-                    activity,
-                    jni_str!("getSystemService"),
-                    jni_sig!("(Ljava/lang/String;)Ljava/lang/Object;"),
-                    &[JValue::Object(&service)],
-                )?
-                .l()?;
-            let jid = env.new_string(id)?;
-            let chars = env
-                .call_method(
-                    &manager,
-                    jni_str!("getCameraCharacteristics"),
-                    jni_sig!("(Ljava/lang/String;)Landroid/hardware/camera2/CameraCharacteristics;"),
-                    &[JValue::Object(&jid)],
-                )?
-                .l()?;
-            let integer = env.find_class(jni_str!("java/lang/Integer"))?;
-            let key_class = env.find_class(jni_str!("android/hardware/camera2/CameraCharacteristics$Key"))?;
-            let name = env.new_string(key_name)?;
-            let key = env.new_object(
-                &key_class,
-                jni_sig!("(Ljava/lang/String;Ljava/lang/Class;)V"),
-                &[JValue::Object(&name), JValue::Object(&integer)],
-            )?;
-            let value = env
-                .call_method(
-                    &chars,
-                    jni_str!("get"),
-                    jni_sig!("(Landroid/hardware/camera2/CameraCharacteristics$Key;)Ljava/lang/Object;"),
-                    &[JValue::Object(&key)],
-                )?
-                .l()?;
-            if value.is_null() {
-                return Ok(None);
-            }
-            Ok(Some(env.call_method(&value, jni_str!("intValue"), jni_sig!("()I"), &[])?.i()?))
-        })
-        .unwrap_or_else(|e| {
-            log::warn!("camera {id}: {key_name} unreadable ({e})");
-            None
-        })
-    };
-    (read(META_POSITION_KEY), read(META_SOURCE_KEY))
+    /// Longer arrays are not Meta's one-value keys: named, not read.
+    const MAX_LEN: usize = 16;
+    if value.is_null() {
+        return Ok(VendorValue::Other("null".into()));
+    }
+    if env.is_instance_of(value, jni_str!("[B"))? {
+        let array = env.as_cast::<JByteArray>(value)?;
+        let len = array.len(env)?;
+        if len > MAX_LEN {
+            return Ok(VendorValue::Other(format!("byte[{len}]")));
+        }
+        let mut v = vec![0i8; len];
+        array.get_region(env, 0, &mut v)?;
+        return Ok(VendorValue::Bytes(v));
+    }
+    if env.is_instance_of(value, jni_str!("[I"))? {
+        let array = env.as_cast::<JIntArray>(value)?;
+        let len = array.len(env)?;
+        if len > MAX_LEN {
+            return Ok(VendorValue::Other(format!("int[{len}]")));
+        }
+        let mut v = vec![0i32; len];
+        array.get_region(env, 0, &mut v)?;
+        return Ok(VendorValue::Ints(v));
+    }
+    if env.is_instance_of(value, jni_str!("java/lang/Integer"))? {
+        return Ok(VendorValue::Int(env.call_method(value, jni_str!("intValue"), jni_sig!("()I"), &[])?.i()?));
+    }
+    let class = env.call_method(value, jni_str!("getClass"), jni_sig!("()Ljava/lang/Class;"), &[])?.l()?;
+    let name = env.call_method(&class, jni_str!("getName"), jni_sig!("()Ljava/lang/String;"), &[])?.l()?;
+    Ok(VendorValue::Other(env.cast_local::<JString>(name)?.try_to_string(env)?))
 }
 
-/// The camera → worker path: wait for the permissions, choose and open the
-/// passthrough camera, run the calibration worker on its frames until `stop`.
+/// Sleep `d`, or less when `stop` is set meanwhile.
+fn sleep_unless(stop: &AtomicBool, d: Duration) {
+    let until = Instant::now() + d;
+    while !stop.load(Ordering::SeqCst) {
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return;
+        }
+        std::thread::sleep(left.min(Duration::from_millis(200)));
+    }
+}
+
+/// The camera → worker path: wait for a camera permission, choose and open the
+/// passthrough camera, run the calibration worker on its frames until `stop`,
+/// reopening the camera after each disconnect or device error
+/// (`ReopenBackoff`).
 fn calibrate_live(
     app: &AndroidApp,
     models: &ModelChannel,
@@ -276,10 +368,10 @@ fn calibrate_live(
         if stop.load(Ordering::SeqCst) {
             return Ok(());
         }
-        match camera_permitted(app) {
+        match camera_permission(app) {
             Ok(true) => break,
             Ok(false) if !told => {
-                log::info!("calibration waits for the camera permissions (rendering with the current model)");
+                log::info!("calibration waits for a camera permission (rendering with the current model)");
                 told = true;
             }
             Ok(false) => {}
@@ -319,7 +411,11 @@ fn calibrate_live(
     let mut headset = choice.intrinsics.filter(|_| realtime).map(HeadsetDepth::new);
     let mut depth_note = Instant::now() - Duration::from_secs(60);
     let (w, l) = (worker.clone(), live.clone());
-    let handler = Box::new(move |yuv: &Yuv420<'_>, timestamp_ns: i64, result: Option<CaptureResult>| {
+    // One handler for every opening of the camera (frame numbers, the clock map
+    // and the headset depth carry over a reopen): shared, each opening's
+    // ImageHandler a thin forwarder.
+    type Handler = dyn FnMut(&Yuv420<'_>, i64, CaptureResult) + Send;
+    let handle = move |yuv: &Yuv420<'_>, timestamp_ns: i64, result: CaptureResult| {
         if let Some(map) = l.new_clock_map() {
             assembler.set_clock(map);
         }
@@ -345,7 +441,7 @@ fn calibrate_live(
             w.submit_poses(&poses);
             return;
         }
-        match assembler.assemble(yuv, timestamp_ns, result.as_ref()) {
+        match assembler.assemble(yuv, timestamp_ns, &result) {
             Ok(mut a) => {
                 if let (Some(h), true) = (headset.as_ref(), a.on_xr_clock) {
                     match h.depth_at((a.frame.t_s * 1e9).round() as i64) {
@@ -362,30 +458,65 @@ fn calibrate_live(
             }
             Err(e) => log::warn!("camera: {e}"),
         }
-    });
-    let camera = PassthroughCamera::open(&manager, &choice, handler)?;
-    log::info!("camera {} streaming: start-up calibration running", choice.id);
+    };
+    let handler: Arc<Mutex<Box<Handler>>> = Arc::new(Mutex::new(Box::new(handle)));
+    let mut backoff = ReopenBackoff::default();
     let mut last_report = Instant::now();
+    let mut first = true;
     while !stop.load(Ordering::SeqCst) {
-        std::thread::sleep(Duration::from_millis(200));
-        if camera.lost() {
-            log::warn!("camera lost: calibration stops (the current model stays)");
-            break;
+        let forward = handler.clone();
+        let opened = PassthroughCamera::open(
+            &manager,
+            &choice,
+            Box::new(move |yuv: &Yuv420<'_>, timestamp_ns: i64, result: CaptureResult| {
+                (forward.lock().unwrap_or_else(|e| e.into_inner()))(yuv, timestamp_ns, result)
+            }),
+        );
+        let camera = match opened {
+            Ok(c) => c,
+            Err(e) => {
+                let delay = backoff.lost(Duration::ZERO);
+                log::warn!("camera {}: {e}: trying again in {delay:?} (the current model stays)", choice.id);
+                sleep_unless(stop, delay);
+                continue;
+            }
+        };
+        let since = Instant::now();
+        if first {
+            log::info!("camera {} streaming: start-up calibration running", choice.id);
+            first = false;
+        } else {
+            log::info!("camera {} reopened: calibration resumes", choice.id);
         }
-        if last_report.elapsed() >= Duration::from_secs(10) {
-            last_report = Instant::now();
-            let snapshot = models.latest();
-            let check = ExposureCheck::new(camera.last_exposure_ns(), FRAME_INTERVAL_S, &snapshot.model);
-            log::info!(
-                "model generation {}: {}; {} failed captures",
-                snapshot.generation,
-                check.line(),
-                camera.failures()
-            );
+        while !stop.load(Ordering::SeqCst) && !camera.lost() {
+            std::thread::sleep(Duration::from_millis(200));
+            if last_report.elapsed() >= Duration::from_secs(10) {
+                last_report = Instant::now();
+                let snapshot = models.latest();
+                let check = ExposureCheck::new(camera.last_exposure_ns(), FRAME_INTERVAL_S, &snapshot.model);
+                log::info!(
+                    "model generation {}: {}; {} failed captures, {} images without their capture results",
+                    snapshot.generation,
+                    check.line(),
+                    camera.failures(),
+                    camera.dropped_images()
+                );
+            }
+        }
+        let (lost, error) = (camera.lost(), camera.error());
+        // Streamed: only a camera that delivered images had recovered.
+        let streamed = if camera.images() > 0 { since.elapsed() } else { Duration::ZERO };
+        drop(camera);
+        if lost {
+            let delay = backoff.lost(streamed);
+            let why = error.map_or_else(|| "disconnected".to_string(), |e| format!("device error {e}"));
+            log::warn!("camera {} {why}: reopening in {delay:?} (the current model stays)", choice.id);
+            sleep_unless(stop, delay);
         }
     }
-    // The handler (holding a worker reference) goes with the camera's reader.
-    drop(camera);
+    // The handler holds a worker reference: gone with the last camera's reader
+    // and this one.
+    drop(handler);
     match Arc::try_unwrap(worker) {
         Ok(w) => {
             let s = w.stop();
@@ -447,23 +578,70 @@ fn store_model(app: &AndroidApp, models: &ModelChannel) {
     }
 }
 
-fn run(app: &AndroidApp) -> Result<(), String> {
-    match request_permissions(app) {
-        Ok(states) => {
-            for (p, granted) in states {
-                match (granted, p == SCENE_PERMISSION) {
-                    (true, _) => {}
-                    (false, false) => log::warn!(
-                        "{p} not granted (asked): until it is, the camera model is the stored or default one"
-                    ),
-                    (false, true) => {
-                        log::warn!("{p} not granted (asked): until it is, calibration runs without headset depth")
-                    }
+/// Wait for the answer to the spatial-data permission before the OpenXR instance
+/// exists (see `SceneWait` for why and when the wait ends): checkSelfPermission
+/// every `SCENE_POLL`, the activity's lifecycle events in between. Why the wait
+/// ended; None: the activity was destroyed meanwhile.
+fn wait_for_scene_permission(app: &AndroidApp, asked: bool) -> Option<SceneStart> {
+    let start = Instant::now();
+    let mut wait = SceneWait { asked, ..Default::default() };
+    loop {
+        wait.granted = match with_activity(app, |env, a| permission_states(env, a, &[SCENE_PERMISSION])) {
+            Ok(states) => states.iter().all(|(_, g)| *g),
+            Err(e) => {
+                // Nothing to wait for that cannot be read.
+                log::warn!("{SCENE_PERMISSION} unreadable ({e}): not waiting for it");
+                wait.asked = false;
+                false
+            }
+        };
+        wait.elapsed = start.elapsed();
+        match wait.step() {
+            SceneWaitStep::Wait => {}
+            SceneWaitStep::Start(why) => return Some(why),
+            SceneWaitStep::Quit => return None,
+        }
+        app.poll_events(Some(SCENE_POLL), |event| {
+            if let PollEvent::Main(main) = event {
+                match main {
+                    // The dialog is another activity over this one: it pauses this
+                    // one or takes its focus, and gives them back when answered.
+                    MainEvent::Pause | MainEvent::LostFocus => wait.on_event(ActivityEvent::Left),
+                    MainEvent::Resume { .. } | MainEvent::GainedFocus => wait.on_event(ActivityEvent::Returned),
+                    MainEvent::Destroy => wait.on_event(ActivityEvent::Destroyed),
+                    _ => {}
                 }
             }
+        });
+    }
+}
+
+fn run(app: &AndroidApp) -> Result<(), String> {
+    let scene_asked = match request_permissions(app) {
+        Ok(r) => {
+            for &(p, granted) in &r.granted {
+                if !granted {
+                    log::info!("{p} not granted{}", if r.asked.contains(&p) { ": asked" } else { "" });
+                }
+            }
+            r.asked.contains(&SCENE_PERMISSION)
         }
         Err(e) => {
-            log::warn!("camera permissions could not be requested ({e}): rendering with the default camera model")
+            log::warn!("permissions could not be requested ({e}): rendering with the default camera model");
+            false
+        }
+    };
+    // Meta: USE_SCENE must be granted before the OpenXR instance is created
+    // (SceneWait's doc); the camera permissions need no such wait (the camera
+    // thread polls them).
+    match wait_for_scene_permission(app, scene_asked) {
+        None => {
+            log::info!("activity destroyed while waiting for {SCENE_PERMISSION}: not starting");
+            return Ok(());
+        }
+        Some(SceneStart::Granted) => {}
+        Some(why) => {
+            log::warn!("{SCENE_PERMISSION} not granted ({why:?}): calibration runs without headset depth this session")
         }
     }
     let scene = Scene::from_glb(&asset(app, "toy.glb")?, "toy.glb").map_err(|e| e.to_string())?;
@@ -493,7 +671,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
                 local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -1.5)),
                 models: &models,
                 settings: LayerSettings::default(),
-                display_hz: 90.0,
+                display_hz: DISPLAY_HZ,
                 env_depth_hz: ENV_DEPTH_HZ,
                 on_frame: Some(&mut on_frame),
                 stop: Some(&stop),

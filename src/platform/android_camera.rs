@@ -1,8 +1,11 @@
 //! The Quest passthrough camera through the Camera2 NDK (`libcamera2ndk`) and an
 //! AImageReader (`libmediandk`, YUV_420_888): the cameras described (what
 //! `analysis::camera::choose_camera` decides on), the chosen one opened with a
-//! repeating preview request whose images and capture results (SENSOR_TIMESTAMP,
-//! SENSOR_EXPOSURE_TIME, ROLLING_SHUTTER_SKEW, FRAME_DURATION) reach a handler.
+//! repeating preview request whose images reach a handler together with their
+//! capture results (SENSOR_TIMESTAMP, SENSOR_EXPOSURE_TIME, ROLLING_SHUTTER_SKEW,
+//! FRAME_DURATION): an image whose result has not arrived yet is held until it
+//! does (`analysis::camera::CapturePairing`). A disconnect or device error marks
+//! the camera lost; its owner reopens it (`analysis::camera::ReopenBackoff`).
 //! Raw NDK calls only; every decision is in `analysis::camera`, tested on desktop.
 //! Compiled for Android only and never run here (no headset): what it must do on
 //! a device is in the README's "not verified" list.
@@ -11,17 +14,19 @@
 //! request; close the capture session; free the request, the output target, the
 //! session output container and the session output; close the device — the NDK
 //! closes it synchronously, after which no device or capture callback runs (so
-//! their context may go); delete the image reader (no buffer can be queued into it
-//! any more); drop the callback context last.
+//! their context may go); drop the images held for their results and refuse new
+//! ones (they must not outlive their reader); delete the image reader (no buffer
+//! can be queued into it any more, and its listener has returned); drop the
+//! callback context last.
 #![allow(unsafe_code)]
 
-use crate::analysis::camera::{CameraChoice, CameraDescription, CaptureResult, CaptureResults};
+use crate::analysis::camera::{CameraChoice, CameraDescription, CapturePairing, CaptureResult, VendorValue};
 use crate::image::yuv::{Yuv420, YuvPlane};
-use ndk::media::image_reader::{AcquireResult, ImageFormat, ImageReader};
+use ndk::media::image_reader::{AcquireResult, Image, ImageFormat, ImageReader};
 use ndk_sys as sys;
 use std::ffi::{c_void, CStr, CString};
 use std::ptr::null_mut;
-use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 // ndk-sys declares the Camera2 functions but links no library for them.
@@ -32,8 +37,10 @@ extern "C" {}
 const TIMESTAMP_SOURCE_REALTIME: u8 = 1;
 /// `ACAMERA_SCALER_AVAILABLE_STREAM_CONFIGURATIONS_OUTPUT`.
 const STREAM_OUTPUT: i32 = 0;
-/// Images the reader may hold: the one being converted, one arriving, slack.
-const MAX_IMAGES: i32 = 3;
+/// Images the reader may have out at once: those held for their capture results,
+/// and two for `AImageReader_acquireLatestImage` (it acquires the next image
+/// before releasing the one it skips).
+const MAX_IMAGES: i32 = CapturePairing::<HeldImage>::HELD as i32 + 2;
 
 fn check(status: sys::camera_status_t, what: &str) -> Result<(), String> {
     if status == sys::camera_status_t::ACAMERA_OK {
@@ -80,8 +87,9 @@ values!(i32s, i32_, i32, sys::ACAMERA_TYPE_INT32);
 values!(i64s, i64_, i64, sys::ACAMERA_TYPE_INT64);
 values!(f32s, f, f32, sys::ACAMERA_TYPE_FLOAT);
 
-/// Meta's vendor keys of one camera: (position, source).
-pub type MetaKeys = (Option<i32>, Option<i32>);
+/// Meta's vendor keys of one camera as JNI found them: (position, source); None
+/// where the camera lists no such key.
+pub type MetaKeys = (Option<VendorValue>, Option<VendorValue>);
 
 /// The camera service (`ACameraManager`).
 pub struct CameraManager(*mut sys::ACameraManager);
@@ -126,6 +134,8 @@ impl CameraManager {
             // SAFETY: `meta` is live until ACameraMetadata_free below.
             let d = unsafe {
                 let array = i32s(meta, t::ACAMERA_SENSOR_INFO_ACTIVE_ARRAY_SIZE);
+                // The intrinsic calibration's own frame (see analysis::camera).
+                let pre = i32s(meta, t::ACAMERA_SENSOR_INFO_PRE_CORRECTION_ACTIVE_ARRAY_SIZE);
                 let calib = f32s(meta, t::ACAMERA_LENS_INTRINSIC_CALIBRATION);
                 let pose_t = f32s(meta, t::ACAMERA_LENS_POSE_TRANSLATION);
                 let pose_r = f32s(meta, t::ACAMERA_LENS_POSE_ROTATION);
@@ -141,6 +151,7 @@ impl CameraManager {
                     id: id.clone(),
                     meta_position,
                     meta_source,
+                    pre_correction_array: pre.get(..4).map(|a| [a[0], a[1], a[2], a[3]]),
                     active_array: array.get(..4).map(|a| [a[0], a[1], a[2], a[3]]),
                     intrinsic_calibration: calib.get(..5).map(|c| [c[0], c[1], c[2], c[3], c[4]]),
                     lens_pose_translation_m: pose_t.get(..3).map(|v| [v[0], v[1], v[2]]),
@@ -167,20 +178,33 @@ impl Drop for CameraManager {
     }
 }
 
+/// An acquired image held (in `Shared::pairing`) until its capture result comes.
+struct HeldImage(Image);
+
+// SAFETY: an AImage is a plain NDK object, not tied to the thread that acquired
+// it; a held one is touched only under `Shared::pairing`'s lock or by the one
+// thread that took it out of it, never by two threads at once.
+unsafe impl Send for HeldImage {}
+
 /// What the NDK's callback threads share with the camera's owner.
 #[derive(Default)]
 struct Shared {
-    results: Mutex<CaptureResults>,
+    /// Images waiting for their capture results, and results for their images.
+    pairing: Mutex<CapturePairing<HeldImage>>,
     /// The newest SENSOR_EXPOSURE_TIME seen (0: none).
     last_exposure_ns: AtomicI64,
     failures: AtomicU64,
-    disconnected: std::sync::atomic::AtomicBool,
+    /// Images handed to the handler.
+    images: AtomicU64,
+    disconnected: AtomicBool,
+    /// The device error `onError` reported (0: none).
+    error: AtomicI32,
 }
 
 /// What the camera hands its user per image: the planes (borrowed from the
-/// AImage for the call), its SENSOR_TIMESTAMP, and its capture result when that
-/// came first (else None: the image's timing is then approximate).
-pub type ImageHandler = Box<dyn FnMut(&Yuv420<'_>, i64, Option<CaptureResult>) + Send>;
+/// AImage for the call), its SENSOR_TIMESTAMP, and its capture result (an image
+/// waits for its result; one whose result never comes is dropped).
+pub type ImageHandler = Box<dyn FnMut(&Yuv420<'_>, i64, CaptureResult) + Send>;
 
 /// The opened passthrough camera streaming into an image reader. See the
 /// module doc for the teardown order.
@@ -199,6 +223,11 @@ pub struct PassthroughCamera<'m> {
     shared: Arc<Shared>,
 }
 
+// The device callbacks only mark the camera lost: the NDK's device is unusable
+// after either (ACameraDevice_StateCallbacks: onDisconnected "the camera device is
+// no longer available for use"; onError "a camera device has encountered a
+// serious error"), and closing and reopening belong to its owner's thread
+// (`PassthroughCamera::lost`, then drop and `open` again after a backoff).
 unsafe extern "C" fn on_disconnected(context: *mut c_void, _device: *mut sys::ACameraDevice) {
     // SAFETY: `context` is the camera's `Shared`, alive until after the device closes.
     let shared = unsafe { &*(context as *const Shared) };
@@ -209,6 +238,7 @@ unsafe extern "C" fn on_disconnected(context: *mut c_void, _device: *mut sys::AC
 unsafe extern "C" fn on_error(context: *mut c_void, _device: *mut sys::ACameraDevice, error: std::os::raw::c_int) {
     // SAFETY: as in `on_disconnected`.
     let shared = unsafe { &*(context as *const Shared) };
+    shared.error.store(error, Ordering::SeqCst);
     shared.disconnected.store(true, Ordering::SeqCst);
     log::error!("camera: device error {error}");
 }
@@ -236,7 +266,7 @@ unsafe extern "C" fn on_capture_completed(
     if let Some(e) = r.exposure_ns {
         shared.last_exposure_ns.store(e, Ordering::Relaxed);
     }
-    shared.results.lock().unwrap_or_else(|p| p.into_inner()).record(r);
+    shared.pairing.lock().unwrap_or_else(|p| p.into_inner()).result(r);
 }
 
 unsafe extern "C" fn on_capture_failed(
@@ -304,26 +334,40 @@ impl<'m> PassthroughCamera<'m> {
                         return;
                     }
                 };
-                let planes = (|| {
-                    let (w, h) = (image.width().ok()? as usize, image.height().ok()? as usize);
-                    let plane = |i: i32| -> Option<YuvPlane<'_>> {
-                        Some(YuvPlane {
-                            data: image.plane_data(i).ok()?,
-                            row_stride: image.plane_row_stride(i).ok()? as usize,
-                            pixel_stride: image.plane_pixel_stride(i).ok()? as usize,
-                        })
-                    };
-                    Some((
-                        image.timestamp().ok()?,
-                        Yuv420 { width: w, height: h, y: plane(0)?, u: plane(1)?, v: plane(2)? },
-                    ))
-                })();
-                let Some((timestamp_ns, yuv)) = planes else {
-                    log::warn!("camera: an image without readable planes or timestamp was skipped");
+                // AImage_getTimestamp is the image's SENSOR_TIMESTAMP: the key its
+                // capture result is matched by.
+                let Ok(timestamp_ns) = image.timestamp() else {
+                    log::warn!("camera: an image without a timestamp was skipped");
                     return;
                 };
-                let result = listener_shared.results.lock().unwrap_or_else(|p| p.into_inner()).take(timestamp_ns);
-                handler(&yuv, timestamp_ns, result);
+                // The image waits for its capture result (it may come later, on the
+                // capture callback's thread); those whose results are in come out,
+                // oldest first. Converted outside the lock.
+                let ready = listener_shared
+                    .pairing
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .image(timestamp_ns, HeldImage(image));
+                for paired in ready {
+                    let image = &paired.image.0;
+                    let yuv = (|| {
+                        let (w, h) = (image.width().ok()? as usize, image.height().ok()? as usize);
+                        let plane = |i: i32| -> Option<YuvPlane<'_>> {
+                            Some(YuvPlane {
+                                data: image.plane_data(i).ok()?,
+                                row_stride: image.plane_row_stride(i).ok()? as usize,
+                                pixel_stride: image.plane_pixel_stride(i).ok()? as usize,
+                            })
+                        };
+                        Some(Yuv420 { width: w, height: h, y: plane(0)?, u: plane(1)?, v: plane(2)? })
+                    })();
+                    let Some(yuv) = yuv else {
+                        log::warn!("camera: an image without readable planes was skipped");
+                        continue;
+                    };
+                    listener_shared.images.fetch_add(1, Ordering::Relaxed);
+                    handler(&yuv, paired.sensor_timestamp_ns, paired.result);
+                }
             }))
             .map_err(|e| format!("AImageReader_setImageListener: {e}"))?;
         let window = reader.window().map_err(|e| format!("AImageReader_getWindow: {e}"))?;
@@ -395,9 +439,25 @@ impl<'m> PassthroughCamera<'m> {
         self.shared.failures.load(Ordering::Relaxed)
     }
 
-    /// The camera was disconnected or hit a device error: reopen or give up.
+    /// Images handed to the handler so far.
+    pub fn images(&self) -> u64 {
+        self.shared.images.load(Ordering::Relaxed)
+    }
+
+    /// Images dropped because their capture results never came.
+    pub fn dropped_images(&self) -> u64 {
+        self.shared.pairing.lock().unwrap_or_else(|p| p.into_inner()).dropped()
+    }
+
+    /// The camera was disconnected or hit a device error (`error`): drop it and
+    /// reopen.
     pub fn lost(&self) -> bool {
         self.shared.disconnected.load(Ordering::SeqCst)
+    }
+
+    /// The device error `onError` reported (ACameraDevice ERROR_* codes), if any.
+    pub fn error(&self) -> Option<i32> {
+        Some(self.shared.error.load(Ordering::SeqCst)).filter(|&e| e != 0)
     }
 }
 
@@ -426,7 +486,10 @@ impl Drop for PassthroughCamera<'_> {
                 sys::ACameraDevice_close(self.device);
             }
         }
-        // Now no callback can run: the reader, then the callbacks' context.
+        // Now no device or capture callback can run. The held images go before their
+        // reader, and the listener (still possibly running until the reader is
+        // deleted) holds no new one; then the reader, then the callbacks' context.
+        self.shared.pairing.lock().unwrap_or_else(|p| p.into_inner()).close();
         self.reader = None;
     }
 }

@@ -356,6 +356,9 @@ fn synth(args: SynthArgs) -> Result<()> {
 }
 
 pub fn main() -> std::process::ExitCode {
+    // The library reports its fallbacks through `log` (e.g. "OpenXR: no passthrough
+    // …"): warnings and errors on stderr unless RUST_LOG says otherwise.
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     // Before any frame-sized allocation (see `blind_augment::alloc`).
     if let blind_augment::alloc::AllocTuning::Refused(param) = blind_augment::alloc::keep_freed_blocks() {
         eprintln!("warning: the C allocator refused {param}: fits will page-fault their planes afresh each call");

@@ -564,14 +564,20 @@ pub(crate) unsafe extern "system" fn locate_views(
         let untracked = rt.session.as_ref().is_some_and(|s| s.untracked_until.is_some_and(|u| s.frame.ended < u));
         if untracked {
             // Tracking lost: no valid bits, and values an app must not read (spec
-            // "View and Projection State") — zeroed, as a runtime may leave them.
+            // "View and Projection State"): zeroed on even frames, as a runtime may
+            // leave them; on odd frames a plausible but wrong pose (turned 90°, 10 m
+            // away), which only an app that reads them anyway would draw.
+            let odd = rt.session.as_ref().is_some_and(|s| s.frame.ended % 2 == 1);
+            let h = std::f32::consts::FRAC_1_SQRT_2;
+            let (orientation, position) = if odd {
+                (xr::Quaternionf { x: 0.0, y: h, z: 0.0, w: h }, xr::Vector3f { x: 10.0, y: 0.0, z: 0.0 })
+            } else {
+                (xr::Quaternionf { x: 0.0, y: 0.0, z: 0.0, w: 0.0 }, xr::Vector3f { x: 0.0, y: 0.0, z: 0.0 })
+            };
             for e in 0..2 {
                 // SAFETY: two views at `views` (capacity ≥ 2).
                 unsafe {
-                    (*views.add(e)).pose = xr::Posef {
-                        orientation: xr::Quaternionf { x: 0.0, y: 0.0, z: 0.0, w: 0.0 },
-                        position: xr::Vector3f { x: 0.0, y: 0.0, z: 0.0 },
-                    };
+                    (*views.add(e)).pose = xr::Posef { orientation, position };
                     (*views.add(e)).fov = eye_fov(e);
                 }
             }
