@@ -17,6 +17,7 @@
 //! what is missing.
 
 pub mod camera;
+pub mod camera_access;
 pub mod flow;
 pub mod headset_depth;
 pub mod onnx;

@@ -17,10 +17,12 @@
 #![allow(unsafe_code)]
 
 use crate::analysis::camera::{
-    camera_permitted, camera_pose, choose_camera, forward_camera, head_from_eyes, permissions_to_request,
-    ActivityEvent, CameraSide, CaptureResult, ExposureCheck, FrameAssembler, ReopenBackoff, SceneStart, SceneWait,
-    SceneWaitStep, VendorValue, CAMERA_PERMISSION, HEADSET_CAMERA_PERMISSION, META_POSITION_KEY, META_SOURCE_KEY,
-    PASSTHROUGH_SIZE,
+    camera_pose, choose_camera, forward_camera, head_from_eyes, CameraSide, CaptureResult, ExposureCheck,
+    FrameAssembler, VendorValue, META_POSITION_KEY, META_SOURCE_KEY, PASSTHROUGH_SIZE,
+};
+use crate::analysis::camera_access::{
+    camera_permitted, permissions_to_request, ActivityEvent, ReopenBackoff, SceneStart, SceneWait, SceneWaitStep,
+    CAMERA_PERMISSION, HEADSET_CAMERA_PERMISSION,
 };
 use crate::analysis::headset_depth::HeadsetDepth;
 use crate::analysis::timing::{ClockMap, ClockSample, TimedPose, TimestampSource};
@@ -39,7 +41,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// The permissions the camera path may use (manifest: uses-permission); either
-/// suffices (`analysis::camera::camera_permitted`), asked for at start while
+/// suffices (`analysis::camera_access::camera_permitted`), asked for at start while
 /// neither is granted. Without one the app renders with the stored or default
 /// camera model.
 const CAMERA_PERMISSIONS: [&str; 2] = [CAMERA_PERMISSION, HEADSET_CAMERA_PERMISSION];
@@ -228,7 +230,7 @@ fn with_activity<T>(
 }
 
 /// Whether a camera permission is granted now (either suffices:
-/// `analysis::camera::camera_permitted`).
+/// `analysis::camera_access::camera_permitted`).
 fn camera_permission(app: &AndroidApp) -> Result<bool, jni::errors::Error> {
     with_activity(app, |env, activity| Ok(camera_permitted(&permission_states(env, activity, &CAMERA_PERMISSIONS)?)))
 }

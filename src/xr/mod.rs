@@ -183,8 +183,11 @@ pub struct XrSummary {
 /// ("To maximize the smoothness of passthrough, it is recommended to use a 72Hz
 /// refresh rate for your application. In flicker-free lighting conditions,
 /// passthrough will synchronize the cameras with the display"), and the rate apps
-/// get by default. The render core's frame budget at 72 Hz (13.9 ms) also leaves
-/// the calibration worker room on the CPU; a higher rate is the user's choice.
+/// get by default. 72 Hz is also the lowest rate a Quest 3 offers, so a measured
+/// frame budget could only argue for a higher one, which the cameras would then
+/// not follow; the loop's own measurement (`XrSummary::missed_frames`, printed by
+/// `blind-augment xr`) says when even 13.9 ms is too little, and the remedy there
+/// is space warp (half the rate), not a lower display rate.
 pub const PASSTHROUGH_DISPLAY_HZ: f32 = 72.0;
 
 /// How often environment depth is set up again while it is not permitted.

@@ -239,7 +239,13 @@ pub fn apk(root: &Path, release: bool) -> Result<PathBuf> {
     // Native libraries stored uncompressed (extractNativeLibs=false: loaded in place).
     run(Command::new("zip").current_dir(&stage).args(["-q", "-0", "-r"]).arg(&base).arg("lib"))?;
     let aligned = work.join("aligned.apk");
-    run(Command::new("zipalign").args(["-p", "-f", "4"]).arg(&base).arg(&aligned))?;
+    // The library is linked for 16 KiB pages (android-clang.sh), and is loaded in
+    // place from the APK, so its data must start on a 16 KiB boundary too
+    // (Android's 16 KB page-size guidance: `zipalign -P 16`). Debian's zipalign
+    // has no -P, and -p aligns .so files to 4 KiB only: the whole alignment is
+    // 16 KiB instead (every stored entry; a few KiB of padding each), and checked
+    // after signing (`stored_libraries_page_aligned`).
+    run(Command::new("zipalign").args(["-f", &PAGE_ALIGN.to_string()]).arg(&base).arg(&aligned))?;
     let out = root.join(format!("target/blind-augment-{profile}.apk"));
     let ks = keystore()?;
     run(Command::new("apksigner")
@@ -249,11 +255,55 @@ pub fn apk(root: &Path, release: bool) -> Result<PathBuf> {
         .arg(&out)
         .arg(&aligned))?;
     run(Command::new("apksigner").args(["verify"]).arg(&out))?;
+    let libraries = stored_libraries_page_aligned(&out)?;
+    ensure!(libraries >= 2, "{libraries} stored libraries in the APK (the app's and the OpenXR loader expected)");
     check(&out, &built)?;
     let size = std::fs::metadata(&out)?.len();
     println!("{}", out.display());
     eprintln!("APK: {} ({:.1} MB), signed and verified", out.display(), size as f64 / 1e6);
     Ok(out)
+}
+
+/// The page size the library is built and stored for (bytes).
+const PAGE_ALIGN: u64 = 16384;
+
+/// Every stored (uncompressed) `.so` in the zip at `apk` starts its data on a
+/// `PAGE_ALIGN` boundary; returns how many there are. Read from the zip's own
+/// records (end of central directory → central headers → local headers).
+fn stored_libraries_page_aligned(apk: &Path) -> Result<usize> {
+    let z = std::fs::read(apk).with_context(|| format!("reading {}", apk.display()))?;
+    let u16_at = |o: usize| -> Result<u64> {
+        z.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]) as u64).context("zip record past the end")
+    };
+    let u32_at = |o: usize| -> Result<u64> {
+        z.get(o..o + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as u64).context("zip record past the end")
+    };
+    let eocd = (0..z.len().saturating_sub(21))
+        .rev()
+        .find(|&o| z[o..o + 4] == [0x50, 0x4b, 0x05, 0x06])
+        .context("no end of central directory: not a zip")?;
+    let entries = u16_at(eocd + 10)?;
+    let mut at = u32_at(eocd + 16)? as usize;
+    let mut libraries = 0;
+    for _ in 0..entries {
+        ensure!(u32_at(at)? == 0x0201_4b50, "bad central directory header at {at}");
+        let method = u16_at(at + 10)?;
+        let (name_len, extra_len, comment_len) =
+            (u16_at(at + 28)? as usize, u16_at(at + 30)? as usize, u16_at(at + 32)? as usize);
+        let local = u32_at(at + 42)? as usize;
+        let name =
+            String::from_utf8_lossy(z.get(at + 46..at + 46 + name_len).context("name past the end")?).to_string();
+        at += 46 + name_len + extra_len + comment_len;
+        if !name.ends_with(".so") {
+            continue;
+        }
+        ensure!(method == 0, "{name} is compressed: extractNativeLibs=false needs it stored");
+        ensure!(u32_at(local)? == 0x0403_4b50, "bad local header for {name}");
+        let data = local as u64 + 30 + u16_at(local + 26)? + u16_at(local + 28)?;
+        ensure!(data % PAGE_ALIGN == 0, "{name}: data at byte {data}, not on a {PAGE_ALIGN}-byte page boundary");
+        libraries += 1;
+    }
+    Ok(libraries)
 }
 
 /// What CI proves of the package (no headset here): the badging, the manifest's

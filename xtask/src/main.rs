@@ -143,3 +143,25 @@ fn main() -> Result<()> {
         other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Builds land where cargo puts them: CARGO_TARGET_DIR when set (a relative one
+    /// from the workspace root, where `cargo` runs the builds), else `target/`.
+    #[test]
+    fn target_dir_follows_cargo_target_dir() {
+        // SAFETY (set_var): the only test in this binary reading the variable.
+        let before = std::env::var_os("CARGO_TARGET_DIR");
+        std::env::set_var("CARGO_TARGET_DIR", "/tmp/elsewhere");
+        assert_eq!(target_dir(), PathBuf::from("/tmp/elsewhere"));
+        std::env::set_var("CARGO_TARGET_DIR", "build/out");
+        assert_eq!(target_dir(), root().join("build/out"));
+        std::env::remove_var("CARGO_TARGET_DIR");
+        assert_eq!(target_dir(), root().join("target"));
+        if let Some(v) = before {
+            std::env::set_var("CARGO_TARGET_DIR", v);
+        }
+    }
+}
