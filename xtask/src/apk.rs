@@ -300,7 +300,10 @@ fn stored_libraries_page_aligned(apk: &Path) -> Result<usize> {
         ensure!(method == 0, "{name} is compressed: extractNativeLibs=false needs it stored");
         ensure!(u32_at(local)? == 0x0403_4b50, "bad local header for {name}");
         let data = local as u64 + 30 + u16_at(local + 26)? + u16_at(local + 28)?;
-        ensure!(data.is_multiple_of(PAGE_ALIGN), "{name}: data at byte {data}, not on a {PAGE_ALIGN}-byte page boundary");
+        ensure!(
+            data.is_multiple_of(PAGE_ALIGN),
+            "{name}: data at byte {data}, not on a {PAGE_ALIGN}-byte page boundary"
+        );
         libraries += 1;
     }
     Ok(libraries)
