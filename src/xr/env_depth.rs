@@ -349,15 +349,15 @@ mod tests {
         }
     }
 
-    /// Layers split, rows reversed (bottom-up storage → top-down views), far < near
+    /// Layers split, rows kept in storage order (the spec never flips them), far < near
     /// read as an infinite far plane, tangents of the fov angles, the pose as given.
     #[test]
     fn views_from_values() {
         let (w, h) = (3u32, 2u32);
         let values: Vec<f32> = (0..12).map(|i| i as f32 / 100.0).collect();
         let v = depth_views(&values, (w, h), 0.1, 0.0, &[view(-0.03), view(0.03)]).unwrap();
-        assert_eq!(v[0].ndc_depth, vec![0.03, 0.04, 0.05, 0.0, 0.01, 0.02]);
-        assert_eq!(v[1].ndc_depth, vec![0.09, 0.10, 0.11, 0.06, 0.07, 0.08]);
+        assert_eq!(v[0].ndc_depth, vec![0.0, 0.01, 0.02, 0.03, 0.04, 0.05]);
+        assert_eq!(v[1].ndc_depth, vec![0.06, 0.07, 0.08, 0.09, 0.10, 0.11]);
         assert!(v[0].far_m.is_infinite() && v[0].near_m == 0.1);
         assert!((v[0].fov_tan[0] - (-0.8f32).tan()).abs() < 1e-6 && (v[0].fov_tan[3] - (-0.9f32).tan()).abs() < 1e-6);
         assert_eq!(v[1].world_from_view.w_axis.truncate(), Vec3::new(0.03, 1.0, 0.0));
