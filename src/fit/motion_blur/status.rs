@@ -37,11 +37,15 @@ pub(crate) fn visible_speed_px(flow: &Flow) -> Option<f32> {
 /// visible streak that the standard error cannot tell from none. (That case was
 /// called absent: 30 of the 123 streaks of `benches/streak_acf/fallback.py`'s frames,
 /// most read within two standard errors of the truth — the astronaut's 8 px as 8.0 ±
-/// 3.2 px —, and it voted "no motion blur" in the worker's window.) NaN is not
-/// identifiable.
+/// 3.2 px —, and it voted "no motion blur" in the worker's window.) A flow too slow
+/// for even a whole-interval exposure to streak visibly (under `INVISIBLE_STREAK_PX`
+/// per frame: a still head) cannot show the exposure at all: not identifiable,
+/// whatever the reading. NaN is not identifiable.
 pub(crate) fn exposure_status(lambda: f32, stderr: f64, speed_px: Option<f32>) -> Status {
     if lambda >= MIN_EXPOSURE && (lambda as f64) > 3.0 * stderr {
         Status::Present
+    } else if speed_px.is_some_and(|s| s < INVISIBLE_STREAK_PX) {
+        Status::NotIdentifiable
     } else if lambda < MIN_EXPOSURE || speed_px.is_some_and(|s| lambda * s < INVISIBLE_STREAK_PX) {
         Status::Absent
     } else {
@@ -96,6 +100,10 @@ mod tests {
         assert_eq!(exposure_status(0.0069, 0.01, Some(50.0)), Status::Absent);
         assert_eq!(exposure_status(0.0071, 0.01, Some(50.0)), Status::NotIdentifiable);
         assert_eq!(exposure_status(0.5, 0.0, Some(8.0)), Status::Present);
+        // A still head (0.2 px/frame: a whole-interval exposure would streak 0.2 px)
+        // shows no exposure: a reading of none there is not identifiable, not absent.
+        assert_eq!(exposure_status(0.0, 0.0, Some(0.2)), Status::NotIdentifiable);
+        assert_eq!(exposure_status(0.004, 1e-4, Some(0.0)), Status::NotIdentifiable);
         // NaN reads nothing.
         assert_eq!(exposure_status(f32::NAN, 0.01, Some(8.0)), Status::NotIdentifiable);
         assert_eq!(exposure_status(0.5, f64::NAN, Some(8.0)), Status::NotIdentifiable);

@@ -9,6 +9,12 @@ use super::*;
 /// under load may see its second frame a few tenths of a second late.
 const NEIGHBOUR_WAIT_S: f64 = 0.3;
 
+/// Streak (px) the held exposure must predict at a frame's speed for that frame's
+/// "absent" reading to count against it: twice the negligible streak
+/// (`fit::motion_blur`'s `INVISIBLE_STREAK_PX`, 0.35 px), so that the streak the
+/// frame failed to show was clearly visible.
+const SHOWN_STREAK_PX: f32 = 0.7;
+
 /// Presence with hysteresis.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Presence {
@@ -66,17 +72,32 @@ impl Calibrator {
                 m.noise = crate::model::Noise::absent(crate::model::Diagnostics::not_fitted(why));
             }
         }
-        // Presence votes: every identifiable estimate.
-        let count = |f: &dyn Fn(&CameraModel) -> (bool, bool)| {
-            models.iter().fold((0, 0), |(p, i), m| {
-                let (present, identifiable) = f(m);
-                (p + present as usize, i + identifiable as usize)
+        // Presence votes: every identifiable estimate. A motion-blur "absent" is a
+        // vote only where the exposure held so far would have streaked visibly
+        // (`SHOWN_STREAK_PX` at that frame's speed): a still or slow head shows no
+        // streak whatever the exposure, and the camera's exposure does not vanish
+        // when the head stops.
+        let held_exposure =
+            self.published.as_ref().filter(|p| p.motion_blur.present).and_then(|p| p.motion_blur.exposure);
+        let speeds: Vec<Option<f32>> = self.estimates.iter().map(|e| e.speed_px).collect();
+        let count = |f: &dyn Fn(usize, &CameraModel) -> (bool, bool)| {
+            models.iter().enumerate().fold((0, 0), |(p, i), (k, m)| {
+                let (present, identifiable) = f(k, m);
+                (p + (present && identifiable) as usize, i + identifiable as usize)
             })
         };
         let ident = |s: Status| matches!(s, Status::Present | Status::Absent);
-        let (np, ni) = count(&|m| (m.noise.present, ident(m.noise.diagnostics.status)));
-        let (mp, mi) = count(&|m| (m.motion_blur.present, ident(m.motion_blur.diagnostics.status)));
-        let (dp, di) = count(&|m| (m.depth_of_field.present, ident(m.depth_of_field.diagnostics.status)));
+        let mb_vote = |k: usize, m: &CameraModel| {
+            let d = &m.motion_blur.diagnostics;
+            let shows = match (d.status, held_exposure, speeds.get(k).copied().flatten()) {
+                (Status::Absent, Some(lambda), Some(speed)) => lambda * speed >= SHOWN_STREAK_PX,
+                _ => true,
+            };
+            (m.motion_blur.present, ident(d.status) && shows)
+        };
+        let (np, ni) = count(&|_, m| (m.noise.present, ident(m.noise.diagnostics.status)));
+        let (mp, mi) = count(&mb_vote);
+        let (dp, di) = count(&|_, m| (m.depth_of_field.present, ident(m.depth_of_field.diagnostics.status)));
         // Value votes: λ only from estimates that pin it down (± 0.05); a frame with
         // little motion says "λ near 0 or anything" and would drag the median. The
         // blind estimator's root search returns the bracket end (0 or 1, with a zero
@@ -135,6 +156,19 @@ impl Calibrator {
                 _ => agg.depth_of_field.present = on[2] && agg.depth_of_field.curve.is_some(),
             }
         }
+        // What is published says one thing per effect: `present` (the hysteresis'
+        // decision) and the status agree, a present motion blur carries its
+        // exposure and an absent one none. Not identifiable (no identifiable
+        // estimate in the window) stays distinct from absent.
+        settle(&mut agg.noise.diagnostics, agg.noise.present, (np, ni));
+        settle(&mut agg.depth_of_field.diagnostics, agg.depth_of_field.present, (dp, di));
+        if agg.motion_blur.present && agg.motion_blur.exposure.is_none() {
+            agg.motion_blur.present = false;
+        }
+        if !agg.motion_blur.present {
+            agg.motion_blur.exposure = None;
+        }
+        settle(&mut agg.motion_blur.diagnostics, agg.motion_blur.present, (mp, mi));
         agg.validate().ok()?;
         self.published = Some(agg.clone());
         self.stages.add("aggregation", t_agg);
@@ -147,5 +181,92 @@ impl Calibrator {
             frames_used: self.estimates.iter().map(|e| e.frame).collect(),
             stages_s: self.stages.0.clone(),
         })
+    }
+}
+
+/// Sets a published effect's status from its presence and the window's votes
+/// (`present` of `identifiable`), saying so in the reason where it changes.
+fn settle(d: &mut crate::model::Diagnostics, present: bool, (present_votes, identifiable): (usize, usize)) {
+    let status = if present {
+        Status::Present
+    } else if identifiable > 0 {
+        Status::Absent
+    } else if d.status == Status::NotFitted {
+        return; // not requested, or not yet fitted: says so already
+    } else {
+        Status::NotIdentifiable
+    };
+    if d.status != status {
+        let word = match status {
+            Status::Present => "present",
+            Status::Absent => "absent",
+            _ => "not identifiable",
+        };
+        d.reason = format!(
+            "{word} by the window's vote ({present_votes} of {identifiable} identifiable estimates present, with \
+             hysteresis); the aggregate said: {}",
+            d.reason
+        );
+        d.status = status;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Diagnostics, MotionBlur};
+    use crate::worker::{CalibrationTier, CalibratorConfig, Providers};
+
+    fn estimate(frame: u64, status: Status, exposure: Option<f32>, speed_px: f32) -> Estimate {
+        let mut model = CameraModel::empty(320, 240);
+        let mut d = Diagnostics::not_fitted("test reading");
+        (d.status, d.method, d.stderr) = (status, "fast".into(), Some(0.01));
+        model.motion_blur = MotionBlur { present: status == Status::Present, exposure, diagnostics: d };
+        Estimate { frame, t_s: frame as f64 / 30.0, model, noise_lags: Vec::new(), speed_px: Some(speed_px) }
+    }
+
+    /// A confident λ, then a second of slow-head frames whose readings say
+    /// "absent" at 0.5 px/frame (the held λ 0.5 would streak 0.25 px there: not
+    /// visible, so no evidence): the exposure is kept, present, with status
+    /// present. Then a second of frames at 8 px/frame that show no streak where
+    /// 4 px were due: dropped, absent, no exposure. Every publication consistent.
+    #[test]
+    fn absent_readings_count_only_where_the_held_exposure_would_show() {
+        let cfg = CalibratorConfig::new(CalibrationTier::Fast, 1.0 / 30.0, None);
+        let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Fast)).expect("config");
+        let publish = |cal: &mut Calibrator, e: Estimate| {
+            let (frame, t_s) = (e.frame, e.t_s);
+            cal.estimates.push_back(e);
+            let m = cal.aggregate(frame, t_s, UpdateReason::Schedule, Instant::now()).expect("published").model;
+            let mb = &m.motion_blur;
+            assert_eq!(
+                mb.present,
+                mb.diagnostics.status == Status::Present,
+                "frame {frame}: {}",
+                mb.diagnostics.reason
+            );
+            assert_eq!(
+                mb.present,
+                mb.exposure.is_some(),
+                "frame {frame}: present {} exposure {:?}",
+                mb.present,
+                mb.exposure
+            );
+            m
+        };
+        let m = publish(&mut cal, estimate(0, Status::Present, Some(0.5), 8.0));
+        assert!(m.motion_blur.present);
+        for f in 1..=40 {
+            let m = publish(&mut cal, estimate(f, Status::Absent, Some(0.0), 0.5));
+            assert!(m.motion_blur.present, "frame {f}: dropped on readings that could not show it");
+            assert_eq!(m.motion_blur.exposure, Some(0.5), "frame {f}");
+        }
+        let mut last = None;
+        for f in 41..=80 {
+            last = Some(publish(&mut cal, estimate(f, Status::Absent, Some(0.0), 8.0)));
+        }
+        let m = last.expect("published");
+        assert!(!m.motion_blur.present, "absence shown at 8 px/frame must drop the exposure");
+        assert_eq!(m.motion_blur.diagnostics.status, Status::Absent);
     }
 }

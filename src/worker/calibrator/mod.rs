@@ -73,6 +73,11 @@ struct Estimate {
     /// The aggregation divides the noise's frame-to-frame correlation out of these
     /// (`tnr`).
     noise_lags: Vec<u64>,
+    /// The frame's image speed (px/frame, 90th percentile of the pose + depth flow
+    /// at the sparse grid); None without poses and depth. A motion-blur reading of
+    /// "absent" is evidence only where the held exposure would have streaked
+    /// (`aggregate`).
+    speed_px: Option<f32>,
 }
 
 /// Variance (px²) of the Gaussian both sides of the temporal motion-blur fit pass
@@ -414,7 +419,8 @@ impl Calibrator {
                         let since = self.estimates.back().map_or(t_s, |e| e.t_s);
                         self.on_change(index, t_s, since, cause, &mut events);
                     }
-                    self.estimates.push_back(Estimate { frame: index, t_s, model, noise_lags });
+                    let speed_px = analysed.sparse_flow.as_deref().and_then(sparse_speed_px);
+                    self.estimates.push_back(Estimate { frame: index, t_s, model, noise_lags, speed_px });
                     let reason = if in_burst && self.after_change {
                         UpdateReason::Change
                     } else if in_burst {
@@ -734,4 +740,11 @@ impl std::fmt::Debug for Calibrator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Calibrator").field("tier", &self.cfg.tier).field("frames_held", &self.window.len()).finish()
     }
+}
+
+/// The 90th percentile of |flow| over the sparse grid's finite vectors (px/frame),
+/// as `fit::motion_blur`'s `visible_speed_px` reads a dense flow.
+fn sparse_speed_px(flow: &[[f32; 2]]) -> Option<f32> {
+    let mut v: Vec<f32> = flow.iter().map(|f| f[0].hypot(f[1])).filter(|s| s.is_finite()).collect();
+    (!v.is_empty()).then(|| fit::percentile(&mut v, 0.9))
 }
