@@ -1,7 +1,13 @@
 //! glTF 2.0 scenes as plain data for the G-buffer pass: triangle meshes (position,
 //! normal, UV), base-colour materials and textures, the node hierarchy and its
 //! animations (translation / rotation / scale channels), evaluated at any time.
-//! Reads self-contained `.glb` files (buffers and images embedded).
+//! Reads `.glb` and `.gltf` (external files beside it, `data:` URIs); `load` says
+//! how, `accessor` reads the data with every range checked.
+
+mod accessor;
+mod load;
+
+pub use load::SUPPORTED_REQUIRED;
 
 use glam::{Mat4, Quat, Vec3};
 use std::sync::Arc;
@@ -10,6 +16,24 @@ use std::sync::Arc;
 pub enum SceneError {
     #[error("glTF `{input}`: {problem}")]
     Invalid { input: String, problem: String },
+    /// The reader panicked: a malformed input it did not anticipate. Kept as an
+    /// error so the app never goes down on a user's file; the fuzz test over
+    /// mutated files holds that no input reaches it.
+    #[error("glTF `{input}`: malformed in a way the reader did not anticipate ({detail}); please report this file")]
+    Unanticipated { input: String, detail: String },
+}
+
+/// Runs a parse, turning a panic inside it (from the glTF crate or this reader)
+/// into `SceneError::Unanticipated`.
+fn guarded(name: &str, parse: impl FnOnce() -> Result<Scene, SceneError>) -> Result<Scene, SceneError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse)).unwrap_or_else(|payload| {
+        let detail = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "panic".into());
+        Err(SceneError::Unanticipated { input: name.to_string(), detail })
+    })
 }
 
 fn invalid(input: &str, problem: impl Into<String>) -> SceneError {
@@ -101,180 +125,24 @@ pub struct Scene {
     pub channels: Vec<Channel>,
     /// Longest animation (s); animations loop with this period.
     pub duration_s: f32,
+    /// What of the file is not drawn, and why (cameras, lights, line primitives, …).
+    pub notes: Vec<String>,
 }
 
 impl Scene {
-    /// Parse a self-contained binary glTF (`.glb`). `name` names the input in errors.
-    pub fn from_glb(bytes: &[u8], name: &str) -> Result<Self, SceneError> {
-        let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(name, e.to_string()))?;
-        let blob = gltf.blob.as_deref();
-        let buffer_data = |b: gltf::Buffer<'_>| -> Option<&[u8]> {
-            match b.source() {
-                gltf::buffer::Source::Bin => blob,
-                gltf::buffer::Source::Uri(_) => None,
-            }
-        };
-        for b in gltf.buffers() {
-            if buffer_data(b.clone()).is_none() {
-                return Err(invalid(name, format!("buffer {} is external or missing; embed it (.glb)", b.index())));
-            }
-        }
-        let mut textures = Vec::new();
-        let mut image_to_texture = std::collections::HashMap::new();
-        for img in gltf.images() {
-            let gltf::image::Source::View { view, .. } = img.source() else {
-                return Err(invalid(name, format!("image {} is an external file; embed it (.glb)", img.index())));
-            };
-            let data = buffer_data(view.buffer()).unwrap_or(&[]);
-            let slice = data
-                .get(view.offset()..view.offset() + view.length())
-                .ok_or_else(|| invalid(name, format!("image {} lies outside its buffer", img.index())))?;
-            let decoded = image::load_from_memory(slice)
-                .map_err(|e| invalid(name, format!("image {}: {e}", img.index())))?
-                .to_rgba8();
-            image_to_texture.insert(img.index(), textures.len());
-            textures.push(Arc::new(TextureData {
-                width: decoded.width(),
-                height: decoded.height(),
-                rgba: decoded.into_raw(),
-            }));
-        }
-        let mut materials: Vec<Material> = gltf
-            .materials()
-            .map(|m| {
-                let pbr = m.pbr_metallic_roughness();
-                Material {
-                    base_colour: pbr.base_color_factor(),
-                    texture: pbr
-                        .base_color_texture()
-                        .and_then(|t| image_to_texture.get(&t.texture().source().index()).copied()),
-                }
-            })
-            .collect();
-        let default_material = materials.len();
-        materials.push(Material { base_colour: [0.8, 0.8, 0.8, 1.0], texture: None });
+    /// Load a `.glb` or `.gltf` file; a `.gltf`'s external buffers and images are
+    /// read from its folder.
+    pub fn load(path: &std::path::Path) -> Result<Self, SceneError> {
+        let name = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|e| invalid(&name, format!("cannot read: {e}")))?;
+        let dir = path.parent().unwrap_or(std::path::Path::new("."));
+        guarded(&name, || load::parse(&bytes, &name, load::Resources::Folder(dir)))
+    }
 
-        let mut nodes: Vec<Node> = gltf
-            .nodes()
-            .map(|n| {
-                let (t, r, s) = n.transform().decomposed();
-                Node {
-                    parent: None,
-                    rest: Trs { translation: Vec3::from(t), rotation: Quat::from_array(r), scale: Vec3::from(s) },
-                }
-            })
-            .collect();
-        for n in gltf.nodes() {
-            for c in n.children() {
-                nodes[c.index()].parent = Some(n.index());
-            }
-        }
-        let mut meshes = Vec::new();
-        for n in gltf.nodes() {
-            let Some(mesh) = n.mesh() else { continue };
-            for prim in mesh.primitives() {
-                if prim.mode() != gltf::mesh::Mode::Triangles {
-                    return Err(invalid(name, format!("mesh {}: only triangle primitives are drawn", mesh.index())));
-                }
-                let reader = prim.reader(buffer_data);
-                let positions: Vec<[f32; 3]> = reader
-                    .read_positions()
-                    .ok_or_else(|| invalid(name, format!("mesh {} has a primitive without positions", mesh.index())))?
-                    .collect();
-                let indices: Vec<u32> = match reader.read_indices() {
-                    Some(i) => i.into_u32().collect(),
-                    None => (0..positions.len() as u32).collect(),
-                };
-                if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-                    return Err(invalid(
-                        name,
-                        format!("mesh {}: index {bad} ≥ {} vertices", mesh.index(), positions.len()),
-                    ));
-                }
-                if positions.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err(invalid(name, format!("mesh {}: non-finite vertex position", mesh.index())));
-                }
-                let normals: Vec<[f32; 3]> = match reader.read_normals() {
-                    Some(n) => n.collect(),
-                    None => vertex_normals(&positions, &indices),
-                };
-                let uvs: Vec<[f32; 2]> = match reader.read_tex_coords(0) {
-                    Some(t) => t.into_f32().collect(),
-                    None => vec![[0.0; 2]; positions.len()],
-                };
-                // A NaN here would become a NaN fragment in the G-buffer and spread
-                // through every blur: refuse it at load time.
-                if normals.iter().flatten().chain(uvs.iter().flatten()).any(|v| !v.is_finite()) {
-                    return Err(invalid(
-                        name,
-                        format!("mesh {}: non-finite normal or texture coordinate", mesh.index()),
-                    ));
-                }
-                let vertices = positions
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &p)| Vertex {
-                        position: p,
-                        normal: normals.get(i).copied().unwrap_or([0.0, 0.0, 1.0]),
-                        uv: uvs.get(i).copied().unwrap_or([0.0; 2]),
-                    })
-                    .collect();
-                let (lo, hi) = positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| {
-                    (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p)))
-                });
-                meshes.push(Mesh {
-                    node: n.index(),
-                    material: prim.material().index().unwrap_or(default_material),
-                    vertices,
-                    indices,
-                    bounds: (lo, hi),
-                });
-            }
-        }
-        if meshes.is_empty() {
-            return Err(invalid(name, "no triangle meshes"));
-        }
-        let mut channels = Vec::new();
-        let mut duration_s = 0.0f32;
-        for anim in gltf.animations() {
-            for ch in anim.channels() {
-                let reader = ch.reader(buffer_data);
-                let times_s: Vec<f32> = reader.read_inputs().map(|i| i.collect()).unwrap_or_default();
-                use gltf::animation::util::ReadOutputs;
-                let (property, mut values): (Property, Vec<[f32; 4]>) = match reader.read_outputs() {
-                    Some(ReadOutputs::Translations(t)) => {
-                        (Property::Translation, t.map(|v| [v[0], v[1], v[2], 0.0]).collect())
-                    }
-                    Some(ReadOutputs::Scales(s)) => (Property::Scale, s.map(|v| [v[0], v[1], v[2], 0.0]).collect()),
-                    Some(ReadOutputs::Rotations(r)) => (Property::Rotation, r.into_f32().collect()),
-                    _ => continue, // morph weights: not drawn
-                };
-                let interp = ch.sampler().interpolation();
-                if interp == gltf::animation::Interpolation::CubicSpline {
-                    // (in-tangent, value, out-tangent) triples: keep the values.
-                    values = values.chunks(3).filter_map(|c| c.get(1).copied()).collect();
-                }
-                if times_s.is_empty()
-                    || values.len() != times_s.len()
-                    || times_s.windows(2).any(|w| w[1] < w[0])
-                    || times_s.iter().chain(values.iter().flatten()).any(|v| !v.is_finite())
-                {
-                    return Err(invalid(
-                        name,
-                        format!("animation {} channel {}: bad keyframes", anim.index(), ch.index()),
-                    ));
-                }
-                duration_s = duration_s.max(*times_s.last().unwrap_or(&0.0));
-                channels.push(Channel {
-                    node: ch.target().node().index(),
-                    property,
-                    times_s,
-                    values,
-                    step: interp == gltf::animation::Interpolation::Step,
-                });
-            }
-        }
-        Ok(Self { nodes, meshes, materials, textures, channels, duration_s })
+    /// Parse a self-contained glTF (`.glb`, or `.gltf` whose resources are all
+    /// `data:` URIs). `name` names the input in errors.
+    pub fn from_glb(bytes: &[u8], name: &str) -> Result<Self, SceneError> {
+        guarded(name, || load::parse(bytes, name, load::Resources::Embedded))
     }
 
     /// Local transforms at time `t_s` (animations loop over `duration_s`). The
@@ -365,17 +233,4 @@ fn sample(ch: &Channel, t: f32) -> [f32; 4] {
     } else {
         std::array::from_fn(|i| a[i] + (b[i] - a[i]) * f)
     }
-}
-
-/// Area-weighted vertex normals for meshes that carry none.
-fn vertex_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
-    let mut acc = vec![Vec3::ZERO; positions.len()];
-    for tri in indices.chunks_exact(3) {
-        let [a, b, c] = [0, 1, 2].map(|i| Vec3::from(positions[tri[i] as usize]));
-        let n = (b - a).cross(c - a);
-        for &i in tri {
-            acc[i as usize] += n;
-        }
-    }
-    acc.into_iter().map(|n| n.try_normalize().unwrap_or(Vec3::Z).to_array()).collect()
 }

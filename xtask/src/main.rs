@@ -4,11 +4,13 @@
 //! bundled glTF object; `xr-runtime` builds the headless OpenXR test runtime and
 //! prints its manifest's path (for `XR_RUNTIME_JSON`); `apk` builds, signs and
 //! checks the Quest APK without the NDK (apk.rs), `install` puts it on a headset;
-//! `train-models` trains the shipped ONNX models (models.rs). CI is `.ci/run` alone, the
+//! `train-models` trains the shipped ONNX models (models.rs); `gltf-corpus` runs the
+//! glTF loader over other projects' files (gltf_corpus.rs). CI is `.ci/run` alone, the
 //! one definition of the checks.
 
 mod apk;
 mod assets;
+mod gltf_corpus;
 mod models;
 
 use anyhow::{bail, Context, Result};
@@ -140,7 +142,11 @@ fn main() -> Result<()> {
         Some("apk") => apk::apk(&root(), args.iter().any(|a| a == "--release")).map(|_| ()),
         Some("install") => apk::install(&root(), args.iter().any(|a| a == "--release")),
         Some("train-models") => models::train(&root()),
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        Some("gltf-corpus") => match args.get(1) {
+            Some(dir) => gltf_corpus::run(&root(), &target_dir(), Path::new(dir)),
+            None => bail!("usage: cargo xtask gltf-corpus MIRRORS (bare git mirrors as owner+name/repo)"),
+        },
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
 

@@ -6,6 +6,7 @@ mod calibrate_cmd;
 mod demo;
 mod fit_cmd;
 mod render_cmd;
+mod scene_cmd;
 mod xr_cmd;
 
 use anyhow::{Context, Result};
@@ -160,7 +161,7 @@ pub struct DemoArgs {
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
-    /// glTF 2.0 binary (.glb) with embedded buffers and textures.
+    /// glTF 2.0 scene: `.glb`, or `.gltf` with its buffers and images beside it or in `data:` URIs.
     #[arg(long)]
     scene: PathBuf,
     /// Folder of background frames (PNG/JPEG, sorted by name; camera frames).
@@ -194,7 +195,7 @@ pub struct XrArgs {
     /// calibration publishes one).
     #[arg(long)]
     camera: Option<PathBuf>,
-    /// glTF 2.0 binary scene (default: the bundled assets/toy.glb).
+    /// glTF 2.0 scene, `.glb` or `.gltf` (default: the bundled assets/toy.glb).
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Distance from the start head pose to the object (m).
@@ -296,6 +297,8 @@ enum Command {
     /// Write a recorded sequence with known truth (the bundled photograph along a
     /// head path; an optional mid-sequence camera change).
     SynthVideo(SynthVideoArgs),
+    /// Check glTF files: what each would draw, or why it is refused.
+    Scene(scene_cmd::SceneArgs),
 }
 
 pub fn parse_size(s: &str) -> Result<(usize, usize)> {
@@ -378,6 +381,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Xr(a) => xr_cmd::run(a),
         Command::Calibrate(a) => calibrate_cmd::run(a),
         Command::SynthVideo(a) => calibrate_cmd::synth_video(a),
+        Command::Scene(a) => scene_cmd::run(a),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

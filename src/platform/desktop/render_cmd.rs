@@ -236,8 +236,10 @@ pub fn write_frames(out: &Path, frames: &[RenderedFrame]) -> Result<()> {
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
-    let bytes = std::fs::read(&args.scene).with_context(|| format!("reading {}", args.scene.display()))?;
-    let scene = Scene::from_glb(&bytes, &args.scene.display().to_string())?;
+    let scene = Scene::load(&args.scene)?;
+    for note in &scene.notes {
+        log::warn!("{}: {note}", args.scene.display());
+    }
     let text = std::fs::read_to_string(&args.camera).with_context(|| format!("reading {}", args.camera.display()))?;
     let model = CameraModel::from_json(&text).with_context(|| format!("camera model {}", args.camera.display()))?;
     let mut paths: Vec<_> = std::fs::read_dir(&args.background)

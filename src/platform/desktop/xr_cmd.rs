@@ -62,8 +62,11 @@ pub fn format_summary(s: &XrSummary) -> String {
 pub fn run(args: XrArgs) -> Result<()> {
     let scene = match &args.scene {
         Some(p) => {
-            let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
-            Scene::from_glb(&bytes, &p.display().to_string())?
+            let scene = Scene::load(p)?;
+            for note in &scene.notes {
+                log::warn!("{}: {note}", p.display());
+            }
+            scene
         }
         None => Scene::from_glb(TOY, "assets/toy.glb")?,
     };

@@ -1,0 +1,780 @@
+//! Reading a glTF 2.0 file into a `Scene`: the container (`.glb` chunks or `.gltf`
+//! JSON), its resources (the GLB binary chunk, `data:` URIs, files beside a
+//! `.gltf`), the extension policy (an extension a file *requires* and this build
+//! does not implement is refused by name), the default scene's node tree, and its
+//! primitives and animations. Every index and byte range in the file is checked
+//! before use (see `accessor`): a malformed file is an error naming the file and
+//! what is wrong, never a panic.
+
+use super::accessor::Data;
+use super::{invalid, Channel, Material, Mesh, Node, Property, Scene, SceneError, TextureData, Trs, Vertex};
+use glam::{Mat4, Quat, Vec2, Vec3};
+use gltf::json;
+use json::accessor::Type;
+use json::validation::{Checked, Validate};
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Extensions a file may list in `extensionsRequired` and still be drawn as its
+/// author meant: quantized attributes are read by `accessor` (any component type,
+/// normalized or not) and texture transforms are applied to the UVs at load.
+pub const SUPPORTED_REQUIRED: &[&str] = &["KHR_mesh_quantization", "KHR_texture_transform"];
+
+/// Compressed-data extensions and what each would need; refused by name when required.
+const COMPRESSION: &[(&str, &str)] = &[
+    ("KHR_draco_mesh_compression", "Draco-compressed meshes"),
+    ("EXT_meshopt_compression", "meshoptimizer-compressed buffers"),
+    ("KHR_meshopt_compression", "meshoptimizer-compressed buffers"),
+    ("KHR_texture_basisu", "KTX2 / Basis Universal textures"),
+    ("EXT_texture_webp", "WebP textures"),
+    ("EXT_texture_avif", "AVIF textures"),
+    ("MSFT_texture_dds", "DDS textures"),
+];
+
+/// Where a file's external resources are looked up.
+pub(super) enum Resources<'a> {
+    /// Only the GLB chunk and `data:` URIs (a bundled asset).
+    Embedded,
+    /// Relative URIs resolved in this folder (the folder of the `.gltf`).
+    Folder(&'a Path),
+}
+
+const GLB_MAGIC: &[u8; 4] = b"glTF";
+
+/// The JSON chunk and the optional BIN chunk of a GLB (glTF 2.0 §4.4), every
+/// length checked against the bytes present.
+fn split_glb<'a>(bytes: &'a [u8], name: &str) -> Result<(&'a [u8], Option<&'a [u8]>), SceneError> {
+    let word = |at: usize| -> Option<u32> { Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?)) };
+    let bad = |what: &str| invalid(name, format!("GLB container: {what}"));
+    let version = word(4).ok_or_else(|| bad("shorter than its 12-byte header"))?;
+    if version != 2 {
+        return Err(bad(&format!("version {version}; only glTF 2.0 is read")));
+    }
+    let total = word(8).ok_or_else(|| bad("shorter than its 12-byte header"))? as usize;
+    if total > bytes.len() || total < 12 {
+        return Err(bad(&format!("header says {total} bytes, the file has {}", bytes.len())));
+    }
+    let mut at = 12;
+    let mut chunks: Vec<(u32, &[u8])> = Vec::new();
+    while at < total {
+        let (Some(len), Some(ty)) = (word(at), word(at + 4)) else {
+            return Err(bad(&format!("truncated chunk header at byte {at}")));
+        };
+        let start = at + 8;
+        let end = start.checked_add(len as usize).filter(|&e| e <= total).ok_or_else(|| {
+            bad(&format!("chunk at byte {at} claims {len} bytes; only {} remain", total.saturating_sub(start)))
+        })?;
+        chunks.push((ty, &bytes[start..end]));
+        // Chunks are padded to 4-byte boundaries (§4.4.3).
+        at = end.div_ceil(4) * 4;
+    }
+    const JSON: u32 = 0x4E4F_534A;
+    const BIN: u32 = 0x004E_4942;
+    match chunks.as_slice() {
+        [(JSON, json), rest @ ..] => {
+            // Chunks of unknown types are skipped (§4.4.3.1); a second BIN is not allowed.
+            let bins: Vec<&[u8]> = rest.iter().filter(|(t, _)| *t == BIN).map(|(_, d)| *d).collect();
+            if bins.len() > 1 {
+                return Err(bad("more than one BIN chunk"));
+            }
+            Ok((json, bins.first().copied()))
+        }
+        _ => Err(bad("the first chunk is not JSON")),
+    }
+}
+
+/// Percent-decoded relative URI, or an error for what is not fetched.
+fn relative_path(uri: &str, what: &str, name: &str) -> Result<String, SceneError> {
+    if uri.contains("://") {
+        return Err(invalid(name, format!("{what}: `{uri}` is a URL; only files beside the .gltf are read")));
+    }
+    let decoded = percent_encoding::percent_decode_str(uri)
+        .decode_utf8()
+        .map_err(|_| invalid(name, format!("{what}: URI `{uri}` is not UTF-8 once decoded")))?;
+    if Path::new(decoded.as_ref()).is_absolute() {
+        return Err(invalid(name, format!("{what}: `{uri}` is an absolute path; glTF URIs are relative")));
+    }
+    Ok(decoded.into_owned())
+}
+
+/// The bytes of a `data:` URI (RFC 2397): base64 or percent-encoded.
+fn data_uri(uri: &str, what: &str, name: &str) -> Result<Vec<u8>, SceneError> {
+    let (header, payload) =
+        uri.split_once(',').ok_or_else(|| invalid(name, format!("{what}: data URI without a comma")))?;
+    if header.ends_with(";base64") {
+        use base64::Engine as _;
+        base64::engine::general_purpose::STANDARD
+            .decode(payload.trim_end())
+            .map_err(|e| invalid(name, format!("{what}: data URI is not valid base64 ({e})")))
+    } else {
+        Ok(percent_encoding::percent_decode_str(payload).collect())
+    }
+}
+
+fn fetch(uri: &str, what: &str, name: &str, resources: &Resources<'_>) -> Result<Vec<u8>, SceneError> {
+    if uri.starts_with("data:") {
+        return data_uri(uri, what, name);
+    }
+    let rel = relative_path(uri, what, name)?;
+    match resources {
+        Resources::Embedded => Err(invalid(
+            name,
+            format!("{what}: external file `{uri}`; load the .gltf from its folder, or embed it (.glb)"),
+        )),
+        Resources::Folder(dir) => {
+            let path = dir.join(&rel);
+            std::fs::read(&path).map_err(|e| invalid(name, format!("{what}: `{}`: {e}", path.display())))
+        }
+    }
+}
+
+/// Checks for what the glTF crate's own validation indexes without a bounds check
+/// (a primitive's POSITION accessor), run before that validation.
+fn precheck(root: &json::Root, name: &str) -> Result<(), SceneError> {
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            for (sem, acc) in &prim.attributes {
+                if acc.value() >= root.accessors.len() {
+                    let sem = match sem {
+                        Checked::Valid(s) => s.to_string(),
+                        Checked::Invalid => "an attribute".into(),
+                    };
+                    return Err(invalid(
+                        name,
+                        format!(
+                            "mesh {m} primitive {p}: {sem} refers to accessor {}, and there are {}",
+                            acc.value(),
+                            root.accessors.len()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    for (i, img) in root.images.iter().enumerate() {
+        // glTF 2.0 schema image.schema.json: exactly one of bufferView / uri, and
+        // mimeType with bufferView.
+        match (&img.buffer_view, &img.uri) {
+            (Some(_), None) if img.mime_type.is_none() => {
+                return Err(invalid(name, format!("image {i}: a bufferView image needs a mimeType")));
+            }
+            (Some(_), None) | (None, Some(_)) => {}
+            _ => return Err(invalid(name, format!("image {i}: exactly one of bufferView and uri must be given"))),
+        }
+    }
+    Ok(())
+}
+
+pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Result<Scene, SceneError> {
+    let (json_bytes, bin) = if bytes.starts_with(GLB_MAGIC) { split_glb(bytes, name)? } else { (bytes, None) };
+    let mut value: serde_json::Value =
+        serde_json::from_slice(json_bytes).map_err(|e| invalid(name, format!("not glTF 2.0 JSON: {e}")))?;
+    let mut notes = Vec::new();
+    normalise(&mut value, &mut notes);
+    let mut root: json::Root =
+        serde_json::from_value(value).map_err(|e| invalid(name, format!("not glTF 2.0 JSON: {e}")))?;
+    if !root.asset.version.starts_with("2.") {
+        return Err(invalid(name, format!("asset.version is {}; only glTF 2.x is read", root.asset.version)));
+    }
+    for ext in &root.extensions_required {
+        if SUPPORTED_REQUIRED.contains(&ext.as_str()) {
+            continue;
+        }
+        return Err(invalid(
+            name,
+            match COMPRESSION.iter().find(|(e, _)| e == ext) {
+                Some((_, what)) => format!("requires {ext} ({what}), which this build does not decode"),
+                None => format!("requires {ext}, which this build does not implement"),
+            },
+        ));
+    }
+    // The policy above decided on required extensions; the crate's validation
+    // would refuse the ones it does not parse itself (KHR_mesh_quantization).
+    let required = std::mem::take(&mut root.extensions_required);
+    precheck(&root, name)?;
+    let mut errors = Vec::new();
+    root.validate(&root, json::Path::new, &mut |path, error| {
+        let path = path().to_string();
+        match error {
+            // An enum value outside the spec's list: the Khronos validator warns
+            // (forward compatibility) and so does this reader, where the object
+            // is used (`Checked::Invalid` is refused at the read).
+            json::validation::Error::Invalid => {}
+            // glTF 2.0 §5.1.1: an accessor without a bufferView is all zeros
+            // (sparse values may replace some); the crate calls it missing.
+            json::validation::Error::Missing if path.starts_with("accessors[") && path.ends_with("].bufferView") => {}
+            // §5.24.1 (mesh.primitive.attributes): a primitive without POSITION
+            // is skipped by the client; its min/max checks then do not apply.
+            json::validation::Error::Missing if path.ends_with("attributes[\"POSITION\"]") => {}
+            _ => errors.push(format!("{path}: {error}")),
+        }
+    });
+    root.extensions_required = required;
+    if let Some(first) = errors.first() {
+        let more = if errors.len() > 1 { format!(" (and {} more)", errors.len() - 1) } else { String::new() };
+        return Err(invalid(name, format!("{first}{more}")));
+    }
+
+    // Buffers are resolved up front but a failure is kept, not raised: a file may
+    // declare a buffer it never reads (the validator accepts that), and the error
+    // is due only where data is read from it.
+    let mut buffers = Vec::with_capacity(root.buffers.len());
+    for (i, b) in root.buffers.iter().enumerate() {
+        let what = format!("buffer {i}");
+        let data = match (&b.uri, i, bin) {
+            (Some(uri), _, _) => fetch(uri, &what, name, &resources).map_err(|e| match e {
+                SceneError::Invalid { problem, .. } => problem,
+                other => other.to_string(),
+            }),
+            // §4.4.3.2: the first buffer without a uri is the GLB's BIN chunk.
+            (None, 0, Some(bin)) => Ok(bin.to_vec()),
+            (None, _, _) => Err(format!("{what} has no data in the file: no uri, and no GLB binary chunk")),
+        };
+        buffers.push(data.and_then(|d| {
+            if (d.len() as u64) < b.byte_length.0 {
+                Err(format!("{what}: {} bytes, byteLength says {}", d.len(), b.byte_length.0))
+            } else {
+                Ok(d)
+            }
+        }));
+    }
+    let data = Data { root: &root, buffers: &buffers };
+    let err = |e: String| invalid(name, e);
+
+    // Nodes and their hierarchy: one parent each, no cycles (glTF 2.0 §3.5.3: the
+    // node hierarchy must be a set of disjoint strict trees).
+    let mut nodes = Vec::with_capacity(root.nodes.len());
+    for (i, n) in root.nodes.iter().enumerate() {
+        let rest = match n.matrix {
+            Some(m) => {
+                let (s, r, t) = Mat4::from_cols_array(&m).to_scale_rotation_translation();
+                Trs { translation: t, rotation: r, scale: s }
+            }
+            None => Trs {
+                translation: Vec3::from(n.translation.unwrap_or([0.0; 3])),
+                rotation: Quat::from_array(n.rotation.map_or([0.0, 0.0, 0.0, 1.0], |q| q.0)).normalize(),
+                scale: Vec3::from(n.scale.unwrap_or([1.0; 3])),
+            },
+        };
+        if !(rest.translation.is_finite() && rest.rotation.is_finite() && rest.scale.is_finite()) {
+            return Err(invalid(name, format!("node {i}: non-finite or degenerate transform")));
+        }
+        nodes.push(Node { parent: None, rest });
+    }
+    for (i, n) in root.nodes.iter().enumerate() {
+        for c in n.children.iter().flatten() {
+            let c = c.value();
+            let child = nodes.get_mut(c).ok_or_else(|| invalid(name, format!("node {i}: child {c} does not exist")))?;
+            if child.parent.is_some() || c == i {
+                return Err(invalid(name, format!("node {c} has more than one parent")));
+            }
+            child.parent = Some(i);
+        }
+    }
+    for i in 0..nodes.len() {
+        let (mut at, mut steps) = (i, 0);
+        while let Some(p) = nodes[at].parent {
+            at = p;
+            steps += 1;
+            if steps > nodes.len() {
+                return Err(invalid(name, format!("node {i} is part of a cycle in the node hierarchy")));
+            }
+        }
+    }
+
+    // The scene drawn: the default scene, else the first; a file without scenes
+    // draws every root node (the spec lets a viewer choose; showing the content is
+    // what a user loading it expects).
+    let roots: Vec<usize> = match (root.scene, root.scenes.first()) {
+        (Some(s), _) => root.scenes[s.value()].nodes.iter().map(|n| n.value()).collect(),
+        (None, Some(s)) => {
+            if root.scenes.len() > 1 {
+                notes.push(format!("{} scenes and no default: drawing scene 0", root.scenes.len()));
+            }
+            s.nodes.iter().map(|n| n.value()).collect()
+        }
+        (None, None) => {
+            notes.push("no scenes: drawing every root node".into());
+            (0..nodes.len()).filter(|&i| nodes[i].parent.is_none()).collect()
+        }
+    };
+    let mut drawn = vec![false; nodes.len()];
+    let mut stack = roots;
+    while let Some(i) = stack.pop() {
+        if std::mem::replace(&mut drawn[i], true) {
+            continue;
+        }
+        stack.extend(root.nodes[i].children.iter().flatten().map(|c| c.value()));
+    }
+    if root.nodes.iter().enumerate().any(|(i, n)| drawn[i] && n.camera.is_some()) {
+        notes.push("cameras ignored: the view is the headset's".into());
+    }
+    if root.extensions_used.iter().any(|e| e == "KHR_lights_punctual") {
+        notes.push("lights ignored: the G-buffer is lit by the fixed key light".into());
+    }
+
+    let mut materials = Vec::with_capacity(root.materials.len() + 1);
+    let mut textures: Vec<Arc<TextureData>> = Vec::new();
+    let mut image_texture: HashMap<usize, usize> = HashMap::new();
+    let mut material_uv: Vec<UvSet> = Vec::new();
+    for (i, m) in root.materials.iter().enumerate() {
+        let pbr = &m.pbr_metallic_roughness;
+        let base_colour = pbr.base_color_factor.0;
+        if base_colour.iter().any(|c| !c.is_finite()) {
+            return Err(invalid(name, format!("material {i}: non-finite baseColorFactor")));
+        }
+        let mut texture = None;
+        let mut uv = UvSet::default();
+        // A texture without a source (`allow_empty_texture`: an extension such as
+        // KHR_texture_basisu supplies it) is drawn without its texture.
+        let source = pbr.base_color_texture.as_ref().map(|info| root.textures[info.index.value()].source.value());
+        if source.is_some_and(|s| s >= root.images.len()) {
+            notes.push(format!("material {i}: base-colour texture without a PNG/JPEG source; drawn untextured"));
+        }
+        if let Some((info, tex)) = pbr.base_color_texture.as_ref().zip(source.filter(|&s| s < root.images.len())) {
+            texture = Some(match image_texture.get(&tex) {
+                Some(&t) => t,
+                None => {
+                    let t = textures.len();
+                    textures.push(Arc::new(decode_image(&root, &data, tex, name, &resources)?));
+                    image_texture.insert(tex, t);
+                    t
+                }
+            });
+            uv = UvSet::from_info(info, name, i)?;
+        }
+        materials.push(Material { base_colour, texture });
+        material_uv.push(uv);
+    }
+    let default_material = materials.len();
+    materials.push(Material { base_colour: [0.8, 0.8, 0.8, 1.0], texture: None });
+    material_uv.push(UvSet::default());
+
+    let mut meshes = Vec::new();
+    let (mut skipped_modes, mut skinned, mut morphed) = (Vec::new(), false, false);
+    for (ni, n) in root.nodes.iter().enumerate() {
+        let Some(mi) = n.mesh.filter(|_| drawn[ni]).map(|m| m.value()) else { continue };
+        skinned |= n.skin.is_some();
+        for (pi, prim) in root.meshes[mi].primitives.iter().enumerate() {
+            let what = format!("mesh {mi} primitive {pi}");
+            morphed |= prim.targets.as_ref().is_some_and(|t| !t.is_empty());
+            use json::mesh::{Mode, Semantic};
+            let mode = match prim.mode {
+                Checked::Valid(m) => m,
+                Checked::Invalid => return Err(invalid(name, format!("{what}: invalid mode"))),
+            };
+            if matches!(mode, Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip) {
+                skipped_modes.push(format!("{mode:?}"));
+                continue;
+            }
+            let attr = |s: Semantic| prim.attributes.get(&Checked::Valid(s)).map(|a| a.value());
+            let Some(pos_ix) = attr(Semantic::Positions) else {
+                skipped_modes.push("without POSITION".into());
+                continue;
+            };
+            let (pos, _) = data.read_f32(pos_ix, &[Type::Vec3], &format!("{what} POSITION")).map_err(err)?;
+            let positions: Vec<[f32; 3]> = pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let order: Vec<u32> = match prim.indices {
+                Some(ix) => data.read_indices(ix.value(), &format!("{what} indices")).map_err(err)?,
+                None => (0..positions.len() as u32).collect(),
+            };
+            if let Some(bad) = order.iter().find(|&&i| i as usize >= positions.len()) {
+                return Err(invalid(name, format!("{what}: index {bad} ≥ {} vertices", positions.len())));
+            }
+            let indices = triangles(mode, &order);
+            if indices.is_empty() {
+                continue;
+            }
+            let normals: Vec<[f32; 3]> = match attr(Semantic::Normals) {
+                Some(ix) => {
+                    let (v, _) = data.read_f32(ix, &[Type::Vec3], &format!("{what} NORMAL")).map_err(err)?;
+                    v.chunks_exact(3)
+                        .map(|c| Vec3::new(c[0], c[1], c[2]).try_normalize().unwrap_or(Vec3::Z).to_array())
+                        .collect()
+                }
+                None => vertex_normals(&positions, &indices),
+            };
+            let material = prim.material.map_or(default_material, |m| m.value());
+            let uv_set = &material_uv[material];
+            let uvs: Vec<[f32; 2]> = match attr(Semantic::TexCoords(uv_set.tex_coord)) {
+                Some(ix) => {
+                    let (v, _) = data.read_f32(ix, &[Type::Vec2], &format!("{what} TEXCOORD")).map_err(err)?;
+                    v.chunks_exact(2).map(|c| uv_set.apply([c[0], c[1]])).collect()
+                }
+                None => vec![[0.0; 2]; positions.len()],
+            };
+            let vertices = positions
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| Vertex {
+                    position: p,
+                    normal: normals.get(i).copied().unwrap_or([0.0, 0.0, 1.0]),
+                    uv: uvs.get(i).copied().unwrap_or([0.0; 2]),
+                })
+                .collect();
+            let (lo, hi) = positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| {
+                (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p)))
+            });
+            meshes.push(Mesh { node: ni, material, vertices, indices, bounds: (lo, hi) });
+        }
+    }
+    if !skipped_modes.is_empty() {
+        skipped_modes.sort();
+        skipped_modes.dedup();
+        notes.push(format!("primitives not drawn: {} (only triangles with positions are)", skipped_modes.join(", ")));
+    }
+    if skinned {
+        notes.push("skins not applied: skinned meshes drawn in their bind pose".into());
+    }
+    if morphed {
+        notes.push("morph targets not applied: meshes drawn with their base shape".into());
+    }
+    if meshes.is_empty() {
+        return Err(invalid(name, "no triangles to draw in the scene"));
+    }
+
+    let mut channels = Vec::new();
+    let mut duration_s = 0.0f32;
+    for (ai, anim) in root.animations.iter().enumerate() {
+        for (ci, ch) in anim.channels.iter().enumerate() {
+            let what = format!("animation {ai} channel {ci}");
+            let property = match ch.target.path {
+                Checked::Valid(json::animation::Property::Translation) => Property::Translation,
+                Checked::Valid(json::animation::Property::Rotation) => Property::Rotation,
+                Checked::Valid(json::animation::Property::Scale) => Property::Scale,
+                _ => continue, // morph weights: not applied (noted above)
+            };
+            let sampler = &anim.samplers[ch.sampler.value()];
+            let (times_s, _) =
+                data.read_f32(sampler.input.value(), &[Type::Scalar], &format!("{what} input")).map_err(err)?;
+            let types: &[Type] = if property == Property::Rotation { &[Type::Vec4] } else { &[Type::Vec3] };
+            let (flat, n) = data.read_f32(sampler.output.value(), types, &format!("{what} output")).map_err(err)?;
+            let mut values: Vec<[f32; 4]> =
+                flat.chunks_exact(n).map(|c| std::array::from_fn(|k| c.get(k).copied().unwrap_or(0.0))).collect();
+            let interp = sampler.interpolation;
+            if interp == Checked::Valid(json::animation::Interpolation::CubicSpline) {
+                // (in-tangent, value, out-tangent) triples: keep the values.
+                values = values.chunks(3).filter_map(|c| c.get(1).copied()).collect();
+            }
+            if property == Property::Rotation {
+                // A zero quaternion has no rotation to normalise to (NaN downstream).
+                if values.iter().any(|q| Quat::from_array(*q).length() < 1e-6) {
+                    return Err(invalid(name, format!("{what}: a zero rotation quaternion")));
+                }
+                values.iter_mut().for_each(|q| *q = Quat::from_array(*q).normalize().to_array());
+            }
+            if times_s.is_empty() || values.len() != times_s.len() || times_s.windows(2).any(|w| w[1] < w[0]) {
+                return Err(invalid(
+                    name,
+                    format!(
+                        "{what}: {} keyframe times for {} values, or times not increasing",
+                        times_s.len(),
+                        values.len()
+                    ),
+                ));
+            }
+            duration_s = duration_s.max(*times_s.last().unwrap_or(&0.0));
+            channels.push(Channel {
+                node: ch.target.node.value(),
+                property,
+                times_s,
+                values,
+                step: interp == Checked::Valid(json::animation::Interpolation::Step),
+            });
+        }
+    }
+    let reach_m = reach_bound_m(&nodes, &meshes, &channels);
+    if reach_m.is_nan() || reach_m > MAX_REACH_M {
+        return Err(invalid(
+            name,
+            format!(
+                "its node transforms and mesh bounds may place vertices {reach_m:.3e} m from the origin; beyond \
+                 {MAX_REACH_M:.0e} m f32 positions step by more than 6 cm and depth and motion vectors are noise"
+            ),
+        ));
+    }
+    Ok(Scene { nodes, meshes, materials, textures, channels, duration_s, notes })
+}
+
+/// Farthest a drawn vertex may lie from the scene's origin (m) for the scene to be
+/// drawn: f32 spacing at 1e6 is 6.25 cm.
+const MAX_REACH_M: f32 = 1.0e6;
+
+/// An upper bound on |world position| of any vertex at any time: per node the
+/// largest scale component and translation length over its rest pose and every
+/// keyframe (linear, step and spline-value interpolation stay within them;
+/// rotations keep lengths), chained down the hierarchy, times the mesh bounds.
+/// Finite values whose products overflow come out as infinity, which fails the check.
+fn reach_bound_m(nodes: &[Node], meshes: &[Mesh], channels: &[Channel]) -> f32 {
+    let mut scale: Vec<f32> = nodes.iter().map(|n| n.rest.scale.abs().max_element()).collect();
+    let mut shift: Vec<f32> = nodes.iter().map(|n| n.rest.translation.length()).collect();
+    for ch in channels {
+        let (Some(s), Some(t)) = (scale.get_mut(ch.node), shift.get_mut(ch.node)) else { continue };
+        for v in &ch.values {
+            let v3 = Vec3::new(v[0], v[1], v[2]);
+            match ch.property {
+                Property::Scale => *s = s.max(v3.abs().max_element()),
+                Property::Translation => *t = t.max(v3.length()),
+                Property::Rotation => {}
+            }
+        }
+    }
+    // (scale, shift) of world_from_node: S = s·S_parent, T = T_parent + S_parent·t.
+    let chain = |mut i: usize| {
+        let mut path = vec![i];
+        while let Some(p) = nodes[i].parent {
+            path.push(p);
+            i = p;
+        }
+        path.iter().rev().fold((1.0f32, 0.0f32), |(s_acc, t_acc), &k| (s_acc * scale[k], t_acc + s_acc * shift[k]))
+    };
+    meshes
+        .iter()
+        .map(|m| {
+            let (s, t) = chain(m.node);
+            let r = m.bounds.0.abs().max(m.bounds.1.abs()).length();
+            s * r + t
+        })
+        .fold(0.0f32, |a, b| if b.is_nan() { f32::INFINITY } else { a.max(b) })
+}
+
+/// Brings JSON the spec allows into the shape the glTF crate's types require:
+/// integers written as floats (`1.0`: JSON numbers; the validator accepts them),
+/// scenes without `nodes` (optional in the schema), and animation channels
+/// without a target node (optional: KHR_animation_pointer targets properties by
+/// pointer), which are dropped with a note.
+fn normalise(v: &mut serde_json::Value, notes: &mut Vec<String>) {
+    fn integers(v: &mut serde_json::Value) {
+        match v {
+            serde_json::Value::Number(n) if n.is_f64() => {
+                if let Some(f) = n.as_f64().filter(|f| f.fract() == 0.0 && f.abs() < 9.0e15) {
+                    *v = serde_json::Value::from(f as i64);
+                }
+            }
+            serde_json::Value::Array(a) => a.iter_mut().for_each(integers),
+            serde_json::Value::Object(o) => o.values_mut().for_each(integers),
+            _ => {}
+        }
+    }
+    integers(v);
+    if let Some(scenes) = v.get_mut("scenes").and_then(|s| s.as_array_mut()) {
+        for s in scenes.iter_mut().filter_map(|s| s.as_object_mut()) {
+            s.entry("nodes").or_insert_with(|| serde_json::Value::Array(Vec::new()));
+        }
+    }
+    let mut dropped = 0;
+    if let Some(anims) = v.get_mut("animations").and_then(|a| a.as_array_mut()) {
+        for a in anims.iter_mut() {
+            if let Some(chs) = a.get_mut("channels").and_then(|c| c.as_array_mut()) {
+                let before = chs.len();
+                chs.retain(|c| c.get("target").and_then(|t| t.get("node")).is_some());
+                dropped += before - chs.len();
+            }
+        }
+    }
+    if dropped > 0 {
+        notes.push(format!("{dropped} animation channels without a target node (KHR_animation_pointer) not applied"));
+    }
+}
+
+/// Which UV set a material's base-colour texture reads and its
+/// KHR_texture_transform, applied to the UVs at load time.
+#[derive(Default)]
+struct UvSet {
+    tex_coord: u32,
+    uv_from_mesh_uv: Option<glam::Affine2>,
+}
+
+impl UvSet {
+    fn from_info(info: &json::texture::Info, name: &str, material: usize) -> Result<Self, SceneError> {
+        let mut set = Self { tex_coord: info.tex_coord, uv_from_mesh_uv: None };
+        if let Some(t) = info.extensions.as_ref().and_then(|e| e.texture_transform.as_ref()) {
+            // KHR_texture_transform (README, "Overview"): uv' = T · R · S · uv with
+            // the GLSL `mat3(cos, sin, 0, −sin, cos, 0, 0, 0, 1)`: column-major, so
+            // its columns are (cos, sin) and (−sin, cos), a counter-clockwise
+            // rotation of the UVs, as the extension's `rotation` says.
+            let (o, r, s) = (Vec2::from(t.offset.0), t.rotation.0, Vec2::from(t.scale.0));
+            if !(o.is_finite() && r.is_finite() && s.is_finite()) {
+                return Err(invalid(name, format!("material {material}: non-finite KHR_texture_transform")));
+            }
+            let (sin, cos) = r.sin_cos();
+            let rot = glam::Mat2::from_cols(Vec2::new(cos, sin), Vec2::new(-sin, cos));
+            set.uv_from_mesh_uv = Some(glam::Affine2::from_mat2_translation(rot * glam::Mat2::from_diagonal(s), o));
+            if let Some(tc) = t.tex_coord {
+                set.tex_coord = tc;
+            }
+        }
+        Ok(set)
+    }
+
+    fn apply(&self, uv: [f32; 2]) -> [f32; 2] {
+        match self.uv_from_mesh_uv {
+            Some(m) => m.transform_point2(Vec2::from(uv)).to_array(),
+            None => uv,
+        }
+    }
+}
+
+/// Vertex order → triangle list (glTF 2.0 §3.7.2.1, "Topology types"): strips
+/// alternate winding as the spec's `p_i = {v_i, v_{i+(1+i%2)}, v_{i+(2−i%2)}}`,
+/// fans are `{v_{i+1}, v_{i+2}, v_0}`; a trailing partial triangle is dropped.
+fn triangles(mode: json::mesh::Mode, order: &[u32]) -> Vec<u32> {
+    use json::mesh::Mode;
+    match mode {
+        Mode::TriangleStrip => (0..order.len().saturating_sub(2))
+            .flat_map(|i| [order[i], order[i + 1 + i % 2], order[i + 2 - i % 2]])
+            .collect(),
+        Mode::TriangleFan => {
+            (1..order.len().saturating_sub(1)).flat_map(|i| [order[i], order[i + 1], order[0]]).collect()
+        }
+        _ => order.chunks_exact(3).flatten().copied().collect(),
+    }
+}
+
+fn decode_image(
+    root: &json::Root,
+    data: &Data<'_>,
+    ix: usize,
+    name: &str,
+    resources: &Resources<'_>,
+) -> Result<TextureData, SceneError> {
+    let img = root.images.get(ix).ok_or_else(|| invalid(name, format!("image {ix} does not exist")))?;
+    let what = format!("image {ix}");
+    let bytes: Vec<u8> = match (&img.buffer_view, &img.uri) {
+        (Some(v), _) => data.view_bytes(v.value(), &what).map_err(|e| invalid(name, e))?.to_vec(),
+        (None, Some(uri)) => fetch(uri, &what, name, resources)?,
+        (None, None) => return Err(invalid(name, format!("{what} has neither bufferView nor uri"))),
+    };
+    let decoded = image::load_from_memory(&bytes)
+        .map_err(|e| invalid(name, format!("{what}: {e} (PNG and JPEG are decoded)")))?
+        .to_rgba8();
+    Ok(TextureData { width: decoded.width(), height: decoded.height(), rgba: decoded.into_raw() })
+}
+
+/// Area-weighted vertex normals for meshes that carry none.
+pub(super) fn vertex_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
+    let mut acc = vec![Vec3::ZERO; positions.len()];
+    for tri in indices.chunks_exact(3) {
+        let [a, b, c] = [0, 1, 2].map(|i| Vec3::from(positions[tri[i] as usize]));
+        let n = (b - a).cross(c - a);
+        for &i in tri {
+            acc[i as usize] += n;
+        }
+    }
+    acc.into_iter().map(|n| n.try_normalize().unwrap_or(Vec3::Z).to_array()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use base64::Engine as _;
+
+    #[test]
+    fn strips_and_fans_follow_the_spec_formulas() {
+        use json::mesh::Mode;
+        let order = [10, 11, 12, 13, 14];
+        // glTF 2.0 §3.7.2.1: strip p_i = {v_i, v_{i+(1+i%2)}, v_{i+(2−i%2)}}.
+        assert_eq!(triangles(Mode::TriangleStrip, &order), vec![10, 11, 12, 11, 13, 12, 12, 13, 14]);
+        // fan p_i = {v_{i+1}, v_{i+2}, v_0}.
+        assert_eq!(triangles(Mode::TriangleFan, &order), vec![11, 12, 10, 12, 13, 10, 13, 14, 10]);
+        // A trailing partial triangle is dropped, not read past the end.
+        assert_eq!(triangles(Mode::Triangles, &order), vec![10, 11, 12]);
+        assert!(triangles(Mode::TriangleStrip, &order[..2]).is_empty());
+        assert!(triangles(Mode::TriangleFan, &[]).is_empty());
+    }
+
+    /// A hand-written document: KHR_mesh_quantization positions (normalized i16,
+    /// interleaved with u8 texture coordinates at a 12-byte stride), one vertex
+    /// replaced by a sparse accessor, a triangle strip, and a KHR_texture_transform.
+    /// Every value is computed here from the spec's definitions.
+    #[test]
+    fn quantized_sparse_interleaved_strip_with_texture_transform() {
+        let mut bin = Vec::new();
+        let verts: [([i16; 3], [u8; 2]); 4] = [
+            ([0, 0, 0], [0, 0]),
+            ([32767, 0, 0], [255, 0]),
+            ([0, 32767, 0], [0, 255]),
+            ([-32767, -32767, 0], [255, 255]),
+        ];
+        for (p, uv) in verts {
+            for c in p {
+                bin.extend_from_slice(&c.to_le_bytes());
+            }
+            bin.extend_from_slice(&[0, 0]); // padding to 8
+            bin.extend_from_slice(&uv);
+            bin.extend_from_slice(&[0, 0]); // padding to 12
+        }
+        let sparse_at = bin.len();
+        bin.extend_from_slice(&2u16.to_le_bytes()); // sparse index: vertex 2
+        bin.extend_from_slice(&[0, 0]);
+        for c in [0i16, 16384, 0] {
+            bin.extend_from_slice(&c.to_le_bytes()); // sparse value (normalized i16)
+        }
+        let b64 = base64::engine::general_purpose::STANDARD.encode(&bin);
+        let doc = serde_json::json!({
+            "asset": {"version": "2.0"},
+            "extensionsUsed": ["KHR_mesh_quantization", "KHR_texture_transform"],
+            "extensionsRequired": ["KHR_mesh_quantization", "KHR_texture_transform"],
+            "buffers": [{"byteLength": bin.len(), "uri": format!("data:application/octet-stream;base64,{b64}")}],
+            "bufferViews": [
+                {"buffer": 0, "byteLength": 48, "byteStride": 12},
+                {"buffer": 0, "byteOffset": sparse_at, "byteLength": 4},
+                {"buffer": 0, "byteOffset": sparse_at + 4, "byteLength": 6}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5122, "normalized": true, "count": 4, "type": "VEC3",
+                 "min": [-1, -1, 0], "max": [1, 1, 0],
+                 "sparse": {"count": 1, "indices": {"bufferView": 1, "componentType": 5123},
+                            "values": {"bufferView": 2}}},
+                {"bufferView": 0, "byteOffset": 8, "componentType": 5121, "normalized": true, "count": 4, "type": "VEC2"}
+            ],
+            "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "extensions": {
+                "KHR_texture_transform": {"offset": [0.5, 0.0], "rotation": std::f32::consts::FRAC_PI_2, "scale": [2.0, 1.0]}}}}}],
+            "textures": [{"source": 0}],
+            "images": [{"uri": "data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAFBQIAX8jx0gAAAABJRU5ErkJggg=="}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "mode": 5, "material": 0}]}],
+            "nodes": [{"mesh": 0}],
+            "scenes": [{"nodes": [0]}],
+            "scene": 0
+        });
+        let scene = parse(&serde_json::to_vec(&doc).unwrap(), "quantized.gltf", Resources::Embedded).expect("loads");
+        let m = &scene.meshes[0];
+        let p: Vec<[f32; 3]> = m.vertices.iter().map(|v| v.position).collect();
+        // Normalized i16: c / 32767, clamped at −1 (KHR_mesh_quantization, glTF §3.11).
+        assert_eq!(p[0], [0.0, 0.0, 0.0]);
+        assert_eq!(p[1], [1.0, 0.0, 0.0]);
+        assert!((p[2][1] - 16384.0 / 32767.0).abs() < 1e-7, "sparse value replaces vertex 2: {:?}", p[2]);
+        assert_eq!(p[3], [-1.0, -1.0, 0.0]);
+        // Strip of 4 vertices (§3.7.2.1): (0, 1, 2), (1, 3, 2).
+        assert_eq!(m.indices, vec![0, 1, 2, 1, 3, 2]);
+        // Tolerance 1e-6: f32 rounding of sin/cos(π/2) and of the products.
+        // uv' = T·R·S·uv, R the extension's column-major mat3 (cos, sin | −sin, cos)
+        // at π/2, S = (2, 1), T = (0.5, 0):
+        // vertex 1, uv (1, 0) [u8 255 normalized] → S (2, 0) → R (0, 2) → T (0.5, 2).
+        let uv1 = m.vertices[1].uv;
+        assert!((uv1[0] - 0.5).abs() < 1e-6 && (uv1[1] - 2.0).abs() < 1e-6, "{uv1:?}");
+        // vertex 2, uv (0, 1) → S (0, 1) → R (−1, 0) → T (−0.5, 0).
+        let uv2 = m.vertices[2].uv;
+        assert!((uv2[0] + 0.5).abs() < 1e-6 && uv2[1].abs() < 1e-6, "{uv2:?}");
+        assert_eq!(scene.textures.len(), 1);
+    }
+
+    #[test]
+    fn required_extensions_not_implemented_are_refused_by_name() {
+        for (ext, says) in [
+            (
+                "KHR_draco_mesh_compression",
+                "requires KHR_draco_mesh_compression (Draco-compressed meshes), which this build does not decode",
+            ),
+            ("EXT_meshopt_compression", "which this build does not decode"),
+            ("KHR_texture_basisu", "KTX2"),
+            ("KHR_materials_foo", "requires KHR_materials_foo, which this build does not implement"),
+        ] {
+            let doc =
+                serde_json::json!({"asset": {"version": "2.0"}, "extensionsRequired": [ext], "extensionsUsed": [ext]});
+            let err = parse(&serde_json::to_vec(&doc).unwrap(), "x.gltf", Resources::Embedded).expect_err(ext);
+            assert!(err.to_string().contains(says), "{err}");
+        }
+    }
+}
