@@ -25,6 +25,7 @@
 //! exceeds the modelled scatter): r is flat in λ near 0, where a Gauss–Newton
 //! slope would claim nothing or too much.
 
+use super::motion_blur::status::{exposure_status, exposure_status_note, MAX_ISOTROPY_HALF_BAND};
 use crate::model::{Diagnostics, MotionBlur, Status};
 use std::time::Instant;
 
@@ -49,7 +50,7 @@ const MIN_BIN_SAMPLES: usize = 64;
 const HARMONIC_SCATTER: f64 = 0.05;
 /// Above this standard error the pooled λ is reported not identifiable: the single
 /// frame's rule (a 90% band wider than half of [0, 1]) as a standard error.
-const MAX_STDERR: f64 = super::motion_blur::MAX_ISOTROPY_HALF_BAND / 1.645;
+const MAX_STDERR: f64 = MAX_ISOTROPY_HALF_BAND / 1.645;
 
 /// One direction bin's sums over its samples at each grid λ: Δ = C − D and
 /// S = C + D per sample (the sample's squared central differences along and across
@@ -378,13 +379,13 @@ pub fn fit_fast_pooled_exposure(frames: &[&IsotropyEvidence]) -> MotionBlur {
         d.stderr = Some(p.stderr);
         return MotionBlur::absent(d);
     }
-    let status = super::motion_blur::exposure_status(lambda, p.stderr, speed);
+    let status = exposure_status(lambda, p.stderr, speed);
     MotionBlur {
         present: status == Status::Present,
         exposure: Some(lambda),
         diagnostics: Diagnostics {
             status,
-            reason: format!("{what}; {}", super::motion_blur::exposure_status_note(status, speed)),
+            reason: format!("{what}; {}", exposure_status_note(status, speed)),
             method: "fast (pooled)".into(),
             residual_before: None,
             residual_after: None,

@@ -2,7 +2,8 @@
 //! spectral zeros where they are identified, else gradient-energy isotropy with its
 //! bias risk, refined by the derivative autocorrelation's shape (`fit_fast`).
 
-use super::isotropy::{fast_samples, isotropy_root, IsotropyRoot, MAX_ISOTROPY_HALF_BAND};
+use super::isotropy::{fast_samples, isotropy_root, IsotropyRoot};
+use super::status::MAX_ISOTROPY_HALF_BAND;
 use super::{acf_shape, decide, ends, exposure_status_note, isotropy, visible_speed_px, MbPlotData, MIN_SAMPLES};
 use crate::image::Flow;
 use crate::model::MotionBlur;

@@ -18,9 +18,6 @@ const FAST_SUBSETS: usize = 4;
 /// percentile 0.097, 90th 0.21, largest 0.29 — the astronaut). The isotropy root
 /// assumes 0; the λ range [root at 1 − this, root at 1 + this] is its ~90% band.
 pub(super) const TEXTURE_ANISOTROPY_90: f64 = 0.21;
-/// Above this half-width of the 90% band the isotropy λ is reported not
-/// identifiable: the band then spans more than half of [0, 1].
-pub(in crate::fit) const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
 /// The isotropy's pixels at `effort`: `FAST_SAMPLES` scaled, never below 4 subsets
 /// of `MIN_SAMPLES` (the root needs `MIN_SAMPLES` in all).
 pub(super) fn fast_samples(effort: f32) -> usize {

@@ -25,7 +25,7 @@ mod acf_shape;
 mod ends;
 mod fast;
 mod isotropy;
-mod status;
+pub(crate) mod status;
 
 pub use fast::fit_fast;
 
@@ -34,7 +34,6 @@ use crate::image::{Flow, Plane, Rgb};
 use crate::model::{flow_within_frame, Diagnostics, MotionBlur, Status};
 #[cfg(test)]
 pub(super) use isotropy::isotropy_evidence;
-pub(super) use isotropy::MAX_ISOTROPY_HALF_BAND;
 pub(crate) use status::{exposure_status, exposure_status_note, visible_speed_px};
 use std::time::Instant;
 

@@ -5,6 +5,11 @@
 use crate::image::Flow;
 use crate::model::Status;
 
+/// Above this half-width of the isotropy estimator's 90% band its λ is reported
+/// not identifiable: the band then spans more than half of [0, 1]. The worker's
+/// pooled isotropy (`fit::isotropy_pool`) holds its standard error to the same.
+pub(crate) const MAX_ISOTROPY_HALF_BAND: f64 = 0.25;
+
 /// Least exposure read as a streak at all (a 0.1 px streak at 20 px/frame).
 pub(crate) const MIN_EXPOSURE: f32 = 0.005;
 

@@ -5,6 +5,7 @@
 
 use super::bands::{channel_pyramids, AxisWeights, Band0, Binning, SepWindow};
 use super::blocking::detect_blocking;
+use super::sources::luma_span;
 use super::*;
 
 const BLIND_FLAT_FRACTION: f64 = 0.2;
@@ -456,13 +457,6 @@ pub(in crate::fit) fn fit_fast_with_luma(
     }
     noise.blocking = blocking;
     (noise, plot_data(&points))
-}
-
-/// The lowest and highest of the lumas `y` (`None` when empty).
-pub(super) fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
-    let lo = y.iter().cloned().reduce(f32::min)?;
-    let hi = y.iter().cloned().reduce(f32::max)?;
-    Some([lo, hi])
 }
 
 /// Median over the luma bins two levels share of the coarse level's std over the

@@ -76,7 +76,7 @@ pub(super) fn level_sources(
                 return LevelSource::Continued { from: coarsest as u32 };
             };
             let y = &points[i].y;
-            let Some(span) = super::blind::luma_span(y) else {
+            let Some(span) = luma_span(y) else {
                 return LevelSource::Continued { from: coarsest as u32 };
             };
             let mean_y = y.iter().sum::<f32>() / y.len() as f32;
@@ -143,4 +143,11 @@ pub(super) fn partial_level_notes(noise: &Noise) -> String {
         }
     }
     out
+}
+
+/// The lowest and highest of the lumas `y` (`None` when empty).
+pub(super) fn luma_span(y: &[f32]) -> Option<[f32; 2]> {
+    let lo = y.iter().cloned().reduce(f32::min)?;
+    let hi = y.iter().cloned().reduce(f32::max)?;
+    Some([lo, hi])
 }
