@@ -271,7 +271,10 @@ impl TrackedViews {
     /// Projection State": "Applications must not read any of the XrView pose
     /// orientation fields if [XR_VIEW_STATE_ORIENTATION_VALID_BIT] is unset", and
     /// likewise the positions without XR_VIEW_STATE_POSITION_VALID_BIT. Values
-    /// that are present but unusable (a zero quaternion) are refused too.
+    /// that are present but unusable (a zero quaternion) are refused too. (The
+    /// openxr 0.22 crate's `View::new` already hands back zeroed fields where a
+    /// bit is unset, which the quaternion check refuses; the flags are checked
+    /// here so the rule does not rest on that wrapper.)
     fn new(flags: xr::ViewStateFlags, located: &[xr::View], size: (u32, u32)) -> Result<Self, String> {
         let valid = xr::ViewStateFlags::ORIENTATION_VALID | xr::ViewStateFlags::POSITION_VALID;
         if !flags.contains(valid) {
