@@ -66,8 +66,10 @@ fn split_glb<'a>(bytes: &'a [u8], name: &str) -> Result<(&'a [u8], Option<&'a [u
             bad(&format!("chunk at byte {at} claims {len} bytes; only {} remain", total.saturating_sub(start)))
         })?;
         chunks.push((ty, &bytes[start..end]));
-        // Chunks are padded to 4-byte boundaries (§4.4.3).
-        at = end.div_ceil(4) * 4;
+        // §4.4.3: chunk lengths include their padding to 4 bytes, so the next
+        // chunk starts right here; some writers leave the JSON unpadded, and
+        // stepping to the next multiple of 4 would misread their BIN header.
+        at = end;
     }
     const JSON: u32 = 0x4E4F_534A;
     const BIN: u32 = 0x004E_4942;
@@ -170,6 +172,16 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     let (json_bytes, bin) = if bytes.starts_with(GLB_MAGIC) { split_glb(bytes, name)? } else { (bytes, None) };
     let mut value: serde_json::Value =
         serde_json::from_slice(json_bytes).map_err(|e| invalid(name, format!("not glTF 2.0 JSON: {e}")))?;
+    if let Some(v) = value.get("asset").and_then(|a| a.get("version")).and_then(|v| v.as_str()) {
+        if !v.starts_with("2.") {
+            return Err(invalid(
+                name,
+                format!("glTF {v}; only glTF 2.x is read (convert it, e.g. with gltf-pipeline)"),
+            ));
+        }
+    } else if value.get("asset").is_none() && value.get("meshes").is_some_and(|m| m.is_object()) {
+        return Err(invalid(name, "glTF 1.0 (objects keyed by name); only glTF 2.x is read"));
+    }
     let mut notes = Vec::new();
     normalise(&mut value, &mut notes);
     let mut root: json::Root =
@@ -351,6 +363,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     materials.push(Material { base_colour: [0.8, 0.8, 0.8, 1.0], texture: None });
     material_uv.push(UvSet::default());
 
+    let draco_used = root.extensions_used.iter().any(|e| e == "KHR_draco_mesh_compression");
     let mut meshes = Vec::new();
     let (mut skipped_modes, mut skinned, mut morphed) = (Vec::new(), false, false);
     for (ni, n) in root.nodes.iter().enumerate() {
@@ -373,6 +386,17 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
                 skipped_modes.push("without POSITION".into());
                 continue;
             };
+            // KHR_draco_mesh_compression (used, not required) leaves the core
+            // accessors without data: they would read as zeros.
+            if draco_used && root.accessors.get(pos_ix).is_some_and(|a| a.buffer_view.is_none() && a.sparse.is_none()) {
+                return Err(invalid(
+                    name,
+                    format!(
+                        "{what}: its data is Draco-compressed (KHR_draco_mesh_compression), which this build does \
+                         not decode"
+                    ),
+                ));
+            }
             let (pos, _) = data.read_f32(pos_ix, &[Type::Vec3], &format!("{what} POSITION")).map_err(err)?;
             let positions: Vec<[f32; 3]> = pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
             let order: Vec<u32> = match prim.indices {
@@ -758,6 +782,27 @@ mod tests {
         let uv2 = m.vertices[2].uv;
         assert!((uv2[0] + 0.5).abs() < 1e-6 && uv2[1].abs() < 1e-6, "{uv2:?}");
         assert_eq!(scene.textures.len(), 1);
+    }
+
+    /// A JSON chunk whose length is not a multiple of 4 (trimesh writes such GLBs;
+    /// §4.4.3 asks for padding): the BIN chunk follows it directly.
+    #[test]
+    fn glb_with_an_unpadded_json_chunk_splits() {
+        let json = b"{\"a\":1}"; // 7 bytes
+        let bin = [1u8, 2, 3, 4];
+        let mut glb = Vec::new();
+        let total = 12 + 8 + json.len() + 8 + bin.len();
+        glb.extend_from_slice(b"glTF");
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&(total as u32).to_le_bytes());
+        glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"JSON");
+        glb.extend_from_slice(json);
+        glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"BIN\0");
+        glb.extend_from_slice(&bin);
+        let (j, b) = split_glb(&glb, "unpadded.glb").expect("splits");
+        assert_eq!((j, b), (&json[..], Some(&bin[..])));
     }
 
     #[test]
