@@ -16,7 +16,7 @@ pub use validate::ModelError;
 
 pub const SCHEMA: &str = "blind-augment/camera-model/1";
 /// Band-pass levels of the noise pyramid (the paper's 4; the official code's 3 is
-/// what the paper calls a mistake-prone simplification: see README).
+/// what the paper calls a mistake-prone simplification: see docs/camera-model.md).
 pub const NOISE_LEVELS: usize = 4;
 
 /// Luma nodes of a grain synthesis table (`synth::SynthesisTable`, `GrainTable`).
@@ -292,7 +292,7 @@ pub struct Diagnostics {
     /// `accurate` (clean reference images) or `fast` (blind, frame only).
     pub method: String,
     /// Fit objective with no effect and with the fitted effect (units per effect,
-    /// stated in `reason`/README).
+    /// stated in `reason` and docs/camera-model.md).
     pub residual_before: Option<f64>,
     pub residual_after: Option<f64>,
     pub samples_used: u64,

@@ -8,7 +8,7 @@
 //! the camera lost; its owner reopens it (`analysis::camera::ReopenBackoff`).
 //! Raw NDK calls only; every decision is in `analysis::camera`, tested on desktop.
 //! Compiled for Android only and never run here (no headset): what it must do on
-//! a device is in the README's "not verified" list.
+//! a device is in docs/xr.md's "not verified" list.
 //!
 //! Teardown (`Drop for PassthroughCamera`, in this order): stop the repeating
 //! request; close the capture session; free the request, the output target, the

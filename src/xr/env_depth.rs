@@ -12,7 +12,7 @@
 //! provider's child) — all before the session, which `xr::run` drops after this.
 //!
 //! Conventions, as read from the extension and Meta's samples (none verified on a
-//! headset here — README lists them): D16 values are window depth d ∈ [0, 1] of an
+//! headset here — docs/xr.md lists them): D16 values are window depth d ∈ [0, 1] of an
 //! OpenGL-style projection (z_ndc = 2d − 1) with near plane `nearZ` and far plane
 //! `farZ`, infinite when `farZ < nearZ` or infinite (spec: XrEnvironmentDepthImageMETA);
 //! the view poses are in the acquire's space at the depth's own capture; the images

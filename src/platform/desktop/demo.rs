@@ -369,7 +369,7 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
         };
         let _ = writeln!(r, "| {l} | {} | {} | {read} | {stated} |", pct(&ea, l), pct(&ef, l));
     }
-    let _ = writeln!(r, "\nThe fast tier sees only the combined frame: its δ includes the photograph's own edge softness (and the motion blur and noise on top), its λ the texture's own anisotropy; its noise measures every level from flat regions of the frame itself. How far to trust each in the field: README, \"Tiers and measured accuracy\".");
+    let _ = writeln!(r, "\nThe fast tier sees only the combined frame: its δ includes the photograph's own edge softness (and the motion blur and noise on top), its λ the texture's own anisotropy; its noise measures every level from flat regions of the frame itself. How far to trust each in the field: docs/accuracy.md.");
     r
 }
 

@@ -123,7 +123,7 @@ pub struct FitArgs {
     fast_effort: f32,
     /// Replace a role's provider by an ONNX model (repeatable): ROLE is denoise,
     /// depth, flow, motion-deblur or defocus-deblur; the model must meet the role's
-    /// contract (README "Your own networks").
+    /// contract (docs/calibration.md, "Your own networks").
     #[arg(long = "onnx", value_name = "ROLE=PATH")]
     onnx: Vec<String>,
     /// Output camera model (JSON).
@@ -238,7 +238,7 @@ pub struct CalibrateArgs {
     fast_effort: f32,
     /// Replace a role's provider by an ONNX model (repeatable): ROLE is denoise,
     /// depth, flow, motion-deblur or defocus-deblur; the model must meet the role's
-    /// contract (README "Your own networks").
+    /// contract (docs/calibration.md, "Your own networks").
     #[arg(long = "onnx", value_name = "ROLE=PATH")]
     onnx: Vec<String>,
     /// Frame rate when --poses does not give times (and the nominal frame interval).
