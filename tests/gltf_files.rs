@@ -330,3 +330,22 @@ fn mutated_files_are_refused_or_drawable_never_a_panic() {
     println!("{} mutants: {refused} refused with a reason, {loaded} loaded and drawable", cases.len());
     assert!(refused > cases.len() / 4, "most damage must be noticed ({refused} of {})", cases.len());
 }
+
+/// A `.gltf` whose files come from a reader (the headset's APK assets): the same
+/// scene as the `.glb`, and a file the reader lacks named in the error.
+#[test]
+fn gltf_resources_from_a_reader_load_like_the_glb() {
+    let reference = Scene::from_glb(TOY, "toy.glb").expect("bundled asset");
+    let (mut json, bin) = split(TOY);
+    json["buffers"][0]["uri"] = "data%20file.bin".into();
+    let store = std::collections::HashMap::from([("data file.bin".to_string(), bin)]);
+    let read = |rel: &str| store.get(rel).cloned().ok_or_else(|| format!("{rel} is not in the store"));
+    let doc = serde_json::to_vec(&json).unwrap();
+    let loaded = Scene::from_bytes_with(&doc, "assets/toy.gltf", &read).expect("reader");
+    assert_same(&reference, &loaded);
+    json["buffers"][0]["uri"] = "other.bin".into();
+    let err = Scene::from_bytes_with(&serde_json::to_vec(&json).unwrap(), "assets/toy.gltf", &read)
+        .expect_err("missing")
+        .to_string();
+    assert!(err.contains("other.bin is not in the store"), "{err}");
+}

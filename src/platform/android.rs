@@ -80,6 +80,21 @@ fn asset(app: &AndroidApp, name: &str) -> Result<Vec<u8>, String> {
     Ok(bytes.to_vec())
 }
 
+/// The APK's bundled scene (`BUNDLED_SCENE`, a `.glb` or a `.gltf` whose buffers
+/// and images sit beside it in the assets), its notes logged.
+fn bundled_scene(app: &AndroidApp) -> Result<Scene, String> {
+    let dir = BUNDLED_SCENE.rsplit_once('/').map_or("", |(d, _)| d);
+    let read = |rel: &str| asset(app, &if dir.is_empty() { rel.to_string() } else { format!("{dir}/{rel}") });
+    let scene = Scene::from_bytes_with(&asset(app, BUNDLED_SCENE)?, BUNDLED_SCENE, &read).map_err(|e| e.to_string())?;
+    for note in &scene.notes {
+        log::warn!("{BUNDLED_SCENE}: {note}");
+    }
+    Ok(scene)
+}
+
+/// The scene the app shows, a path inside the APK's assets.
+const BUNDLED_SCENE: &str = "toy.glb";
+
 /// Ask for the camera and spatial-data permissions that are missing
 /// (`permissions_to_request`; Activity.requestPermissions over JNI) and report
 /// which are granted now and which were asked for; the answer comes later,
@@ -646,7 +661,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
             log::warn!("{SCENE_PERMISSION} not granted ({why:?}): calibration runs without headset depth this session")
         }
     }
-    let scene = Scene::from_glb(&asset(app, "toy.glb")?, "toy.glb").map_err(|e| e.to_string())?;
+    let scene = bundled_scene(app)?;
     let models = ModelChannel::new(first_model(app)?).map_err(|e| e.to_string())?;
     let live = Arc::new(LiveInputs::default());
     // Raw pointers are not Send: carried as addresses into the XR thread.

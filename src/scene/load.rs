@@ -38,6 +38,9 @@ pub(super) enum Resources<'a> {
     Embedded,
     /// Relative URIs resolved in this folder (the folder of the `.gltf`).
     Folder(&'a Path),
+    /// Relative URIs (percent-decoded) handed to this reader: files of an app's
+    /// bundle (the APK's assets) or any other store.
+    Reader(&'a dyn Fn(&str) -> Result<Vec<u8>, String>),
 }
 
 const GLB_MAGIC: &[u8; 4] = b"glTF";
@@ -128,6 +131,7 @@ fn fetch(uri: &str, what: &str, name: &str, resources: &Resources<'_>) -> Result
             let path = dir.join(&rel);
             std::fs::read(&path).map_err(|e| invalid(name, format!("{what}: `{}`: {e}", path.display())))
         }
+        Resources::Reader(read) => read(&rel).map_err(|e| invalid(name, format!("{what}: `{rel}`: {e}"))),
     }
 }
 

@@ -139,6 +139,17 @@ impl Scene {
         guarded(&name, || load::parse(&bytes, &name, load::Resources::Folder(dir)))
     }
 
+    /// Parse a `.glb` or `.gltf` whose external files (relative URIs,
+    /// percent-decoded) `read` supplies: the headset reads a bundled scene's
+    /// buffers and images from the APK's assets this way.
+    pub fn from_bytes_with(
+        bytes: &[u8],
+        name: &str,
+        read: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    ) -> Result<Self, SceneError> {
+        guarded(name, || load::parse(bytes, name, load::Resources::Reader(read)))
+    }
+
     /// Parse a self-contained glTF (`.glb`, or `.gltf` whose resources are all
     /// `data:` URIs). `name` names the input in errors.
     pub fn from_glb(bytes: &[u8], name: &str) -> Result<Self, SceneError> {
