@@ -230,7 +230,7 @@ fn main() {
         // Steady state: the second before the change and the last second.
         let (lb, nb, db, dfb) = stats(&r, CHANGE_S - 1.0, CHANGE_S);
         let (la, na, _, _) = stats(&r, small.frame_time_s(small.frames - 1) - 1.0, f64::INFINITY);
-        // The Quest camera's size (the targets are stated there): the
+        // The Quest camera's size (the targets are stated at it): the
         // 1280×960 run's second after its burst (no change in it).
         let (lq, nq, dq, dfq) = stats(&big_run, 1.0, f64::INFINITY);
         let known_run = run(tier, &known, &known_frames, known.source_pixel_blur_px(&textured));

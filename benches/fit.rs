@@ -104,7 +104,7 @@ fn bench(cr: &mut Criterion) {
 
 /// The fast tier at 1280×960, all three effects, one thread: median wall time of 11
 /// fits and each effect's stage timers (`diagnostics.stages_s`, medians), as a
-/// markdown table for BENCHMARKS.md (issue 10, item 5: ≤ 30 ms).
+/// markdown table for BENCHMARKS.md (target: ≤ 30 ms).
 fn fast_stages(_: &mut Criterion) {
     blind_augment::alloc::keep_freed_blocks();
     let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");

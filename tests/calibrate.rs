@@ -23,7 +23,7 @@ use common::calibration::*;
 /// 0.29 px, below what the edge ratio resolves), 45 frames, the fast tier. Every
 /// publication from 0.5 s on (the first turn starts at 0.4 s; mid-turn frames,
 /// whose motion blur widens edges, must not enter the pooled curve) reads the truth
-/// within 0.1 px RMSE over its depth range (issue 13's accurate-tier target;
+/// within 0.1 px RMSE over its depth range (the accurate tier's target;
 /// measured 0.024–0.040 px; with the moving frames let into the pool it read
 /// 0.27 px at 1.23 s).
 #[test]
@@ -49,7 +49,7 @@ fn fast_tier_reads_depth_of_field_on_a_texture_of_known_blur() {
 }
 
 /// The accurate tier (video as its own reference) before and after the change.
-/// Tolerances, from the issue's accurate-tier targets where this 320×240 sequence
+/// Tolerances, from the accurate tier's targets where this 320×240 sequence
 /// meets them, wider where it cannot and why:
 /// * λ within 0.02 before the change (goal 0.01; measured 0.006–0.011: the first
 ///   estimates come from frames early in a turn, with 3–5 px of motion);
@@ -88,8 +88,8 @@ fn accurate_tier_converges_and_follows_a_camera_change() {
 ///   change: its ≤ 2.3 px streaks are not identifiable from one frame);
 /// * after the burst, the previous frame is aligned at most once per 0.1 s of video
 ///   (the noise probe's interval): the noise refit waits for a frame the probe
-///   aligned instead of aligning again out of phase (the old schedule aligned
-///   twice per 0.1 s; the alignment is the largest single cost of a fast update).
+///   aligned instead of aligning again out of phase (which would align twice per
+///   0.1 s; the alignment is the largest single cost of a fast update).
 #[test]
 fn fast_tier_publishes_every_frame_and_presence_does_not_flicker() {
     let (published, _, stages) = run_with_stages(CalibrationTier::Fast);

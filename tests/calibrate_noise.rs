@@ -27,10 +27,10 @@ impl Denoiser for NoTemporalReference {
 
 /// The accurate tier whose temporal denoiser fails (at a burst's start, after a
 /// reset, on a head that never repeats its motion) fits noise blind, and reads the
-/// previous frame aligned as the fast tier does. Before, the fallback fitted the
-/// frame alone: on the demo's video every other such fit read levels 1–3 at
-/// +110…+710% (texture in the frame's flattest samples) and was published for
-/// 0.2 s after a (false) camera change. Tolerance: every publication from the
+/// previous frame aligned as the fast tier does. A fallback fitting the frame
+/// alone reads levels 1–3 at +110…+710% on every other such fit of the demo's
+/// video (texture in the frame's flattest samples), published for 0.2 s after a
+/// (false) camera change. Tolerance: every publication from the
 /// second frame to the change within 15%, the median within the fast tier's 10%
 /// target (measured: at most 5.3%, median 3.0%; without the aligned frame 46–65%,
 /// median 57%).
@@ -61,7 +61,7 @@ fn accurate_tier_without_its_reference_fits_noise_on_the_aligned_previous_frame(
 /// The same at 1280×960, where the noise probe's alignment covers only bands of
 /// rows and the fallback aligns its strip (a quarter of the frame) on its own: 8
 /// frames, every publication from the second within 5% (measured 0.8–1.4%; fitted
-/// on the frame alone, before the fallback read the previous frame, 1.6–9.7%).
+/// on the frame alone, without the previous frame, 1.6–9.7%).
 #[test]
 fn accurate_tier_without_its_reference_aligns_its_noise_strip_at_full_size() {
     let spec = SequenceSpec::motorcycle(scene(), 1280, 960, 8, None);
@@ -138,8 +138,8 @@ fn accurate_tier_leaves_its_temporal_noise_reference_on_a_codec_grid() {
 
 /// The first frame (and the first after a reset that dropped the held frames) has
 /// no previous frame to align, and its blind noise fit reads the frame alone:
-/// +56% on this sequence, published until the next fit before the wait. Now the
-/// frame-alone fit is held back while an aligned one can come (intrinsics given)
+/// +56% on this sequence, which would stand until the next fit. The frame-alone
+/// fit is held back while an aligned one can come (intrinsics given)
 /// and is superseded by it: every noise the fast tier publishes before the change
 /// is within 15% (the fast tier's 10% target plus a frame's scatter; measured
 /// 1.9–5.7%), the first on the second frame. Without intrinsics no neighbour ever
@@ -250,8 +250,8 @@ fn a_cameras_temporal_noise_reduction_is_measured_and_divided_out() {
 /// (their ratios fit no ρ: measured within 0.33 s), and from then on, until a
 /// change drops what was learnt, no published noise reads a frame difference: the
 /// fast tier reads the frame alone and says why. (Its error is no better for it —
-/// measured 42% high against the neighbour's 45% low — but it is no longer a
-/// confident reading of a copied difference.)
+/// measured 42% high against the neighbour's 45% low — but it is not a confident
+/// reading of a copied difference.)
 #[test]
 fn noise_copied_between_frames_in_blocks_is_not_read_off_frame_differences() {
     let tier = CalibrationTier::Fast;

@@ -44,8 +44,8 @@ fn camera<'a>(f: &'a Fixture, id: &str) -> &'a CameraDescription {
 
 /// Camera 1 carries position 0 but source 1 (not passthrough) and comes first;
 /// camera 0 has no vendor keys: the left passthrough camera is 50, the right 51,
-/// with nothing to note. Read as `Integer` the way the old code asked for them,
-/// the 1-byte keys were absent to it: no passthrough camera at all.
+/// with nothing to note. Read as `Integer`, the 1-byte keys would be absent: no
+/// passthrough camera at all.
 #[test]
 fn chooses_the_passthrough_cameras_by_their_byte_array_keys() {
     let f = fixture();

@@ -153,8 +153,8 @@ fn demo_runs_without_files() {
     let acc = model(&d.join("camera_accurate.json"));
     let (t, a) = (truth.motion_blur.exposure.expect("λ"), acc.motion_blur.exposure.expect("λ"));
     assert!((t - a).abs() < 0.01, "demo λ {a} vs {t}");
-    // The report's headline table puts both tiers' errors side by side (issue 10,
-    // item 7): its λ row must carry the errors of the written models.
+    // The report's headline table puts both tiers' errors side by side: its λ row
+    // must carry the errors of the written models.
     let report = std::fs::read_to_string(d.join("report.md")).expect("report");
     let fast = model(&d.join("camera_fast.json"));
     let f = fast.motion_blur.exposure_or_zero();

@@ -1,5 +1,4 @@
-//! Spatially correlated sensor noise (issue 10, item 1: "real camera noise is not
-//! white"): demosaicing, an ISP's denoiser and a codec correlate it between
+//! Spatially correlated sensor noise (real camera noise is not white): demosaicing, an ISP's denoiser and a codec correlate it between
 //! neighbouring pixels, so its band stds decay slower across the pyramid than white
 //! noise's. On video the blind fit reads every level from the frame against the
 //! previous one aligned (texture cancels in the difference); one frame alone cannot
@@ -167,10 +166,9 @@ fn check(
     }
     // Each measured level's stated error (`LevelSource::Measured`) covers its error:
     // within 2 stated errors (95% of a normal error) on at least 90% of the (frame,
-    // fit, level) readings. Measured 2026-11-28: all 82 here; over 16 runs of
-    // `examples/correlated_noise_probe` (these spectra and a low-passed one, 640×480
-    // and the worker's strips at 1280×960, frames 55–62 and 100–107; BENCHMARKS.md
-    // "The blind noise's level sources") 4 of 725 lie beyond. 90%, not 95%: the
+    // fit, level) readings. Measured: all 82 here; over 16 runs (these spectra and a
+    // low-passed one, 640×480 and the worker's strips at 1280×960, frames 55–62 and
+    // 100–107; BENCHMARKS.md "The blind noise's level sources") 4 of 725 lie beyond. 90%, not 95%: the
     // residue priors were read on this clip's frames 55–62, and a set of 16–40
     // readings may hold a few beyond by chance.
     let within = over_stated.iter().filter(|&&r| r <= 2.0).count();

@@ -404,8 +404,8 @@ proptest! {
 /// finite standard error wherever an exposure is reported, and "present" only with
 /// an exposure; a flow past the frame's diagonal is not identifiable (its streak
 /// cannot be in the frame), and says so. (Non-finite flow is refused by `fit` with
-/// an error naming it: `non_finite_pixels_are_named`.) Before the profiles' node
-/// cap, a 1e5 px/frame flow took the fit 100 s per 160×160 frame.
+/// an error naming it: `non_finite_pixels_are_named`.) Without the profiles' node
+/// cap, a 1e5 px/frame flow takes the fit 100 s per 160×160 frame.
 #[test]
 fn exposure_paths_at_extreme_frames_and_flows() {
     let sizes = [(160usize, 160usize), (512, 384), (700, 130)];

@@ -77,10 +77,10 @@ fn fast_exposure_within_stated_tolerance() {
 /// natural texture anisotropy would place the root almost anywhere. Astronaut,
 /// 8 px/frame flow, λ 0.5 (4 px streak) under a uniform Gaussian defocus of σ 2.5
 /// px, 8-bit: each answer is either *not identifiable* or within 2.5 of its own
-/// standard errors of the truth. Measured: both defocused cases now read *not
-/// identifiable* (band [0, 1]; λ 0.134 and 0.194 by isotropy); before the texture
+/// standard errors of the truth. Measured: both defocused cases read *not
+/// identifiable* (band [0, 1]; λ 0.134 and 0.194 by isotropy); without the texture
 /// prior they read 0.134 ± 0.22 and 0.194 ± 0.25, absent — covered here by the
-/// two-scale term, which missed on the 1280×960 bench frame (0 ± 0.033 for 0.5,
+/// two-scale term, which misses on the 1280×960 bench frame (0 ± 0.033 for 0.5,
 /// BENCHMARKS.md). The sharp case reads 0.524 ± 0.020 from the streak's zeros and
 /// must stay within the stated 0.15.
 #[test]
@@ -131,10 +131,10 @@ fn fast_exposure_uncertainty_covers_its_error_under_defocus() {
 ///   photograph (blurs of independent causes add in variance) 0.091 / 0.055 px;
 ///   tolerance 0.2 px (that composition is itself an estimate from one fit).
 ///
-/// Before edges were required to be isolated (`fit::dof::blind::isolated`) the procedural
-/// texture read 0.244 / 0.195 px (thin bars' two edges cancel in the re-blur and
-/// read δ low), and the astronaut against the truth ⊕ its own blur 0.142 / 0.062
-/// before edges were selected on the re-blurred gradient.
+/// Without requiring edges to be isolated (`fit::dof::blind::isolated`) the
+/// procedural texture reads 0.244 / 0.195 px (thin bars' two edges cancel in the
+/// re-blur and read δ low), and without selecting edges on the re-blurred gradient
+/// the astronaut reads 0.142 / 0.062 against the truth ⊕ its own blur.
 #[test]
 fn fast_dof_within_stated_tolerance() {
     use blind_augment::synth::sequence::{motorcycle, procedural};
@@ -187,8 +187,8 @@ fn fast_dof_within_stated_tolerance() {
 /// Measured δ at 1.5 m: clean 2.35 px, noisy 2.34 px (−0.2%; both read the
 /// photograph's own ~1.1 px with the 2 px: √(4 + 1.2) ≈ 2.3); with single-pixel
 /// gradients clean 1.83 px, noisy 1.01 px (−45%); with averaged gradients but
-/// before edges had to be isolated, clean 1.93 px, noisy 2.08 px (+8%).
-/// Tolerance 12%, set when that +8% was measured.
+/// without requiring isolated edges, clean 1.93 px, noisy 2.08 px (+8%).
+/// Tolerance 12%, set from that +8%.
 #[test]
 fn fast_dof_reads_a_noisy_frame_like_a_clean_one() {
     let img = photo("astronaut.png");
@@ -219,10 +219,10 @@ fn fast_dof_reads_a_noisy_frame_like_a_clean_one() {
 /// re-rendered along a head path, 320×240, Poisson–Gaussian noise ×1.5 after the
 /// camera change — `synth::sequence`): on frames 110–125 the flattest samples of
 /// levels 1–3 scatter by luma bin (texture in some bins, noise in others) and no
-/// line explains three of them. Keeping every bin then put levels 1–3 at up to 21×
-/// the truth (1 frame in 12 over 3× across the 150-frame video); such a level now
-/// counts as not identifiable and continues the finest measured one. Measured after
-/// the change: the worst level 1–3 std over all 150 frames is 1.86× the truth (the
+/// line explains three of them. Keeping every bin would put levels 1–3 at up to 21×
+/// the truth (1 frame in 12 over 3× across the 150-frame video); such a level
+/// counts as not identifiable and continues the finest measured one. Measured: the
+/// worst level 1–3 std over all 150 frames is 1.86× the truth (the
 /// level-0 texture inflation this scene carries through), 1.05× on these frames.
 /// Bound: within 2× either way on every frame.
 #[test]
@@ -291,12 +291,12 @@ fn noise_with_an_aligned_neighbour_reads_through_texture_on_video() {
 
 /// Levels the blind noise fit cannot measure continue the finest measured level by
 /// white-noise band ratios: they carry that level's error and no more. The case is
-/// `examples/noise_budget_probe.rs`' astronaut under its weakest noise (1280×960,
-/// seed 3), where texture reads level 1 high (measured +56%). The continuation used
-/// to scale by the measured levels' decay against white, which there was that texture:
-/// levels 2–3 read +110 / +185% (BENCHMARKS.md "The blind noise fit's derived
-/// levels"). Tolerance 1 point: the continuation is the measured level's map times a
-/// constant per level, so its relative error is that level's, up to rounding.
+/// the astronaut under weak sensor noise (below; 1280×960, seed 3), where texture
+/// reads level 1 high (measured +56%). A continuation scaled by the measured levels'
+/// decay against white, which there is that texture, reads levels 2–3 at +110 /
+/// +185% (BENCHMARKS.md "The blind noise fit's derived levels"). Tolerance 1 point:
+/// the continuation is the measured level's map times a constant per level, so its
+/// relative error is that level's, up to rounding.
 #[test]
 fn derived_noise_levels_carry_the_measured_error_and_no_more() {
     let (a, b) = ([5e-6f32; 3], [2e-4f32; 3]);
@@ -347,10 +347,10 @@ fn derived_noise_levels_carry_the_measured_error_and_no_more() {
 /// within two standard errors, texture in the flattest samples included. Four
 /// natural scenes the texture floor was fitted on (the astronaut, chelsea, the
 /// Motorcycle view, the vtest clip's temporal mean) and one it was not (the rocket),
-/// under the weakest and the bench's noise of `examples/noise_budget_probe.rs`,
-/// 1280×960, 8-bit, seed 3. Measured: errors +1.8…+34.6%, 9 of 10 held (not: the
-/// Motorcycle under the bench's noise, +23.7% against ± 8.6%; 7 of its 9 probe
-/// frames held); with the sampling error alone (± 0.3–2.5%) 1 of 10. Tolerance: 9
+/// under a weak noise and the bench's noise, 1280×960, 8-bit, seed 3. Measured:
+/// errors +1.8…+34.6%, 9 of 10 held (not: the Motorcycle under the bench's noise,
+/// +23.7% against ± 8.6%; 7 of its 9 frames at three strengths and three seeds
+/// held); with the sampling error alone (± 0.3–2.5%) 1 of 10. Tolerance: 9
 /// of 10, and a median standard error ≤ 25% (measured 17.6%), so that no inflated
 /// figure passes. On the clip's temporal mean the error itself is held to 12%.
 #[test]
@@ -407,12 +407,12 @@ fn blind_noise_standard_error_covers_texture_in_the_flat_samples() {
 /// streak lines and the defocus fit fewer edges (every other row of its scan, said
 /// in the reason), with answers near full effort's; an edge-poor frame's reduced
 /// scan finds too few edges and the other rows are read too — the full scan's
-/// edges, so the same curve as at full effort. Tolerances, from
-/// `examples/effort_probe.rs`' measurements: λ within 0.05 of the truth at both
-/// efforts (measured here 0.499 → 0.501; over two seeds 0.495–0.519); δ(Z) RMSE at
-/// effort 0.5 within 0.1 px of full effort's (measured here 0.458 → 0.456 px against
-/// the lens alone — the photograph's own blur is in both; over the probe's 24 ramp
-/// frames the median moved by 0.000 px, the largest by 0.014).
+/// edges, so the same curve as at full effort. Tolerances, from measurements over
+/// 24 defocus-ramp frames (BENCHMARKS.md "The fast tier's effort"): λ within 0.05 of
+/// the truth at both efforts (measured here 0.499 → 0.501; over two seeds
+/// 0.495–0.519); δ(Z) RMSE at effort 0.5 within 0.1 px of full effort's (measured
+/// here 0.458 → 0.456 px against the lens alone — the photograph's own blur is in
+/// both; over the 24 ramp frames the median moved by 0.000 px, the largest by 0.014).
 #[test]
 fn fast_effort_reads_fewer_samples_and_keeps_edge_poor_frames() {
     let (w, h) = (1280, 960);
@@ -473,22 +473,22 @@ fn fast_effort_reads_fewer_samples_and_keeps_edge_poor_frames() {
 }
 
 /// The blind δ(Z)'s standard error (δ RMS over the evaluated depths) holds its
-/// error, or the fit says *not identifiable*. It used to be scale·√(3/N), the edges
-/// taken as independent and the curve as known beyond them: 6–25× under the error on
-/// `examples/effort_probe`'s 24 ramp frames (none within two standard errors). Now
-/// it is a cluster-robust sandwich over frame cells, the two forms' spread beyond
-/// the textured depths and 5% of δ for the edge calibration (BENCHMARKS.md "The
-/// blind δ(Z)'s standard error"). Two of the probe's frames at 1280×960:
+/// error, or the fit says *not identifiable*. The standard error is a
+/// cluster-robust sandwich over frame cells, the two forms' spread beyond the
+/// textured depths and 5% of δ for the edge calibration (BENCHMARKS.md "The blind
+/// δ(Z)'s standard error"); scale·√(3/N), the edges taken as independent and the
+/// curve as known beyond them, is 6–25× under the error on 24 defocus-ramp frames
+/// (none within two standard errors). Two of those frames at 1280×960:
 /// * a texture with no blur of its own (the procedural shapes) under a thin lens
-///   k 2, focus 2.5 m — the probe's worst relative miss there (0.075 px RMSE, 10%
-///   of δ's RMS), where ± 0.011 px was reported; now ± 0.039: the RMSE must lie
-///   within two standard errors (tolerance: the definition of "covered" the probe
-///   counts, 18 of its 21 answered frames);
+///   k 2, focus 2.5 m — the worst relative miss of the ramp frames there (0.075 px
+///   RMSE, 10% of δ's RMS), where scale·√(3/N) reports ± 0.011 px and the sandwich
+///   ± 0.039: the RMSE must lie within two standard errors (tolerance: the
+///   definition of "covered" over the ramp frames, 18 of their 21 answered);
 /// * an edge-poor frame (the rocket: ~240 edges, all at 1.6–3.0 m of a 0.5–4 m
-///   ramp) under k 3, focus 1.2 m: it read a quadratic 0.78 px RMSE off at ± 0.066
-///   px, *present*; now the curve through that band, extrapolated to 1.1–4 m, is
-///   within three of its standard errors of none: *not identifiable* — or, if
-///   present, covered like the first.
+///   ramp) under k 3, focus 1.2 m: scale·√(3/N) reads a quadratic 0.78 px RMSE off
+///   at ± 0.066 px, *present*; with the sandwich the curve through that band,
+///   extrapolated to 1.1–4 m, is within three of its standard errors of none: *not
+///   identifiable* — or, if present, covered like the first.
 #[test]
 fn blind_dof_standard_error_covers_its_error_or_says_not_identifiable() {
     use blind_augment::synth::sequence::{motorcycle, procedural};
@@ -555,9 +555,9 @@ fn thinned_edges_keep_their_cells() {
 }
 
 /// A blind reading of a visible streak that its standard error cannot tell from none
-/// is *not identifiable*, not *absent* (`fit::motion_blur::exposure_status`): it
-/// used to be called absent, a vote for "no motion blur" in the worker's window
-/// however right the reading (`benches/streak_acf/fallback.py`: 30 of 123 streaks,
+/// is *not identifiable*, not *absent* (`fit::motion_blur::exposure_status`):
+/// called absent, it would be a vote for "no motion blur" in the worker's window
+/// however right the reading (30 of 123 box streaks on photographs and text pages,
 /// among them the astronaut's 8 px read 8.0 ± 3.2 px). Frames: the astronaut and the
 /// rocket mirror-tiled to 640×480, uniform flow of 50 px/frame at 0° and 90°, box
 /// streaks of 8 px (λ 0.16) and none, 3 DN of sensor noise, 8-bit. Each streak must

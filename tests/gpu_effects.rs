@@ -1,6 +1,6 @@
 //! Every GPU effect pass against its CPU twin on the same inputs, on whatever
 //! Vulkan device is present (CI pins lavapipe). Deterministic effects: mean absolute
-//! error ≤ 1/255 and 99th percentile ≤ 4/255 (the render-core issue's tolerance: one
+//! error ≤ 1/255 and 99th percentile ≤ 4/255 (the render core's tolerance: one
 //! 8-bit step on average, a few at edges where float order differs). Validation-layer
 //! warnings and errors fail the test. Without a device the test is skipped with a
 //! message — unless REQUIRE_GPU=1 (set by .ci/run), where that is a failure. On a
@@ -147,9 +147,9 @@ fn grain_table(noise: &Noise) -> GrainTable {
 
 /// Grain is random but seeded: with the same counter-based RNG the GPU field equals
 /// the CPU twin up to the last bits of the GPU's log/cos (bound 1e-4, 0.5% of a
-/// typical grain std; far inside the 1/255). Statistically, on flat greys
+/// typical grain std; far inside the 1/255 tolerance). Statistically, on flat greys
 /// across the luminance range each pyramid level's std is within 5% of the model
-/// (the render-core issue's criterion; 256² gives ≈2.2% standard error at level 3).
+/// (the render core's criterion; 256² gives ≈2.2% standard error at level 3).
 #[test]
 fn grain_pass_matches_cpu_reference() {
     let Some(ctx) = gpu_context("grain") else { return };

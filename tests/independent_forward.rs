@@ -1,6 +1,6 @@
 //! The accurate tier on frames made by a second, independent forward model
 //! (`common::independent`: Gaussian layers, bicubic MB, Poisson noise after the MB),
-//! not by the project's own `synth` (issue 10 item 6). Errors are measured over every
+//! not by the project's own `synth`. Errors are measured over every
 //! pixel of the frame with valid depth — where virtual content may be placed — not
 //! only over the depths the fit found texture at.
 
@@ -62,7 +62,7 @@ fn scenes() -> Vec<DofScene> {
         depth: ramp.clone(),
         truth: DofCurve::Quadratic { a: 0.3, b: -1.0, c: 1.5 },
     });
-    // The issue's miss: 14% of the frame nearer than every textured sample.
+    // The failure case to cover: 14% of the frame nearer than every textured sample.
     let band = h * 14 / 100;
     let mut img = astro.clone();
     flatten_rows(&mut img, 0..band, [0.62, 0.60, 0.58], [0.60, 0.58, 0.57]);
@@ -129,11 +129,11 @@ fn frame_rmse(fitted: &DepthOfField, truth: &DofCurve, depth: &Plane) -> f64 {
 
 /// δ(Z) over the whole frame under Gaussian layers. Measured (BENCHMARKS.md): frame
 /// RMSE 0.029 / 0.048 px on the fully textured scenes, 0.19 / 0.066 px with 14% of
-/// the frame textureless and nearer than every textured sample (0.68 / 0.12 px when
-/// the model was clamped to the textured depths), 0.049 px with a textureless far
-/// band; median **0.049 px**, the issue's 0.05 (0.067 before the blend map of
+/// the frame textureless and nearer than every textured sample (0.68 / 0.12 px with
+/// the model clamped to the textured depths), 0.049 px with a textureless far
+/// band; median **0.049 px**, the target 0.05 (0.067 without the blend map of
 /// `constant_blur_reads_its_sigma_under_three_kernels`). Tolerances: the median
-/// 0.05 px (the issue's goal); 0.06 px per scene where the frame is textured (a
+/// 0.05 px (the target); 0.06 px per scene where the frame is textured (a
 /// sampled Gaussian of std σ still reads +0.01…+0.06 px long, see the test below);
 /// 0.25 px where the frame holds depths without texture, whose δ is extrapolated (at
 /// most one textured inverse-depth span, see `fit::dof::EXTRAPOLATION_FRACTION`).
@@ -242,7 +242,7 @@ fn constant_blur_reads_its_sigma_under_three_kernels() {
 /// a bilinear read between pixels blurs by a tent of variance t(1 − t) (1/6 px² on
 /// average) along the streak; a band-limited streak of the same λ lacks it, so the
 /// fit shortens the streak by about that variance (L² / 12 → L² / 12 − 1/6). Not the
-/// core issue's 0.01: a convention difference, not a fit error — rendering the fitted
+/// accurate tier's 0.01 target: a convention difference, not a fit error — rendering the fitted
 /// λ with the renderer's bilinear taps reproduces the camera's streak. Tolerance
 /// 0.08 (the measured −0.066 worst case plus margin); a sign test pins the direction.
 #[test]
@@ -302,7 +302,7 @@ fn independent_sensor_has_its_stated_std() {
 
 /// Photosite noise after the bicubic MB (the clean reference is the blurred frame):
 /// each channel's noise follows its own value, which the fit must recognise; synth's
-/// std on flat greys within the core issue's median 1.5% (measured: 0.73% astronaut,
+/// std on flat greys within the target median 1.5% (measured: 0.73% astronaut,
 /// 0.26% chelsea; a luma-driven fit was 11.9% / 9.2% off). Luma-driven noise from the
 /// same generator must keep the paper's luma intensity (measured 0.33% / 0.57%).
 #[test]

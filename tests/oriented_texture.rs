@@ -16,11 +16,11 @@ mod common;
 /// An oriented texture (σ 3 px along its axis, 1.2 across: ~6× the gradient energy
 /// across) with the flow 30° and 45° off its smooth axis, 8 and 16 px/frame, λ 0,
 /// 0.25 and 0.5, two seeds: no frame may report a *present* exposure whose
-/// standard error does not hold the truth within two. Before the diagonals'
-/// contrast widened the band, 10 of these 24 frames did (every 30° frame at λ 0 and
-/// 0.25 and two at 0.5: λ 0.37–0.88 *present* by the autocorrelation shape, whose
-/// error isotropy's band gauges). Closer to the axis the bound the diagonals prove is not
-/// enough (20°: 1 frame of 12 at 800×700, and two whose streak zeros pass their
+/// standard error does not hold the truth within two. Without the widening of the
+/// band by the diagonals' contrast, 10 of these 24 frames do (every 30° frame at λ
+/// 0 and 0.25 and two at 0.5: λ 0.37–0.88 *present* by the autocorrelation shape,
+/// whose error isotropy's band gauges). Closer to the axis the bound the diagonals
+/// prove is not enough (20°: 1 frame of 12 at 800×700, and two whose streak zeros pass their
 /// side-lobe gate at exactly e^0.2 at 640×480), and along it (0°) one frame
 /// cannot tell the two apart (BENCHMARKS.md "Oriented texture at an angle to the
 /// flow"); nothing is asserted there.
@@ -63,11 +63,11 @@ fn oriented_texture_off_the_flow_is_not_read_as_a_streak() {
 /// Closer to the texture's smooth axis (10° and 20° off) at 8 px/frame the texture
 /// is as smooth along the flow as a full-frame streak makes a frame: isotropy's root
 /// is not bracketed below λ = 1, and the autocorrelation shape's best length is 8
-/// px. Before the shape's candidates reached past a full-frame streak its best was
-/// "the search's end" (they ended at 7 px: the flow's 7.99 px/frame, floored),
-/// isotropy's unbracketed root answered, and all four frames read λ 1.000 ± 0.08–0.13
-/// *present* (for 0 at 10°, for 0.5 at 20°). Now both searches ending at λ = 1 is
-/// not identifiable; at 16 px/frame (a root inside [0, 1]) nothing is asserted here.
+/// px. With the shape's candidates ending at a full-frame streak its best is "the
+/// search's end" (they end at 7 px: the flow's 7.99 px/frame, floored), isotropy's
+/// unbracketed root answers, and all four frames read λ 1.000 ± 0.08–0.13 *present*
+/// (for 0 at 10°, for 0.5 at 20°). Both searches ending at λ = 1 is not
+/// identifiable; at 16 px/frame (a root inside [0, 1]) nothing is asserted here.
 #[test]
 fn a_texture_smoother_along_the_flow_than_any_exposure_is_not_read_as_a_full_frame_streak() {
     let (w, h) = (640usize, 480usize);

@@ -32,9 +32,9 @@ fn fit_constant_depth(img: &Rgb) -> DepthOfField {
 /// published, so the PSF is measured here on the shipped 640×480 by a method
 /// independent of the estimator: the first zero of the radially averaged power
 /// spectrum (Bessel J₁: f₀ = 3.8317/(2πR)) lies at 0.110 cycles/px → R = 5.54 px,
-/// second-moment σ = √(R²/4 + 1/12) = 2.79 px. (The issue's "19 px diameter" would
+/// second-moment σ = √(R²/4 + 1/12) = 2.79 px. (A "19 px diameter" would
 /// put that zero at 0.064 cycles/px, where the spectrum has none.) Tolerance: 25% of
-/// σ (the issue's). Measured: disc, σ 2.75 px (−1.3%), ring z 31, notch 0.22.
+/// σ (the required tolerance). Measured: disc, σ 2.75 px (−1.3%), ring z 31, notch 0.22.
 #[test]
 fn real_defocused_photo_reads_as_a_disc_of_the_measured_size() {
     let img = photo("defocus_disc_opencv.jpg");
@@ -94,12 +94,12 @@ fn fast_fit_carries_the_kernel_shape() {
 }
 
 /// A disc read right is reported present, whatever one half of the tiles' cepstrum
-/// shows elsewhere. Chelsea mirror-tiled to 1280×960 under a σ 2 px disc
-/// (`examples/effort_probe`'s frame): δ read 2.047 px (+2.3%), but the standard error
-/// — half the two tile halves' difference — took one half's global cepstral minimum
-/// at 38.0 px (z 4.9) against the ring at 7.6 (z 33): ± 3.8 px, and the frame was
-/// reported *absent*. Each half's dip is now read near the whole set's
-/// (`defocus_spectrum::dip_near`): ± 0.15 px (the radius mapping's floor), present.
+/// shows elsewhere. Chelsea mirror-tiled to 1280×960 under a σ 2 px disc: δ reads
+/// 2.047 px (+2.3%), but a standard error of half the two tile halves' difference,
+/// each half's global cepstral minimum taken, puts one half at 38.0 px (z 4.9)
+/// against the ring at 7.6 (z 33): ± 3.8 px, and the frame *absent*. Each half's
+/// dip is read near the whole set's (`defocus_spectrum::dip_near`): ± 0.15 px (the
+/// radius mapping's floor), present.
 /// Tolerances: δ within 10% (as above); the standard error under 0.5 px (a
 /// quarter of δ).
 #[test]
@@ -114,10 +114,10 @@ fn a_disc_read_right_is_present_whatever_a_half_of_the_tiles_shows() {
     assert!(dof.diagnostics.stderr.is_some_and(|e| e < 0.5), "{:?}", dof.diagnostics.stderr);
 }
 
-/// The issue's real defocused photograph: OpenCV's `text_defocus.jpg` ("compact
+/// A real defocused photograph: OpenCV's `text_defocus.jpg` ("compact
 /// digital photo camera, no artificial distortion"), restored in OpenCV's
 /// `deconvolution.py` with `--circle --d 19`: a disc of diameter 19 px, R = 9.5,
-/// second-moment σ = √(R²/4 + 1/12) = 4.76 px. Tolerance: 25% of σ (the issue's).
+/// second-moment σ = √(R²/4 + 1/12) = 4.76 px. Tolerance: 25% of σ (the required tolerance).
 /// Measured: disc, R 9.17 px, σ 4.60 px (−3.4%), ring z 26, notch 0.86.
 #[test]
 fn real_text_defocus_reads_as_the_stated_disc() {
@@ -145,11 +145,11 @@ fn fast_mb(img: &Rgb, deg: f32, speed_px: f32) -> blind_augment::model::MotionBl
     fit(&inp, &opts).expect("fit").model.motion_blur
 }
 
-/// The issue's two real motion-blurred photographs, with the linear PSFs OpenCV's
+/// Two real motion-blurred photographs, with the linear PSFs OpenCV's
 /// `deconvolution.py` restores them with (its docstring): `licenseplate_motion.jpg`
 /// `--angle 135 --d 22` and `text_motion.jpg` `--angle 86 --d 31`. The flow
-/// direction is given (as the issue says) with a nominal 50 px/frame, so the streak
-/// is λ·50 px. Tolerance: 15% of the stated length (the issue's).
+/// direction is given (as stated for them) with a nominal 50 px/frame, so the streak
+/// is λ·50 px. Tolerance: 15% of the stated length (the required tolerance).
 ///
 /// Measured: the license plate reads 21.4 px (−3%) from the streak's spectral zeros
 /// (correlation 0.81 ≥ 0.45). The text page's zeros are not identified (the text
@@ -189,7 +189,7 @@ fn real_motion_photos_with_stated_streaks() {
 /// read it (measured 0.481 for 0.5); with 8 px/frame (a 4 px streak, zeros too
 /// shallow under that defocus) the fast tier must not claim a confident λ = 0 — it
 /// reports not identifiable (measured: 10.7% more gradient energy along the flow
-/// than across). Tolerance: 0.05 in λ (the live-calibration issue's fast target).
+/// than across). Tolerance: 0.05 in λ (the live calibration's fast-tier target).
 #[test]
 fn motion_blur_under_varying_defocus() {
     let (w, h) = (640usize, 480usize);

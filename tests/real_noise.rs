@@ -25,7 +25,7 @@ fn median_abs(v: &[f64]) -> f64 {
 /// The model's own per-level stds, evaluated where the renderer evaluates them (luma
 /// clamped to the fitted range), against the temporal reference.
 ///
-/// The issue's goal — median |relative error| ≤ 20% over every level, channel and
+/// The goal — median |relative error| ≤ 20% over every level, channel and
 /// bin — is NOT met on this frame, and the test says what is: measured 2026-11-23,
 /// level 0 −34% over all bins but within 20% (median) over the bins inside the luma
 /// range the fit measured (0.53–0.78, the road); levels 1–3 −69…−80%. Why: the
@@ -36,7 +36,7 @@ fn median_abs(v: &[f64]) -> f64 {
 /// is 0.73 DN against the noise's median 0.44 DN). One frame cannot separate them;
 /// the fit therefore reports levels 1–3 as not identifiable and continues level 0
 /// by white-noise ratios (which decay faster than this codec's noise: hence the
-/// coarse levels' large negative error). Tolerances below: the issue's 20% where
+/// coarse levels' large negative error). Tolerances below: the goal's 20% where
 /// the fit claims a measurement; everywhere else only "within the stated miss + 10
 /// points", so a regression still fails.
 #[test]
@@ -98,7 +98,7 @@ fn one_real_frame_reads_the_temporal_noise_per_level_and_luma() {
 
 /// The fitted model synthesised through `synth` onto the clip's clean (temporal
 /// mean) image, analysed with the same pyramid and binned like the reference: level
-/// 0 inside the fitted luma range within 20% (the issue's tolerance; measured
+/// 0 inside the fitted luma range within 20% (the goal's tolerance; measured
 /// 2026-11-23: see the printout), every cell together within the stated miss of the
 /// test above (median 69% measured; 80% asserted).
 #[test]
@@ -163,8 +163,7 @@ fn compression_blocking_is_recognised() {
 /// A block codec predicts each frame from the last: skipped blocks copy its noise
 /// exactly, predicted ones carry it under their residual. On this clip 72% of frame
 /// 400's pixels equal frame 401's, and the blind fit with a neighbour 1–10 frames
-/// away read level 0 at −59…−82% (`examples/real_noise_neighbour.rs`, against the
-/// temporal reference; alone −31%). So where the frame shows the codec's grid the
+/// away reads level 0 at −59…−82% (against the temporal reference; alone −31%). So where the frame shows the codec's grid the
 /// fit reads it alone and says why. Checked with the extreme of a copy — the frame
 /// itself as its own aligned neighbour: the difference holds no noise at all (no
 /// model, or level 0 below a fifth of the frame-alone fit's), while `fit` returns

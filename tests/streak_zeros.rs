@@ -10,14 +10,14 @@ use blind_augment::synth::{add_dof, add_motion_blur};
 use common::*;
 
 /// The streak-zeros estimator claims only zeros it sees (`fit::streak_spectrum`).
-/// Before its template carried the noise floor and its grid reached past both ends
-/// of [lambda_min, 1], the mirror-tiled astronaut at 1280×960 (~7 px/frame) with no
+/// Without the noise floor in its template and its grid's reach past both ends of
+/// [lambda_min, 1], the mirror-tiled astronaut at 1280×960 (~7 px/frame) with no
 /// blur, with depth-varying defocus only, and with a 1.8 px streak (λ 0.25: no zero
 /// below Nyquist) all read λ ≈ 0.35 *identified* (correlation 0.53–0.89), and MB +
-/// noise read 0.67 for 0.5 (identified, +35%). Now none of the three is identified;
-/// a noisy streak is either not identified or within 15% (the streak
-/// tolerance; measured: not identified, 0.479 ± 0.160). At 24 px/frame on 640×480
-/// a streak under defocus is identified within 5% (measured 0.482 ± 0.003, its first
+/// noise reads 0.67 for 0.5 (identified, +35%). None of the three may be identified;
+/// a noisy streak is either not identified or within 15% (the streak tolerance;
+/// measured: not identified, 0.479 ± 0.160). At 24 px/frame on 640×480 a streak
+/// under defocus is identified within 5% (measured 0.482 ± 0.003, its first
 /// side lobe e^3.0 over the noise floor; 5% is the spread of the noise-free reads,
 /// 0.48–0.50); with noise instead its zeros read 0.504 ± 0.023 but its side lobe
 /// lies at the floor (e^0.07; `MIN_SIDE_LOBE`), as an oriented texture's does — not
@@ -65,9 +65,9 @@ fn streak_zeros_claim_only_zeros_they_see() {
 /// correlation 0.99–1.00. A zero has power coming back after it; here the first side
 /// lobe's span holds the floor (ln excess 0.08–0.09 against `MIN_SIDE_LOBE` 0.2),
 /// so none may be identified. Along y (the sharp axis) the zeros must not claim a
-/// streak either. And the highest lobe a wrong read showed in
-/// `examples/side_lobe_probe.rs`: another texture seed, flow 20° off its smooth
-/// axis, λ 0 at 12 px/frame — read 0.491 ± 0.011, lobe e^0.15 (identified under a
+/// streak either. And the highest lobe a wrong read showed over four texture seeds
+/// up to 20° off: another texture seed, flow 20° off its smooth axis, λ 0 at 12
+/// px/frame — read 0.491 ± 0.011, lobe e^0.15 (identified under a
 /// 0.15 threshold).
 #[test]
 fn streak_zeros_do_not_take_a_smooth_axis_for_a_streak() {
@@ -110,11 +110,11 @@ fn streak_zeros_do_not_take_a_smooth_axis_for_a_streak() {
 /// across-flow peak may supply at most `MAX_ACROSS_SHARE` of the ratio's dip.
 /// Frames (640×480, flow 50 px/frame, synth's box streak, 8-bit): a rendered text
 /// page (tests/data/text_page) and the rocket photograph (tests/data/rocket.jpg).
-/// Before the two gates (this test run on the previous commit): the sharp page
-/// along its lines read a 3.8 ± 0.15 px streak, *identified*; a 31 px streak across
-/// its lines 5.5 ± 0.13 px; the sharp rocket at 45° 19.2 ± 1.7 px — confident and
-/// wrong (now: along-flow dips −0.32 / 0.26 / 0.11, across shares 1.50 / 0.73 / —).
-/// The zeros must now either read the streak within 15% (the tolerance) or
+/// With the two gates disabled, this test's frames read: the sharp page along its
+/// lines a 3.8 ± 0.15 px streak, *identified*; a 31 px streak across its lines
+/// 5.5 ± 0.13 px; the sharp rocket at 45° 19.2 ± 1.7 px — confident and wrong
+/// (their along-flow dips −0.32 / 0.26 / 0.11, across shares 1.50 / 0.73 / —).
+/// The zeros must either read the streak within 15% (the streak tolerance) or
 /// identify none, and the 8 and 16 px streaks they read right on the same frames
 /// stay identified (dips 0.68–1.64). Not caught, stated: the page's 31 px streak
 /// at 45° reads 4.4 px identified (dip 0.67, share 0.43 — the diagonal letter
@@ -154,9 +154,9 @@ fn streak_zeros_are_dips_of_the_along_flow_power() {
 
 /// Streak zeros read off noise alone: a frame with no streak and no texture — a
 /// horizontal ramp of the full 8-bit range under 2 DN of white noise (640×480, flow
-/// 50 px/frame at 30°) — had its zeros *identified* as a ~21 px streak at
+/// 50 px/frame at 30°) — has its zeros *identified* as a ~21 px streak at
 /// correlation 0.72–0.78 on two of four noise seeds (`benches/streak_gates`'s
-/// frames, numpy's noise), as had the held-out set's moon sky (19.2 px) and colour
+/// frames, numpy's noise), as have the held-out set's moon sky (19.2 px) and colour
 /// wheel (21.5 px) and, on the grayscale wheel, streaks of 0 / 6 / 24 px (17–21 px
 /// each). A streak of L ≥ 10 px leaves the along-flow derivative autocorrelation a
 /// dip near L or the shape a length above L/2; where neither shows, the zeros are

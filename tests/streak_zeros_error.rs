@@ -19,7 +19,7 @@ mod common;
 /// standard errors, the coverage the fit's reported error claims (~95%); 12 frames,
 /// so one miss would be in keeping with that and is allowed. Without the model
 /// error 8 of the 10 zeros answers here missed (λ 0.860 ± 0.011 for 0.9, 0.730 ±
-/// 0.008 for 0.75 …; at 800×700, `examples/oblique_probe` `SET=iso`, 16 of 20);
+/// 0.008 for 0.75 …; at 800×700, 16 of 20);
 /// with it, none.
 #[test]
 fn streak_zeros_error_holds_their_model_error() {

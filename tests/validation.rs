@@ -1,5 +1,5 @@
 //! Accurate tier (the paper's OPTIMIZATION setting) on real photographs with known
-//! synthetic distortions, against the tolerances of the core issue:
+//! synthetic distortions, against the core tolerances:
 //! median |λ error| ≤ 0.01 (sub-2-px streaks included), δ RMSE ≤ 0.05 px over the
 //! fitted depth range, noise std of `synth` on flat greys within a median 1.5%.
 //! Distorted frames go through 8-bit quantisation, as a PNG round trip would.
@@ -106,9 +106,9 @@ fn fit_dof(sharp: &Rgb, depth: &Plane, units: DepthUnits, truth: &DepthOfField) 
 
 /// The full-resolution stack (no pyramid handoff) on the strongest case (to 9.4 px)
 /// must be 5× inside the tolerance, which is what the faster default spends.
-/// Measured 0.0077 px (0.0049 before the fit's blend map: the fit's 0.5 px blends
-/// and synth's 0.25 px blends then shared the same excess of high frequency, which
-/// partly cancelled; now the fit reads exact Gaussians, and synth's blends within
+/// Measured 0.0077 px (0.0049 without the fit's blend map: the fit's 0.5 px blends
+/// and synth's 0.25 px blends then share the same excess of high frequency, which
+/// partly cancels; with it the fit reads exact Gaussians, and synth's blends within
 /// −0.013 px of their δ — tests/independent_forward.rs).
 #[test]
 fn dof_full_resolution_stack_is_exact() {

@@ -16,8 +16,7 @@ else (L = 0 included).
         --angles 0,90,45 --noise 0,3
 
 Bare names are read from scikit-image's bundled `skimage/data` (0.26.0 here).
-`FIT_ARGS="--fast-effort 0.5"` passes more options to every `fit` (this script's and
-`benches/streak_acf/*.py`'s, which call `fit` from here).
+`FIT_ARGS="--fast-effort 0.5"` passes more options to every `fit` call.
 Needs numpy, Pillow, opencv-python-headless, scikit-image.
 """
 import argparse

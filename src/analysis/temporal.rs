@@ -200,8 +200,8 @@ fn motion_difference(a: &Analysed, b: &Analysed) -> Option<f32> {
 /// pixel). Invalid pixels in the aligned rows hold the current frame's value; the
 /// rows not aligned hold 0 (invalid). Each source is warped a row at a time into a
 /// row buffer and summed there: a sparse reference costs its bands, and no
-/// frame-sized buffer besides its output (the per-source frames it used to
-/// allocate, zeroed, cost as much as the alignment itself at 1280×960).
+/// frame-sized buffer besides its output (a zeroed frame per source would cost as
+/// much as the alignment itself at 1280×960).
 fn aligned_mean(
     current: &Analysed,
     sources: &[&Arc<Analysed>],
@@ -417,8 +417,8 @@ impl TemporalMotionDeblur {
     /// references (`split`), each aligned on about a sixth of a 1280×960 frame (all
     /// of it up to 640×320). At 1280×960 one full alignment is 37 ms of one core
     /// (BENCHMARKS.md). One frame alone, unsplit, read λ = 0.5 as 0.66 on 3.6 px
-    /// streaks at 1280×960 (`examples/mb_probe`): its noise, averaged by the streak,
-    /// lowers the loss at long λ.
+    /// streaks at 1280×960: its noise, averaged by the streak, lowers the loss at
+    /// long λ.
     pub fn sparse() -> Self {
         Self { frames: 2, max_aligned_px: Some(204_800), split: true, ..Default::default() }
     }

@@ -216,9 +216,9 @@ mod tests {
 
     /// A window whose first fit is far off and of another form than the rest (the
     /// calibration video's burst: the first frame fitted alone, +57%) publishes what
-    /// the others agree on. Before `noise_pool` the first fit's form decided: the
-    /// first window published it unchanged (+57%), the second the mean of it and
-    /// the later fit of its form (+26%). Tolerance 5%: the good fits are within 2%
+    /// the others agree on. Were the first fit's form to decide, the first window
+    /// would publish it unchanged (+57%), the second the mean of it and the later
+    /// fit of its form (+26%). Tolerance 5%: the good fits are within 2%
     /// of the truth, the linear one within 3% at mid-luma.
     #[test]
     fn one_far_fit_of_another_form_does_not_decide_the_noise() {

@@ -113,10 +113,10 @@ fn irls<const P: usize>(n: usize, row: impl Fn(usize) -> [f64; P], y: &[f64], it
         // and kept where |r| is past the corner: a select, not a branch, so the pass
         // runs four samples to a vector division. Taken inside the sums' loop (a
         // branch on each sample's side of the corner, mispredicted where residuals
-        // straddle it, and a scalar division) the thin lens's focus search took
-        // 1.61 ms at the bench frame's 2 845 edges, now 1.43 (the defocus fit's
-        // least squares 1.8 → 1.6 ms, same-moment). The same weights (the same
-        // expression), the same sums in the same order.
+        // straddle it, and a scalar division) the thin lens's focus search takes
+        // 1.61 ms at the bench frame's 2 845 edges, this pass 1.43 (the defocus
+        // fit's least squares 1.8 against 1.6 ms, same-moment). The same weights
+        // (the same expression), the same sums in the same order.
         if let Some(inv) = inv_scale {
             for (w, r) in weights.iter_mut().zip(&res) {
                 // |r|/scale as a product with the reciprocal (one division per step
@@ -508,7 +508,7 @@ mod tests {
     /// Samples that share their errors are counted once: every sample repeated four
     /// times reads the same standard error as the set once, when each copy shares
     /// its original's cluster (to the G/(G − 1) factor, the same G) — and half of
-    /// it (1/√4) when every copy is taken as independent, the old formula's mistake.
+    /// it (1/√4) when every copy is taken as independent.
     /// Tolerance 1e-9 relative for the equality (float sums in another order), 1%
     /// for the half (G/(G − 1) of 40 vs 160 clusters).
     #[test]

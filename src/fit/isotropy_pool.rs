@@ -20,7 +20,7 @@
 //! directions are independent looks at the texture), then minimises over λ the
 //! weighted residual of the bins' r(λ) about their best harmonic; weights
 //! 1/(sampling variance + `HARMONIC_SCATTER`²), the scatter measured on photographs
-//! (`examples/mb_pool_probe.rs`). The standard error is the half-width of the
+//! (see `HARMONIC_SCATTER`). The standard error is the half-width of the
 //! profile-likelihood interval (Δχ² = 1, scaled by χ²/dof where the residual
 //! exceeds the modelled scatter): r is flat in λ near 0, where a Gauss–Newton
 //! slope would claim nothing or too much.
@@ -32,7 +32,8 @@ use std::time::Instant;
 /// λ grid of the evidence: λ_j = j / (GRID − 1). The sums are smooth in λ (each is
 /// a sum over thousands of box means): a root of the cubic interpolation between
 /// nodes 1/16 apart lies within 0.006 of the exact root (mean 0.0003; 194 frames of
-/// `examples/mb_pool_probe.rs`), far inside the pooled λ's standard error.
+/// photographs blurred along several flow directions), far inside the pooled λ's
+/// standard error.
 pub const GRID: usize = 17;
 /// Direction bins over 180° (15° each): a turning flow spreads one frame's samples
 /// over a few bins, each its own direction.
@@ -43,10 +44,10 @@ const MIN_BIN_SAMPLES: usize = 64;
 /// How far a bin's r(λ*) strays from the harmonic shared by all bins when the bins
 /// see different content (different frames, different parts of the frame): the
 /// standard deviation of r about its best second harmonic over directions, each
-/// direction a different crop of a sharp photograph (`MODE=scatter
-/// examples/mb_pool_probe.rs`: astronaut, chelsea, Motorcycle, 300×260 crops at 12
-/// directions: rms 0.048, p90 0.079; one crop at every direction: 0.003–0.009, the
-/// structure tensor's exact harmonic up to sampling). Rounded up to 0.05.
+/// direction a different crop of a sharp photograph (astronaut, chelsea,
+/// Motorcycle, 300×260 crops at 12 directions: rms 0.048, p90 0.079; one crop at
+/// every direction: 0.003–0.009, the structure tensor's exact harmonic up to
+/// sampling). Rounded up to 0.05.
 const HARMONIC_SCATTER: f64 = 0.05;
 /// Above this standard error the pooled λ is reported not identifiable: the single
 /// frame's rule (a 90% band wider than half of [0, 1]) as a standard error.

@@ -163,7 +163,8 @@ pub struct FitOptions {
     /// Blind noise: grid points per pyramid level (the level-0 stride is
     /// √(pixels / this), at least 4 px; coarser levels keep about as many). The
     /// sample search's cost is linear in it; what fewer cost in accuracy is measured
-    /// in BENCHMARKS.md ("Fast tier speed", sixth session).
+    /// in BENCHMARKS.md ("Fast tier speed at 1280×960": the noise grid as a
+    /// measured setting).
     pub noise_fast_samples_per_level: usize,
     /// Blind exposure and defocus: the share of their full sample counts read, in
     /// [`MIN_FAST_EFFORT`, 1] (default 1) — the isotropy's pixels (4 096), the
@@ -665,9 +666,10 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     (model.noise, plots.noise) = noise;
     (model.motion_blur, plots.motion_blur) = mb;
     (model.depth_of_field, plots.depth_of_field) = dof;
-    // The luma's build counted where it was timed before it moved into the input
-    // check (~0 there now): the blind noise fit's `blur.shared_luma` stage, or
-    // without that fit the blind defocus fit's `luma`.
+    // The luma, built with the input check, has its build time added to the fit
+    // stage that would otherwise build it (~0 there with the luma prebuilt): the
+    // blind noise fit's `blur.shared_luma` stage, or without that fit the blind
+    // defocus fit's `luma`.
     if let Some(t) = luma_s {
         let slots =
             [(&mut model.noise.diagnostics, "blur.shared_luma"), (&mut model.depth_of_field.diagnostics, "luma")];

@@ -71,7 +71,7 @@ pub fn blur_separable_rows(p: &Plane, kernel: &[f32], row: &dyn Fn(usize) -> boo
 /// 32 lanes: four AVX2 vectors, four independent chains of additions. With 16
 /// (two chains) each tap's addition waited on the previous one's (~3 cycles a tap):
 /// the blind DoF fit's re-blur of the 640×480 half frame (21 taps) took 0.70 ms,
-/// 0.60 with 32 or 64 lanes (`stage_times`, 24 runs each); 32 leaves SSE2's 16
+/// 0.60 with 32 or 64 lanes (24 runs each); 32 leaves SSE2's 16
 /// registers room (8 accumulators), NEON's 32 as well.
 #[inline]
 fn taps_into<'a>(out: &mut [f32], kernel: &[f32], tap: impl Fn(usize, usize) -> &'a [f32]) {

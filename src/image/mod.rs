@@ -120,11 +120,11 @@ impl Plane {
             // weights and tap indices (lane-wise), the four taps' reads (the only
             // scalar part), and the two-way interpolation (lane-wise). The same
             // operations per node in the same order, so the same values; one node
-            // per iteration did every step in scalar registers. The lengths are
+            // per iteration would do every step in scalar registers. The lengths are
             // constants, so each loop unrolls whole, without zeroed scratch or
-            // per-chunk length tests: chunks of a run-time length up to 32 took
+            // per-chunk length tests: chunks of a run-time length up to 32 take
             // 62 / 119 / 208 ns for lines of 17 / 33 / 65 nodes, these 51 / 85 /
-            // 154 ns (9 nodes: 45 → 44 ns), `examples/line_bench.rs`.
+            // 154 ns (9 nodes: 45 against 44 ns).
             let n16 = out.len() / 16 * 16;
             let (sixteens, rest) = out.split_at_mut(n16);
             line_chunks::<16>(&self.data, self.width, (x0, y0, dx, dy), sixteens, 0);

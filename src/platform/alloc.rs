@@ -9,11 +9,11 @@
 //! threshold) lies free: every call then pays a page fault and a page clear per
 //! 4 KiB on first touch, and an `munmap` (a TLB shootdown on every core the process
 //! runs on — the render thread's included) per block. Measured (`perf`, the fast
-//! tier at 1280×960 on one thread, `examples/stage_times`): 20–26% of its samples
-//! in the kernel's fault path; the same frames with the thresholds below 82–85 →
-//! 67–71 ms (BENCHMARKS.md). The cost is memory: the heap keeps what a fit freed,
-//! up to its peak, which the worker reaches again on its next update (the probe's
-//! maximum resident set: 85 MB with the thresholds, 79 MB without).
+//! tier at 1280×960 on one thread): 20–26% of its samples in the kernel's fault
+//! path; the same frames with the thresholds below 67–71 ms instead of 82–85
+//! (BENCHMARKS.md). The cost is memory: the heap keeps what a fit freed, up to its
+//! peak, which the worker reaches again on its next update (a process fitting
+//! those frames: maximum resident set 85 MB with the thresholds, 79 MB without).
 //!
 //! Android (bionic's scudo) has its own knobs (the secondary cache's size) and is
 //! left at its defaults: not measured here, no headset.

@@ -288,8 +288,7 @@ pub fn white_sensor_noise(a: [f32; 3], b: [f32; 3], luminance_range: [f32; 2]) -
 /// pixels. Level std ratios (level l + 1 over level l) measured here: white noise
 /// 0.24 / 0.44 / 0.49 (`unit_band_std`), white noise low-passed by a Gaussian of std
 /// 0.7 px (a demosaic's reach) 0.58 / 0.53 / 0.51, the vtest clip's DivX noise
-/// 0.40–0.51 / 0.69–0.74 over its static pixels
-/// (`benches/noise_scenes/level0_correlation.py`).
+/// 0.40–0.51 / 0.69–0.74 over its static pixels.
 ///
 /// `white_sensor_noise`'s level 0 (std_c(Y) = √(a_c + b_c·Y)·c_0) with each coarser
 /// level's std `level_ratios[l]` times the finer one's (the low-pass's by the last

@@ -424,7 +424,7 @@ impl SequenceSpec {
     /// (variance 1/12 source px²), magnified by the view (view px per source px).
     /// At 320×240 the view is about 1:1 (0.29 px); at 1280×960 it is 4× (1.15 px).
     /// The blind DoF estimator reads effect-free frames of the video at 0.22–0.36 px
-    /// and 1.05–1.31 px (`examples/dof_probe`, BENCHMARKS.md).
+    /// and 1.05–1.31 px (BENCHMARKS.md).
     pub fn source_pixel_blur_px(&self, scene: &Scene) -> f32 {
         (self.view.fx / scene.intrinsics.fx) / 12f32.sqrt()
     }

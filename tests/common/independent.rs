@@ -1,5 +1,5 @@
 //! A second forward model, written without `synth`: the kind of addDoF / addMB /
-//! addNoise another implementation would use (issue 10 item 6), so the accurate fits
+//! addNoise another implementation would use, so the accurate fits
 //! are held to frames they did not make themselves.
 //!
 //! How it differs from `synth`, on purpose:

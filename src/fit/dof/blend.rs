@@ -9,7 +9,7 @@
 //! blurred by exactly H_t exceeds the variance-linear (t − t_k)/(t_{k+1} − t_k), and
 //! σ read through the linear map comes out long: measured on the astronaut and
 //! chelsea photographs blurred by exact discrete Gaussians, +0.03…+0.05 px between
-//! the default 0.5 px nodes (0 on them) — the "δ biased upward" of issue 10 item 6.
+//! the default 0.5 px nodes (0 on them): δ biased upward.
 //!
 //! The least-squares w of a frame blurred by H_t is, over the frame,
 //! w*(t) = ⟨H_t S − S_k, S_{k+1} − S_k⟩ / |S_{k+1} − S_k|², and because discrete

@@ -187,7 +187,7 @@ const FAST_MAX_EDGE_SAMPLES: usize = 8192;
 /// whose gradient noise happened to push them over it, and those read δ low (a
 /// larger frame gradient, a larger ratio); the re-blurred gradient is nearly
 /// noise-free, so selecting on it does not bias the ratio, and at 0.04 the frame's
-/// threshold no longer binds (the frame's gradient is the re-blurred one × R > 1).
+/// threshold does not bind (the frame's gradient is the re-blurred one × R > 1).
 /// Blurry edges have the lowest gradients, so they felt it most: on the
 /// procedural texture at 1280×960 with the video's noise, δ 2.7 px read for 2.87
 /// at the near end, 2.81 with this threshold (noise-free: 2.82–2.85).
@@ -217,9 +217,9 @@ struct Edge {
 /// Fewest edges a reduced-effort scan (`FitOptions::fast_effort` < 1: a share of
 /// the rows) must find before its samples are used alone (see `fit_fast`): below
 /// it the other rows are read too, which makes the full scan. Full-effort scans
-/// find ~2 300–3 000 edges on textured 1280×960 frames, 37–256 on edge-poor ones
-/// (`examples/effort_probe.rs`), so a half-effort scan of a textured frame keeps
-/// over 1 000 and an edge-poor one is read whole.
+/// find ~2 300–3 000 edges on textured 1280×960 frames, 37–256 on edge-poor ones,
+/// so a half-effort scan of a textured frame keeps over 1 000 and an edge-poor one
+/// is read whole.
 const EFFORT_MIN_EDGES: usize = 600;
 
 /// Whether the edge at `c` (gradient direction rounded to `s`, unit `normal`,
@@ -277,10 +277,11 @@ const _: () = assert!(
 /// for the rows around the edge scan's row, each row computed once over its whole
 /// width (contiguous: it vectorises) and kept in a ring of `GRAD_ROWS` rows. The
 /// scan's three readers — the threshold and non-maximum suppression, the tangent
-/// mean, `isolated`'s walk — took a scalar central difference per tap (four reads
-/// and bounds checks each; on the bench frame 84 101 suppression taps, 32 702 × 5
-/// tangent taps and at most 5 693 × 2 × 7 × 5 walk taps — a bound, the walk stops
-/// early), the same value `at` now reads (the same two subtractions and products).
+/// mean, `isolated`'s walk — would otherwise each take a scalar central difference
+/// per tap (four reads and bounds checks each; on the bench frame 84 101
+/// suppression taps, 32 702 × 5 tangent taps and at most 5 693 × 2 × 7 × 5 walk
+/// taps — a bound, the walk stops early), the same value `at` reads (the same two
+/// subtractions and products).
 /// Columns 0 and w − 1 and rows outside [1, h − 2] are never computed: every reader
 /// stays inside them.
 struct GradRows {

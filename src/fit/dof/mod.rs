@@ -22,7 +22,7 @@
 //! the depths the frame holds (0.5–99.5th percentile of its valid depth), with at
 //! most `EXTRAPOLATION_FRACTION` of the textured inverse-depth span of
 //! extrapolation on each side — δ(Z) clamps Z into that range, so content nearer
-//! than every textured sample no longer takes the nearest sample's blur.
+//! than every textured sample does not take the nearest sample's blur.
 //!
 //! Present when the fitted curve reaches ≥ 0.1 px somewhere in the range (a 0.1 px
 //! Gaussian removes 5% of the contrast at Nyquist: invisible) and its maximum
@@ -53,7 +53,7 @@ pub const DEFAULT_NODE_SPACING_PX: f32 = 0.5;
 /// Measured at 512² with the blend map (BENCHMARKS.md, `cargo bench --bench
 /// quality`): at 4 px the strong-blur RMSE is 0.0086 px (5 px: 0.0140; full
 /// resolution: 0.0077) in 60% of the full-resolution time (19.1 vs 31.8 ms); at
-/// 3 px it is 0.049 px, at the 0.05 px tolerance. (Before the map 4 px read
+/// 3 px it is 0.049 px, at the 0.05 px tolerance. (Without the map 4 px reads
 /// 0.080 px: the variance-linear map's bias on the coarse grid.)
 pub const DEFAULT_PYRAMID_FROM_PX: Option<f32> = Some(4.0);
 const TEXTURE_MIN_GRAD_SQ: f32 = 1e-4;
@@ -85,7 +85,7 @@ pub struct DofPlotData {
 /// patch of texture), for the δ(Z) standard error (`curve::cluster_stderr`): a grid
 /// of about `CELLS` square cells, whatever the resolution (80 px at 1280×960, 20 px
 /// at 320×240), so that a cell holds a stretch of edge and its neighbourhood.
-/// Measured on the 24 defocus-ramp frames of `examples/effort_probe` (BENCHMARKS.md
+/// Measured on 24 defocus-ramp frames at 1280×960 (BENCHMARKS.md
 /// "The blind δ(Z)'s standard error"): 32 / 64 / 128 px cells at 1280×960 read a
 /// median 1.8 / 2.0 / 2.4× (1.2–4.1× over the frames) the sandwich with every
 /// sample its own cluster — growing slowly past the scale of an edge.
@@ -106,7 +106,7 @@ impl Cells {
 
 /// The blind tier's edge-calibration bias, as a fraction of δ's RMS over the
 /// evaluated depths (`finish`): on a texture of known blur (no blur of its own) the
-/// blind curves of `examples/effort_probe`'s six procedural frames are off by
+/// blind curves of six procedural frames of the defocus ramps are off by
 /// 0.039–0.075 px RMS, 2.8–9.9% of the truth's δ RMS (median 3.4%), while their
 /// statistical error reads 0.008–0.016 px (BENCHMARKS.md "The blind δ(Z)'s
 /// standard error").

@@ -55,7 +55,7 @@ use std::time::Instant;
 ///    not their lag-0 values. Its λ is
 ///    reported; half its difference from the isotropy root enters the standard error
 ///    in quadrature with isotropy's. Measured on the frames this path answers
-///    (`benches/streak_acf/fallback.py`, BENCHMARKS.md): median error 10% / 7%
+///    (box streaks at 640×480, 50 px/frame, BENCHMARKS.md): median error 10% / 7%
 ///    where isotropy alone had 36% / 22% (probe / held-out sets); the real text page
 ///    25.8 px for 31 (isotropy: 16.8). From a shape length of 20 px the along-flow
 ///    curve's dip near it (`acf_shape::along_dip`) is reported instead, its error
@@ -76,13 +76,11 @@ const CONFIRM_MIN_LENGTH_PX: f32 = 10.0;
 /// higher frequency, the streak shorter) and their floor is not the template's (a
 /// streak along the flow also lowers the across-flow power it is set against, so the
 /// template's floor sits too high and places the zero late). Measured on 111 zeros
-/// answers (`benches/streak_acf/fallback.py`'s 70 — box streaks of 6–31 px at 50
-/// px/frame on photographs; `examples/oblique_probe` `SET=iso`'s 20 — 6–16 px on an
-/// isotropic texture under defocus and noise; `SET=photos`' 21 — 8 px on four
+/// answers (70 box streaks of 6–31 px at 50 px/frame on photographs; 20 of 6–16 px
+/// on an isotropic texture under defocus and noise; 21 of 8 px on four
 /// photographs): relative error median −1.7%, |error| 68th percentile 2.5%, 90th
-/// 6.2%; on a noise-free synthetic line field with an exact box (`examples/
-/// zeros_bias_probe`) ±0.05 px, so the error is the scene's and the noise's, not
-/// the estimator's arithmetic. Without it the zeros claimed ± 0.003–0.02 where they
+/// 6.2%; on a noise-free synthetic line field with an exact box ±0.05 px, so the
+/// error is the scene's and the noise's, not the estimator's arithmetic. Without it the zeros claimed ± 0.003–0.02 where they
 /// missed by 2–4%: on the isotropic texture 16 of 20 answers held the truth outside
 /// two standard errors.
 const ZEROS_MODEL_ERROR: f64 = 0.025;
@@ -121,7 +119,8 @@ pub fn fit_fast(
         // noise, no streak: the moon's sky 19.2 px, a colour wheel on black 21.5 px)
         // have no dip and a shape of 0 px, while of the 102 right identifications from
         // 10 px on both sets 97 show a dip and 4 a shape within 25% (one has neither:
-        // a colour wheel's 24 px streak read 20.8 px, now not identifiable).
+        // a colour wheel's 24 px streak read 20.8 px, which this check leaves not
+        // identifiable).
         if let Ok(speed) = acf_shape::crop_speed(flow) {
             let len = lambda * speed;
             // Past `acf_shape::MAX_DIP_LENGTH_PX` no dip can show within the lags (and
@@ -244,7 +243,7 @@ pub fn fit_fast(
     // the autocorrelation shape it gauges — except through the shape's dip along
     // the flow, the reading a texture's anisotropy moves least (`acf_shape::along_dip`,
     // from `acf_shape::MIN_DIP_LENGTH_PX`), whose error then carries the wide band
-    // as well (below). Measured (`benches/streak_acf/fallback.py`): a text
+    // as well (below). Measured (box streaks at 640×480, 50 px/frame): a text
     // photograph's 24 px streak 30° off the flow read 24.0 ± 8.7 px by its dip where
     // the diagonals' anisotropy had widened the band past half of [0, 1].
     if half_band > MAX_ISOTROPY_HALF_BAND {

@@ -174,10 +174,11 @@ pub(super) fn isotropy_root(
     // summed per interleaved subset (the root's spread) and per flow direction (the
     // pooled fit's evidence). The grid brackets the frame's and the subsets' roots,
     // which exact evaluations then refine; the prior's band is read off the grid
-    // (cubic interpolation: within 0.006 of exact roots, mean 0.0003, over the 194
-    // frames of `examples/mb_pool_probe.rs` — inside a bound of 1/256 on a bias).
-    // The stage costs ~0.7 ms more than the root searches from [0, 1] alone did
-    // (8.0–8.4 → 8.7–9.7 ms at 1280×960, same-moment A/B, BENCHMARKS.md).
+    // (cubic interpolation: within 0.006 of exact roots, mean 0.0003, over 194
+    // frames of photographs blurred along several flow directions — inside a bound
+    // of 1/256 on a bias). The stage costs ~0.7 ms more than root searches from
+    // [0, 1] alone (8.7–9.7 against 8.0–8.4 ms at 1280×960, same-moment A/B,
+    // BENCHMARKS.md).
     let mut sub = vec![[[0.0f64; GRID]; 2]; FAST_SUBSETS];
     let mut evidence = IsotropyEvidence::default();
     let (mut c, mut d) = ([0.0f64; GRID], [0.0f64; GRID]);
@@ -315,12 +316,12 @@ pub(super) fn isotropy_root(
 /// The bound, not more: under a heavy-tailed prior on (a, b) — over four
 /// photographs at 12 directions |b| has median 0.028 and 90th percentile 0.176,
 /// a Cauchy's ratio — the 90% half-width of a given b is 2.06·|b|, but that
-/// refused 19 of the 144 held-out frames of `benches/streak_acf/fallback.py` (15
-/// of them read right; the bound: 3) for 6 more oriented-texture frames (BENCHMARKS.md
-/// "Oriented texture at an angle to the flow"). Measured with
-/// `examples/oblique_probe.rs`: an oriented texture (σ 3 / 1.2 px) 20° and 30° off
-/// the flow, where |b| reads 0.25–0.36 and 0.32–0.48, read *present* and missed
-/// the truth on 20 of 24 frames (λ 0.37–1.0 for none), and on 1 now; at 10° (|b|
+/// refused 19 of the 144 held-out box-streak frames (15 of them read right; the
+/// bound: 3) for 6 more oriented-texture frames (BENCHMARKS.md "Oriented texture
+/// at an angle to the flow"). Measured: an oriented texture (σ 3 / 1.2 px) 20° and
+/// 30° off the flow, where |b| reads 0.25–0.36 and 0.32–0.48, read *present* and
+/// missed the truth on 20 of 24 frames without the bound (λ 0.37–1.0 for none), on
+/// 1 with it; at 10° (|b|
 /// 0.14–0.19) and along the axis (b = 0) one frame cannot tell.
 pub(super) fn anisotropy_ratios(oblique_contrast: f64, oblique_contrast_se: f64) -> [f64; 2] {
     let a = (oblique_contrast.abs() - 2.0 * oblique_contrast_se).clamp(0.0, 0.9);
@@ -468,10 +469,10 @@ fn geometry((px, py, fx, fy): Sample, scale: usize) -> Geometry {
 }
 
 /// An isotropy sample: its frame pixel and the flow there, read once by the
-/// candidate scan. The profiles and the coarse scale used to read the flow again at
-/// each chosen pixel, after the scan had left those cache lines: a miss on each of
-/// the two 4.9 MB flow planes per sample, ~43% of `isotropy_root`'s own time in a
-/// `perf` profile of the bench frame.
+/// candidate scan. Reading the flow again at each chosen pixel (the profiles, the
+/// coarse scale), after the scan has left those cache lines, costs a miss on each
+/// of the two 4.9 MB flow planes per sample, ~43% of `isotropy_root`'s own time in
+/// a `perf` profile of the bench frame.
 pub(super) type Sample = (usize, usize, f32, f32);
 
 #[cfg(test)]

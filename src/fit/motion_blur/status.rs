@@ -39,10 +39,10 @@ pub(crate) fn visible_speed_px(flow: &Flow) -> Option<f32> {
 /// errors and `MIN_EXPOSURE`. Absent: the reading itself is negligible — under
 /// `MIN_EXPOSURE`, or a streak under `INVISIBLE_STREAK_PX` at `speed_px`
 /// (`visible_speed_px`) where the flow is known. Otherwise not identifiable: a
-/// visible streak that the standard error cannot tell from none. (That case was
-/// called absent: 30 of the 123 streaks of `benches/streak_acf/fallback.py`'s frames,
-/// most read within two standard errors of the truth — the astronaut's 8 px as 8.0 ±
-/// 3.2 px —, and it voted "no motion blur" in the worker's window.) A flow too slow
+/// visible streak that the standard error cannot tell from none. (Called absent,
+/// that case would take in 30 of the 123 box streaks of the evaluation frames, most
+/// read within two standard errors of the truth — the astronaut's 8 px as 8.0 ±
+/// 3.2 px —, and vote "no motion blur" in the worker's window.) A flow too slow
 /// for even a whole-interval exposure to streak visibly (under `INVISIBLE_STREAK_PX`
 /// per frame: a still head) cannot show the exposure at all: not identifiable,
 /// whatever the reading. NaN is not identifiable.

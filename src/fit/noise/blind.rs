@@ -10,8 +10,8 @@ use super::*;
 
 const BLIND_FLAT_FRACTION: f64 = 0.2;
 /// Default of `FitOptions::noise_fast_samples_per_level`. Measured over 27 frames of
-/// known noise and the real DivX clip (`examples/noise_budget_probe.rs`; the table
-/// is in BENCHMARKS.md, "Fast tier speed", sixth session): level 0's error is the
+/// known noise and the real DivX clip (the table is in BENCHMARKS.md, "Fast tier
+/// speed at 1280×960", the noise grid as a measured setting): level 0's error is the
 /// same from 40 000 down to 5 000 (median 10–11%: texture in the flattest samples,
 /// not sampling), the clip's level 0 inside its range 18.4% at 20 000 and 16.8%
 /// here; the noise fit at 1280×960 takes 15.4 ms instead of 18.5. 10 000, not
@@ -39,7 +39,7 @@ const MAX_LEVEL_STD_RATIO: f32 = 0.8;
 /// level-l noise, so choosing on it does not pick low noise); one from level 1 on
 /// with an aligned neighbour, whose difference cancels texture only where the two
 /// exposures agree — what it leaves lives at the texture's scales. Measured
-/// (`examples/correlated_noise_probe`, BENCHMARKS.md "Correlated noise on video"),
+/// (BENCHMARKS.md "Correlated noise on video"),
 /// levels 2 / 3, l+2 → l+1: white noise at 640×480 +8.5 / +23.0% → +6.9 / +14.4%,
 /// in the worker's strips at 1280×960 +4.5 / +18.1% → +4.7 / +8.8%; correlated noise
 /// within ±3% either way; a neighbour differing only in its noise within ±2.3%.
@@ -56,9 +56,9 @@ const BLIND_MIN_FLAT: usize = 12;
 /// mean, three strengths, three seeds) so that 2 standard errors hold the level-0
 /// error at mid luma on 90% of them; on 63 frames of 7 held-out natural scenes it
 /// held 60 (BENCHMARKS.md, "The blind noise's texture floor"). No frame statistic
-/// tried separated texture from noise (the level-1 band at the flat samples misread
-/// grass as noise and the real clip's road as texture), so this is a prior: pure
-/// textures (grass, gravel, brick) exceed it by +15…+695%.
+/// measured separates texture from noise (the level-1 band at the flat samples
+/// misreads grass as noise and the real clip's road as texture), so this is a
+/// prior: pure textures (grass, gravel, brick) exceed it by +15…+695%.
 const TEXTURE_FLOOR_STD: f32 = 0.006;
 const TEXTURE_FLOOR_RELATIVE: f32 = 0.26;
 
@@ -290,8 +290,8 @@ pub(in crate::fit) fn fit_fast_with_luma(
     // finest measured level by the white-noise band ratios (see below); the reason
     // names them. Coarser levels are then not sampled at all:
     // nothing would read them (levels 2–3 hold ~60% of the grid points at 1280×960,
-    // and over `examples/noise_budget_probe.rs`' 27 frames level 2 was measured on 6,
-    // level 3 on none).
+    // and over 27 frames of known noise level 2 was measured on 6, level 3 on
+    // none).
     let (mut points, mut measured_levels, mut derived): (Vec<LevelPoints>, Vec<usize>, Vec<usize>) =
         (vec![], vec![], vec![]);
     let mut prev: Option<Vec<BinMeasure>> = None;
@@ -358,15 +358,15 @@ pub(in crate::fit) fn fit_fast_with_luma(
     let fitted = fitted.map(|LevelFit { form, intensity, levels: lv, covs, rel_res, nll }| {
         let unit = crate::synth::unit_band_std();
         let last = lv.len() - 1;
-        // Beyond the finest measured levels: white noise's per-level ratios. They
-        // used to be scaled by how much slower than white the two finest measured
-        // levels decayed (correlated noise decays slower); measured, that excess was
-        // only ever texture: over `examples/noise_budget_probe.rs`' 27 frames of
-        // white noise it fired on the 12 with two or more levels measured — a level
-        // 1 or 2 read high by texture (+6…+232%) — and compounded it (chelsea's
-        // strongest noise: level 3 +423% where level 2 read +232%; levels 2–3 median
-        // 36.8 / 40.6% → 25.4 / 25.4% without it), and the real clip's fit measures
-        // one level only, so it never reached correlated noise.
+        // Beyond the finest measured levels: white noise's per-level ratios, not
+        // scaled by how much slower than white the two finest measured levels decay
+        // (correlated noise decays slower): measured, that excess was only ever
+        // texture. Over 27 frames of known white noise such a scaling fired on the 12
+        // with two or more levels measured — a level 1 or 2 read high by texture
+        // (+6…+232%) — and compounded it (chelsea's strongest noise: level 3 +423%
+        // where level 2 read +232%; levels 2–3 median 36.8 / 40.6% with it, 25.4 /
+        // 25.4% without), and the real clip's fit measures one level only, so it
+        // never reached correlated noise.
         let levels = (0..NOISE_LEVELS)
             .map(|l| match measured_levels.iter().position(|&m| m == l) {
                 Some(i) => lv[i],

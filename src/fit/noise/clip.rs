@@ -43,8 +43,8 @@ pub(super) fn clip_levels(lo: (f32, usize), hi: (f32, usize), min_count: usize) 
 /// read every row (the frame cached), a lane-wise single pass was 2× slower than a
 /// pass for the extremes and another counting them; with blocking on half the rows
 /// the passes are bound by memory (three 4.9 MB planes at 1280×960), and one pass
-/// read 3.7 ms against 4.4 ms for two (`search.clipping`, `BENCH=1 stage_times`).
-/// The lanes compare with `<`/`>`: the fit's input is checked finite first.
+/// read 3.7 ms against 4.4 ms for two (the `search.clipping` stage, the fit bench's
+/// frame). The lanes compare with `<`/`>`: the fit's input is checked finite first.
 pub(super) fn channel_clip_limits(ch: &[f32], min_count: usize) -> (Option<f32>, Option<f32>) {
     const LANES: usize = 8;
     let (mut lo, mut hi) = ([f32::INFINITY; LANES], [f32::NEG_INFINITY; LANES]);

@@ -11,8 +11,7 @@ const EVAL_POINTS: usize = 9;
 /// The std (0–1 pixel values, any band-pass level ≥ 1) that the difference against
 /// an aligned neighbour leaves of the scene where the two exposures differ (motion
 /// blur, parallax, resampling), read as noise. Measured on the calibration video
-/// (`examples/correlated_noise_probe`, `RESIDUE=1`; white noise, whose coarse levels
-/// are weakest, frames 55–62): √(read² − truth²) at mid luma, levels 2 and 3,
+/// (white noise, whose coarse levels are weakest, frames 55–62): √(read² − truth²) at mid luma, levels 2 and 3,
 /// −0.0001…+0.0008 at 640×480 full frames and +0.0000…+0.0010 in the worker's
 /// 240-row strips at 1280×960, median 0.00043 (level 1: −0.0004…+0.0007); taken
 /// as 0.0005.

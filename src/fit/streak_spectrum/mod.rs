@@ -65,16 +65,15 @@
 //! √subsets, in quadrature with the λ shift when the noise floor is doubled and
 //! halved, floored at the grid step. The match is trusted (`identified`) when the
 //! best lies inside [lambda_min, 1], the correlation is ≥ `MIN_SCORE` and the
-//! relative standard error is ≤ `MAX_RELATIVE_STDERR`. Measured (`examples/
-//! streak_probe.rs`: 42 frames — astronaut 1280×960 at ~7 px/frame and 640×480 at 8
-//! and 24 px/frame; λ 0, 0.25, 0.5; clean, noisy, defocused, both; the demo frame;
+//! relative standard error is ≤ `MAX_RELATIVE_STDERR`. Measured (42 frames —
+//! astronaut 1280×960 at ~7 px/frame and 640×480 at 8 and 24 px/frame; λ 0, 0.25, 0.5; clean, noisy, defocused, both; the demo frame;
 //! two real photographs): the 9 it identifies read within 9% (1280×960 λ 0.5:
 //! 0.493 ± 0.010, under defocus 0.486 ± 0.012; 640×480 at 24 px/frame λ 0.25:
 //! 0.248, λ 0.5 + noise 0.486 ± 0.023; the license-plate photograph −2.5%), and it
-//! identifies no frame without a zero in the band. Before the floor and the grid's
-//! reach it identified 14, 7 of them 16–∞% off (the clean and the defocused
+//! identifies no frame without a zero in the band. Without the floor and the grid's
+//! reach it identifies 14, 7 of them 16–∞% off (the clean and the defocused
 //! 1280×960 frames at λ 0.35 with correlation 0.53–0.61; 1.8 px streaks at 0.35;
-//! noise +35%). Noisy short streaks now read 0.295 ± 0.036 for 0.25 — not
+//! noise +35%). Noisy short streaks read 0.295 ± 0.036 for 0.25 — not
 //! identified, the isotropy estimator of `motion_blur::fit_fast` takes over, with
 //! its stated band.
 //! A page of text is often not identified: its line pitch puts its own periodic
@@ -106,7 +105,7 @@ const MIN_SPEED_PX: f32 = 3.0;
 /// Set on the pure-sinc template (640×480 astronaut, 8-bit, λ 0 and 0.2: streak-free
 /// ratios correlated ≤ 0.38, streaks 0.37–0.93). With the noise-floor template a
 /// streak-free frame can correlate up to 0.95, but its best lies outside
-/// [lambda_min, 1] (every such frame of `examples/streak_probe.rs`); the streaks
+/// [lambda_min, 1] (every such frame of the 42 above); the streaks
 /// it identifies correlate 0.64–0.96, the text page's best 0.38.
 pub const MIN_SCORE: f32 = 0.45;
 /// Interleaved subsets must agree: relative standard error at most this.
@@ -139,10 +138,10 @@ const ABOVE_FULL: f32 = 1.3;
 /// than across it, a streak whose side lobes defocus and noise bury), the template
 /// still matches — its zero placed at the knee, its side lobes filled by the floor —
 /// at correlation up to 1.00. Measured (the floor shaped by the lines' sampling):
-/// `examples/streak_probe.rs` — oriented texture along its smooth axis or 10° off
-/// it 0.03–0.13 (read λ 0.37–0.92 for 0, 0.2, 0.5), the streaks identified 0.21
-/// (noisy) to 5.3 (the license plate); `examples/side_lobe_probe.rs` (four seeds,
-/// up to 20° off) — the texture's wrong reads up to 0.17 (20° off, 12 px/frame, λ 0
+/// an oriented texture along its smooth axis or 10° off it 0.03–0.13 (read λ
+/// 0.37–0.92 for 0, 0.2, 0.5), the streaks identified 0.21 (noisy) to 5.3 (the
+/// license plate); the oriented texture over four seeds, up to 20° off — its wrong
+/// reads up to 0.17 (20° off, 12 px/frame, λ 0
 /// read 0.49), the photograph's right reads from 0.05 (noisy) up. The two overlap:
 /// 0.2 identifies none of the wrong reads and loses right ones whose lobe lies in
 /// the noise (their zeros were only the knee, as the texture's are; the isotropy
@@ -174,12 +173,12 @@ pub const MAX_ACROSS_SHARE: f32 = 0.6;
 /// White noise gives ~1 there (up to ~2–3 where an oblique line's bilinear
 /// sampling low-passes it, `interpolated_noise_correlation`), a 1/f² texture ~400,
 /// a streak more. With the per-line normalisation a pair of pure-noise lines over a
-/// flat area weighed as much as a textured one. Measured (`benches/streak_gates/
-/// probe.py`, BENCHMARKS.md "Lines with no texture along the flow"): on the ninth
-/// session's held-out set (144 frames with 0 and 2 DN of noise) the wrong
-/// identifications fall from 6 to 2 (the colour wheel at 120° with 12 px and at 30°
+/// flat area weighs as much as a textured one. Measured (`benches/streak_gates/
+/// probe.py`, BENCHMARKS.md "Lines with no texture along the flow"): on the
+/// held-out set (144 frames with 0 and 2 DN of noise) the rule cuts the wrong
+/// identifications from 6 to 2 (the colour wheel at 120° with 12 px and at 30°
 /// with 6 px, the silhouette's two: gone; the moon's sky and the colour wheel with no
-/// streak remain), 47 right reads before and after; on the tuning-like set (300
+/// streak remain), 47 right reads with and without it; on the tuning-like set (300
 /// frames) the same 185 right reads and 2 wrong ones. Stricter tilts (10, 30, 100)
 /// also drop lines with weak texture, and each made a new wrong read in one set or
 /// the other; dropping a pair where only its along-flow line is flat made new wrong

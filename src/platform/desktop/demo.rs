@@ -200,7 +200,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
 }
 
 /// The report's headline: each tier's error against the known truth, per effect, with
-/// its fit time — the trade a user makes between the two tiers (issue 10, item 7).
+/// its fit time — the trade a user makes between the two tiers.
 /// δ is compared over every pixel's depth (every 4th pixel), so a curve that is wrong
 /// only where the frame holds no depth costs nothing and one wrong over the frame's
 /// bulk costs its full weight; noise over lumas 0.2–0.8, all levels and channels.

@@ -62,10 +62,11 @@ const MIN_ENERGY_OVER_NOISE: f64 = 1.1;
 const MAX_SPEED_SPREAD: f32 = 1.25;
 /// A reading of no streak must be resolved: the match at a `ZERO_PROBE_PX` streak
 /// (or the longest candidate, if shorter) must be worse than at none by this
-/// factor. Smooth shading matches every length about equally: on
-/// `benches/streak_acf/fallback.py`'s frames the colour wheel's residual rose
-/// 0–1.3% from 0 to 4 px (it read its 6, 12 and 24 px streaks as 0 px, *absent*),
-/// the 30 other frames read at 0 px by 21% or more (the rendered page at 90° the least).
+/// factor. Smooth shading matches every length about equally: on the box-streak
+/// evaluation frames (640×480, 50 px/frame) the colour wheel's residual rose
+/// 0–1.3% from 0 to 4 px (without this rule it read its 6, 12 and 24 px streaks as
+/// 0 px, *absent*), the 30 other frames read at 0 px by 21% or more (the rendered
+/// page at 90° the least).
 const MIN_ZERO_RISE: f64 = 1.1;
 const ZERO_PROBE_PX: usize = 4;
 
@@ -96,20 +97,19 @@ pub(super) fn acf_shape(y: &Plane, flow: &Flow) -> Result<AcfShape, Refusal> {
 /// streak's, so that a best length at the full frame is a located minimum and one
 /// past it is seen as such (`Refusal::PastFullFrame`), not as "the search's end". A best
 /// past it is no exposure (λ ≤ 1): the frame is smoother along the flow than any
-/// streak makes it. Measured (`examples/oblique_probe`, an oriented texture σ 3 /
-/// 1.2 px at 8 px/frame, 0–20° off its smooth axis, no streak or λ 0.5): the best
-/// lies at 7.8–8.5 px — that texture's smoothness along the flow is a full-frame
-/// streak's; before, the candidates ended at ⌊speed⌋ (7 px for 7.99 px/frame at
-/// 10°), the shape was refused, and isotropy's unbracketed root answered λ 1.000
-/// *present* (`fit_fast` now refuses where both end there). Two, not more: the
-/// motion-blur fit's cost on the bench frame rose ~0.35 ms with candidates to 1.5×
-/// the full frame, for nothing those two do not show (and they are read only where
-/// the best within the full frame is the full frame).
+/// streak makes it. Measured (an oriented texture σ 3 / 1.2 px at 8 px/frame, 0–20°
+/// off its smooth axis, no streak or λ 0.5): the best lies at 7.8–8.5 px — that
+/// texture's smoothness along the flow is a full-frame streak's; with candidates
+/// ending at ⌊speed⌋ (7 px for 7.99 px/frame at 10°) the shape is refused, and
+/// isotropy's unbracketed root answers λ 1.000 *present* (`fit_fast` refuses where
+/// both end there). Two, not more: the motion-blur fit's cost on the bench frame
+/// rises ~0.35 ms with candidates to 1.5× the full frame, for nothing those two do
+/// not show (and they are read only where the best within the full frame is the
+/// full frame).
 const PAST_FULL_FRAME_PX: usize = 2;
 
 /// Why the shape gives no length. One kind is told apart because a caller branches
-/// on it (`ends::both_at_full_frame`); the words are for the fit's reason. (Before,
-/// that caller recognised the kind by a phrase in the words.)
+/// on it (`ends::both_at_full_frame`); the words are for the fit's reason.
 #[derive(Clone, Debug, PartialEq)]
 pub(super) enum Refusal {
     /// The best length lies past a full-frame streak (`PAST_FULL_FRAME_PX`): the frame
@@ -409,7 +409,7 @@ fn read(
 const DIP_WINDOW: f64 = 1.4;
 /// The shortest shape length whose dip is read. Below it the sharp texture's own
 /// autocorrelation is not narrow against L and drags the dip long (the 2R(t) term
-/// falls across it): measured on the probe and held-out frames (`fallback.py`), dips
+/// falls across it): measured on the box-streak tuning and held-out frames, dips
 /// read 12 px streaks at 12.3–16.3 px where the shape read 11.0–14.0, and one 16 px
 /// streak at 21.7 (shape 16.3); from shape lengths of 20 px every dip read as close
 /// as the shape or closer (24 px streaks 24.0–26.1, 31 px 30.8–32.9).

@@ -238,8 +238,8 @@ fn kernels_and_sizes() {
 
 /// Smooth shading (a colour wheel's: luma varying with the angle about the centre, no
 /// edges) matches every streak length about as well as none, so its best length of 0
-/// is not a reading: without a streak the shape refuses (before `MIN_ZERO_RISE` it
-/// read 0 px — and on fallback.py's colour wheel called its 6–24 px streaks absent);
+/// is not a reading: without a streak the shape refuses (without `MIN_ZERO_RISE` it
+/// reads 0 px — and calls a colour wheel's 6–24 px box streaks absent);
 /// with a 12 px streak at 30° it may read a length (9.0 px here) but never none. An
 /// isotropic texture without a streak still reads 0
 /// (`streaks_on_an_isotropic_texture_read_their_length`).
