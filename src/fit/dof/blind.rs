@@ -278,10 +278,9 @@ const _: () = assert!(
 /// width (contiguous: it vectorises) and kept in a ring of `GRAD_ROWS` rows. The
 /// scan's three readers — the threshold and non-maximum suppression, the tangent
 /// mean, `isolated`'s walk — would otherwise each take a scalar central difference
-/// per tap (four reads and bounds checks each; on the bench frame 84 101
-/// suppression taps, 32 702 × 5 tangent taps and at most 5 693 × 2 × 7 × 5 walk
-/// taps — a bound, the walk stops early), the same value `at` reads (the same two
-/// subtractions and products).
+/// per tap (four reads and bounds checks; on the bench frame 84 101 suppression
+/// taps, 32 702 × 5 tangent taps and at most 5 693 × 2 × 7 × 5 walk taps, a bound),
+/// the same value `at` reads (the same two subtractions and products).
 /// Columns 0 and w − 1 and rows outside [1, h − 2] are never computed: every reader
 /// stays inside them.
 struct GradRows {

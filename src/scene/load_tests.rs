@@ -1,0 +1,129 @@
+//! Unit tests of the glTF reader: values computed from the spec's definitions.
+
+use super::*;
+use base64::Engine as _;
+
+#[test]
+fn strips_and_fans_follow_the_spec_formulas() {
+    use json::mesh::Mode;
+    let order = [10, 11, 12, 13, 14];
+    // glTF 2.0 §3.7.2.1: strip p_i = {v_i, v_{i+(1+i%2)}, v_{i+(2−i%2)}}.
+    assert_eq!(triangles(Mode::TriangleStrip, &order), vec![10, 11, 12, 11, 13, 12, 12, 13, 14]);
+    // fan p_i = {v_{i+1}, v_{i+2}, v_0}.
+    assert_eq!(triangles(Mode::TriangleFan, &order), vec![11, 12, 10, 12, 13, 10, 13, 14, 10]);
+    // A trailing partial triangle is dropped, not read past the end.
+    assert_eq!(triangles(Mode::Triangles, &order), vec![10, 11, 12]);
+    assert!(triangles(Mode::TriangleStrip, &order[..2]).is_empty());
+    assert!(triangles(Mode::TriangleFan, &[]).is_empty());
+}
+
+/// A hand-written document: KHR_mesh_quantization positions (normalized i16,
+/// interleaved with u8 texture coordinates at a 12-byte stride), one vertex
+/// replaced by a sparse accessor, a triangle strip, and a KHR_texture_transform.
+/// Every value is computed here from the spec's definitions.
+#[test]
+fn quantized_sparse_interleaved_strip_with_texture_transform() {
+    let mut bin = Vec::new();
+    let verts: [([i16; 3], [u8; 2]); 4] =
+        [([0, 0, 0], [0, 0]), ([32767, 0, 0], [255, 0]), ([0, 32767, 0], [0, 255]), ([-32767, -32767, 0], [255, 255])];
+    for (p, uv) in verts {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+        bin.extend_from_slice(&[0, 0]); // padding to 8
+        bin.extend_from_slice(&uv);
+        bin.extend_from_slice(&[0, 0]); // padding to 12
+    }
+    let sparse_at = bin.len();
+    bin.extend_from_slice(&2u16.to_le_bytes()); // sparse index: vertex 2
+    bin.extend_from_slice(&[0, 0]);
+    for c in [0i16, 16384, 0] {
+        bin.extend_from_slice(&c.to_le_bytes()); // sparse value (normalized i16)
+    }
+    let b64 = base64::engine::general_purpose::STANDARD.encode(&bin);
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_mesh_quantization", "KHR_texture_transform"],
+        "extensionsRequired": ["KHR_mesh_quantization", "KHR_texture_transform"],
+        "buffers": [{"byteLength": bin.len(), "uri": format!("data:application/octet-stream;base64,{b64}")}],
+        "bufferViews": [
+            {"buffer": 0, "byteLength": 48, "byteStride": 12},
+            {"buffer": 0, "byteOffset": sparse_at, "byteLength": 4},
+            {"buffer": 0, "byteOffset": sparse_at + 4, "byteLength": 6}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5122, "normalized": true, "count": 4, "type": "VEC3",
+             "min": [-1, -1, 0], "max": [1, 1, 0],
+             "sparse": {"count": 1, "indices": {"bufferView": 1, "componentType": 5123},
+                        "values": {"bufferView": 2}}},
+            {"bufferView": 0, "byteOffset": 8, "componentType": 5121, "normalized": true, "count": 4, "type": "VEC2"}
+        ],
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "extensions": {
+            "KHR_texture_transform": {"offset": [0.5, 0.0], "rotation": std::f32::consts::FRAC_PI_2, "scale": [2.0, 1.0]}}}}}],
+        "textures": [{"source": 0}],
+        "images": [{"uri": "data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAFBQIAX8jx0gAAAABJRU5ErkJggg=="}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "mode": 5, "material": 0}]}],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+        "scene": 0
+    });
+    let scene = parse(&serde_json::to_vec(&doc).unwrap(), "quantized.gltf", Resources::Embedded).expect("loads");
+    let m = &scene.meshes[0];
+    let p: Vec<[f32; 3]> = m.vertices.iter().map(|v| v.position).collect();
+    // Normalized i16: c / 32767, clamped at −1 (KHR_mesh_quantization, glTF §3.11).
+    assert_eq!(p[0], [0.0, 0.0, 0.0]);
+    assert_eq!(p[1], [1.0, 0.0, 0.0]);
+    assert!((p[2][1] - 16384.0 / 32767.0).abs() < 1e-7, "sparse value replaces vertex 2: {:?}", p[2]);
+    assert_eq!(p[3], [-1.0, -1.0, 0.0]);
+    // Strip of 4 vertices (§3.7.2.1): (0, 1, 2), (1, 3, 2).
+    assert_eq!(m.indices, vec![0, 1, 2, 1, 3, 2]);
+    // Tolerance 1e-6: f32 rounding of sin/cos(π/2) and of the products.
+    // uv' = T·R·S·uv, R the extension's column-major mat3 (cos, sin | −sin, cos)
+    // at π/2, S = (2, 1), T = (0.5, 0):
+    // vertex 1, uv (1, 0) [u8 255 normalized] → S (2, 0) → R (0, 2) → T (0.5, 2).
+    let uv1 = m.vertices[1].uv;
+    assert!((uv1[0] - 0.5).abs() < 1e-6 && (uv1[1] - 2.0).abs() < 1e-6, "{uv1:?}");
+    // vertex 2, uv (0, 1) → S (0, 1) → R (−1, 0) → T (−0.5, 0).
+    let uv2 = m.vertices[2].uv;
+    assert!((uv2[0] + 0.5).abs() < 1e-6 && uv2[1].abs() < 1e-6, "{uv2:?}");
+    assert_eq!(scene.textures.len(), 1);
+}
+
+/// A JSON chunk whose length is not a multiple of 4 (trimesh writes such GLBs;
+/// §4.4.3 asks for padding): the BIN chunk follows it directly.
+#[test]
+fn glb_with_an_unpadded_json_chunk_splits() {
+    let json = b"{\"a\":1}"; // 7 bytes
+    let bin = [1u8, 2, 3, 4];
+    let mut glb = Vec::new();
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(total as u32).to_le_bytes());
+    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(json);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(&bin);
+    let (j, b) = split_glb(&glb, "unpadded.glb").expect("splits");
+    assert_eq!((j, b), (&json[..], Some(&bin[..])));
+}
+
+#[test]
+fn required_extensions_not_implemented_are_refused_by_name() {
+    for (ext, says) in [
+        (
+            "KHR_draco_mesh_compression",
+            "requires KHR_draco_mesh_compression (Draco-compressed meshes), which this build does not decode",
+        ),
+        ("EXT_meshopt_compression", "which this build does not decode"),
+        ("KHR_texture_basisu", "KTX2"),
+        ("KHR_materials_foo", "requires KHR_materials_foo, which this build does not implement"),
+    ] {
+        let doc =
+            serde_json::json!({"asset": {"version": "2.0"}, "extensionsRequired": [ext], "extensionsUsed": [ext]});
+        let err = parse(&serde_json::to_vec(&doc).unwrap(), "x.gltf", Resources::Embedded).expect_err(ext);
+        assert!(err.to_string().contains(says), "{err}");
+    }
+}
