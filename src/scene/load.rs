@@ -481,9 +481,14 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             let mut values: Vec<[f32; 4]> =
                 flat.chunks_exact(n).map(|c| std::array::from_fn(|k| c.get(k).copied().unwrap_or(0.0))).collect();
             let interp = sampler.interpolation;
+            let mut tangents = None;
             if interp == Checked::Valid(json::animation::Interpolation::CubicSpline) {
-                // (in-tangent, value, out-tangent) triples: keep the values.
-                values = values.chunks(3).filter_map(|c| c.get(1).copied()).collect();
+                // glTF 2.0 Appendix C: (in-tangent, value, out-tangent) per keyframe.
+                if values.len() % 3 != 0 {
+                    return Err(invalid(name, format!("{what}: CUBICSPLINE output is not (in, value, out) triples")));
+                }
+                tangents = Some(values.chunks_exact(3).map(|c| (c[0], c[2])).collect::<Vec<_>>());
+                values = values.chunks_exact(3).map(|c| c[1]).collect();
             }
             if property == Property::Rotation {
                 // A zero quaternion has no rotation to normalise to (NaN downstream).
@@ -509,6 +514,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
                 times_s,
                 values,
                 step: interp == Checked::Valid(json::animation::Interpolation::Step),
+                tangents,
             });
         }
     }
@@ -539,11 +545,19 @@ fn reach_bound_m(nodes: &[Node], meshes: &[Mesh], channels: &[Channel]) -> f32 {
     let mut shift: Vec<f32> = nodes.iter().map(|n| n.rest.translation.length()).collect();
     for ch in channels {
         let (Some(s), Some(t)) = (scale.get_mut(ch.node), shift.get_mut(ch.node)) else { continue };
+        // A cubic spline overshoots its values by at most 4/27 · Δt · (|m0| + |m1|)
+        // (the largest of the Hermite tangent bases, at a third of the interval).
+        let overshoot = ch.tangents.as_ref().map_or(0.0, |tg| {
+            let dt_max = ch.times_s.windows(2).map(|w| w[1] - w[0]).fold(0.0f32, f32::max);
+            let m_max =
+                tg.iter().flat_map(|(a, b)| [a, b]).map(|m| Vec3::new(m[0], m[1], m[2]).length()).fold(0.0, f32::max);
+            4.0 / 27.0 * dt_max * 2.0 * m_max
+        });
         for v in &ch.values {
             let v3 = Vec3::new(v[0], v[1], v[2]);
             match ch.property {
-                Property::Scale => *s = s.max(v3.abs().max_element()),
-                Property::Translation => *t = t.max(v3.length()),
+                Property::Scale => *s = s.max(v3.abs().max_element() + overshoot),
+                Property::Translation => *t = t.max(v3.length() + overshoot),
                 Property::Rotation => {}
             }
         }

@@ -127,3 +127,45 @@ fn required_extensions_not_implemented_are_refused_by_name() {
         assert!(err.to_string().contains(says), "{err}");
     }
 }
+
+/// CUBICSPLINE by glTF 2.0 Appendix C: keyframes 0 → 1 at t 0 → 1, out-tangent 2
+/// at the first, in-tangent 0 at the second: at s = ½ the Hermite sum is
+/// h01·1 + td·h10·2 = 0.5 + 0.125·2 = 0.75; at s = ¼, 0.15625 + 0.140625·2 = 0.4375.
+/// Before, the tangents were dropped and the curve read linear (0.5, 0.25).
+#[test]
+fn cubic_spline_translation_follows_the_hermite_formula() {
+    let floats: Vec<f32> = [
+        vec![0.0, 1.0],                                    // times
+        vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0], // k0: in, value, out
+        vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0], // k1: in, value, out
+    ]
+    .concat();
+    let tri: Vec<f32> = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let bytes: Vec<u8> = floats.iter().chain(&tri).flat_map(|f| f.to_le_bytes()).collect();
+    let b64 = base64::engine::general_purpose::STANDARD.encode(&bytes);
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": bytes.len(), "uri": format!("data:application/octet-stream;base64,{b64}")}],
+        "bufferViews": [
+            {"buffer": 0, "byteLength": 8},
+            {"buffer": 0, "byteOffset": 8, "byteLength": 72},
+            {"buffer": 0, "byteOffset": 80, "byteLength": 36}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0.0], "max": [1.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 6, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 2}}]}],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+        "animations": [{"channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+                        "samplers": [{"input": 0, "output": 1, "interpolation": "CUBICSPLINE"}]}]
+    });
+    let scene = parse(&serde_json::to_vec(&doc).unwrap(), "spline.gltf", Resources::Embedded).expect("loads");
+    // Tolerance 1e-6: f32 arithmetic on values of order 1.
+    for (t, want) in [(0.5, 0.75f32), (0.25, 0.4375), (0.0, 0.0)] {
+        let x = scene.local_at(t)[0].translation.x;
+        assert!((x - want).abs() < 1e-6, "t {t}: {x}, Hermite gives {want}");
+    }
+}

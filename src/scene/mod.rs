@@ -111,9 +111,11 @@ pub struct Channel {
     pub property: Property,
     pub times_s: Vec<f32>,
     pub values: Vec<[f32; 4]>,
-    /// STEP interpolation (else linear; CUBICSPLINE is read as linear between its
-    /// keyframe values, its tangents ignored).
+    /// STEP interpolation (else linear, or cubic with `tangents`).
     pub step: bool,
+    /// CUBICSPLINE: each keyframe's (in-tangent, out-tangent), in value units per
+    /// second (glTF 2.0 Appendix C).
+    pub tangents: Option<Vec<([f32; 4], [f32; 4])>>,
 }
 
 #[derive(Clone, Debug)]
@@ -238,6 +240,27 @@ fn sample(ch: &Channel, t: f32) -> [f32; 4] {
         return a;
     }
     let f = (t - t0) / (t1 - t0);
+    if let Some(tg) = &ch.tangents {
+        // glTF 2.0 Appendix C, cubic Hermite spline: with s = f, td = t1 − t0,
+        // v = (2s³ − 3s² + 1)·v0 + td·(s³ − 2s² + s)·b0 + (−2s³ + 3s²)·v1 + td·(s³ − s²)·a1,
+        // b0 the out-tangent of keyframe k − 1, a1 the in-tangent of keyframe k;
+        // rotations are normalised after (the spec's note on quaternions).
+        let (b0, a1) = (tg[k - 1].1, tg[k].0);
+        let td = t1 - t0;
+        let (s2, s3) = (f * f, f * f * f);
+        let (h00, h10, h01, h11) = (2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + f, -2.0 * s3 + 3.0 * s2, s3 - s2);
+        let v: [f32; 4] = std::array::from_fn(|i| h00 * a[i] + td * h10 * b0[i] + h01 * b[i] + td * h11 * a1[i]);
+        return if ch.property == Property::Rotation {
+            let q = Quat::from_array(v);
+            if q.length() > 1e-6 {
+                q.normalize().to_array()
+            } else {
+                a
+            }
+        } else {
+            v
+        };
+    }
     if ch.property == Property::Rotation {
         // glTF spec, Appendix "Interpolation": spherical linear for rotations.
         Quat::from_array(a).normalize().slerp(Quat::from_array(b).normalize(), f).to_array()
