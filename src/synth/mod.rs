@@ -4,6 +4,9 @@
 
 mod dof;
 pub mod layer;
+mod measured;
+#[cfg(test)]
+pub(crate) mod measured_check;
 mod motion_blur;
 mod noise;
 mod rng;

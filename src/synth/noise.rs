@@ -26,34 +26,38 @@ use super::rng::gaussian;
 use crate::image::{gaussian_pyramid, laplacian_pyramid, Plane, Rgb};
 use crate::model::{Noise, NoiseIntensity, NOISE_LEVELS};
 use rayon::prelude::*;
-use std::sync::OnceLock;
 
 /// Std of each band (levels 0..4, then the low-pass) of the Laplacian pyramid of
-/// unit white noise, measured once on a 768×768×3 field (interior and borders
-/// pooled; relative standard error ≤ 0.5% at the coarsest band, ≤ 0.1% at level 0).
+/// unit white noise, measured on a 768×768×3 field (interior and borders pooled;
+/// relative standard error ≤ 0.5% at the coarsest band, ≤ 0.1% at level 0). The
+/// measurement (`measure_unit_band_std`) is stored in `measured.rs`: computed on
+/// first use it cost every fresh process ~50 ms (the fits and the grain table read
+/// it); `measured::tests` holds the stored values to a fresh measurement.
 pub fn unit_band_std() -> &'static [f32; NOISE_LEVELS + 1] {
-    static C: OnceLock<[f32; NOISE_LEVELS + 1]> = OnceLock::new();
-    C.get_or_init(|| {
-        let n = 768usize;
-        let mut sums = [0.0f64; NOISE_LEVELS + 1];
-        let mut counts = [0usize; NOISE_LEVELS + 1];
-        for c in 0..3u32 {
-            let data = (0..n * n).map(|i| gaussian((i % n) as u32, (i / n) as u32, c, 0x5eed_c0de)).collect();
-            let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
-            for (l, band) in pyr.bands.iter().chain(std::iter::once(&pyr.lowpass)).enumerate() {
-                sums[l] += band.data.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
-                counts[l] += band.data.len();
-            }
-        }
-        let mut out = [0.0f32; NOISE_LEVELS + 1];
-        for l in 0..=NOISE_LEVELS {
-            out[l] = (sums[l] / counts[l] as f64).sqrt() as f32;
-        }
-        out
-    })
+    &super::measured::UNIT_BAND_STD
 }
 
-const BANDS: usize = NOISE_LEVELS + 1;
+#[cfg(test)]
+pub(super) fn measure_unit_band_std() -> [f32; NOISE_LEVELS + 1] {
+    let n = 768usize;
+    let mut sums = [0.0f64; NOISE_LEVELS + 1];
+    let mut counts = [0usize; NOISE_LEVELS + 1];
+    for c in 0..3u32 {
+        let data = (0..n * n).map(|i| gaussian((i % n) as u32, (i / n) as u32, c, 0x5eed_c0de)).collect();
+        let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
+        for (l, band) in pyr.bands.iter().chain(std::iter::once(&pyr.lowpass)).enumerate() {
+            sums[l] += band.data.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
+            counts[l] += band.data.len();
+        }
+    }
+    let mut out = [0.0f32; NOISE_LEVELS + 1];
+    for l in 0..=NOISE_LEVELS {
+        out[l] = (sums[l] / counts[l] as f64).sqrt() as f32;
+    }
+    out
+}
+
+pub(super) const BANDS: usize = NOISE_LEVELS + 1;
 
 /// Cross-level energy transfer of the pyramid, M[m][l][l'] = mean over pixels of
 /// A_m(E_l)·A_m(E_l'), where E_l is the image collapsed from band l alone of the
@@ -61,58 +65,61 @@ const BANDS: usize = NOISE_LEVELS + 1;
 /// The Laplacian pyramid is overcomplete: a band re-weighted on its own is not the
 /// band of any image, so re-analysing synthesised noise leaks energy between
 /// neighbouring levels. Analysis is linear, so for band weights w the variance of
-/// analysed band m is Σ_{l,l'} w_l w_l' M[m][l][l']. Measured once on 512×512×3.
+/// analysed band m is Σ_{l,l'} w_l w_l' M[m][l][l']. Measured on 512×512×3
+/// (`measure_transfer`), stored in `measured.rs` like `unit_band_std`.
 fn transfer() -> &'static [[[f64; BANDS]; BANDS]; BANDS] {
-    static M: OnceLock<[[[f64; BANDS]; BANDS]; BANDS]> = OnceLock::new();
-    M.get_or_init(|| {
-        let n = 512usize;
-        let mut m = [[[0.0f64; BANDS]; BANDS]; BANDS];
-        let mut count = [0usize; BANDS];
-        for c in 0..3u32 {
-            let data = (0..n * n).map(|i| gaussian((i % n) as u32, (i / n) as u32, c, 0x7a5f)).collect();
-            let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
-            // Analysed bands of each single-band image.
-            let analysed: Vec<Vec<Plane>> = (0..BANDS)
-                .map(|l| {
-                    let mut only = pyr.clone();
-                    for (k, b) in only.bands.iter_mut().enumerate() {
-                        if k != l {
-                            b.data.iter_mut().for_each(|v| *v = 0.0);
-                        }
-                    }
-                    if l != NOISE_LEVELS {
-                        only.lowpass.data.iter_mut().for_each(|v| *v = 0.0);
-                    }
-                    let a = laplacian_pyramid(&only.collapse(), NOISE_LEVELS);
-                    let mut v = a.bands;
-                    v.push(a.lowpass);
-                    v
-                })
-                .collect();
-            for mm in 0..BANDS {
-                count[mm] += analysed[0][mm].data.len();
-                for l in 0..BANDS {
-                    for l2 in 0..BANDS {
-                        let dot: f64 = analysed[l][mm]
-                            .data
-                            .iter()
-                            .zip(&analysed[l2][mm].data)
-                            .map(|(a, b)| *a as f64 * *b as f64)
-                            .sum();
-                        m[mm][l][l2] += dot;
+    &super::measured::TRANSFER
+}
+
+#[cfg(test)]
+pub(super) fn measure_transfer() -> [[[f64; BANDS]; BANDS]; BANDS] {
+    let n = 512usize;
+    let mut m = [[[0.0f64; BANDS]; BANDS]; BANDS];
+    let mut count = [0usize; BANDS];
+    for c in 0..3u32 {
+        let data = (0..n * n).map(|i| gaussian((i % n) as u32, (i / n) as u32, c, 0x7a5f)).collect();
+        let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
+        // Analysed bands of each single-band image.
+        let analysed: Vec<Vec<Plane>> = (0..BANDS)
+            .map(|l| {
+                let mut only = pyr.clone();
+                for (k, b) in only.bands.iter_mut().enumerate() {
+                    if k != l {
+                        b.data.iter_mut().for_each(|v| *v = 0.0);
                     }
                 }
-            }
-        }
+                if l != NOISE_LEVELS {
+                    only.lowpass.data.iter_mut().for_each(|v| *v = 0.0);
+                }
+                let a = laplacian_pyramid(&only.collapse(), NOISE_LEVELS);
+                let mut v = a.bands;
+                v.push(a.lowpass);
+                v
+            })
+            .collect();
         for mm in 0..BANDS {
+            count[mm] += analysed[0][mm].data.len();
             for l in 0..BANDS {
                 for l2 in 0..BANDS {
-                    m[mm][l][l2] /= count[mm] as f64;
+                    let dot: f64 = analysed[l][mm]
+                        .data
+                        .iter()
+                        .zip(&analysed[l2][mm].data)
+                        .map(|(a, b)| *a as f64 * *b as f64)
+                        .sum();
+                    m[mm][l][l2] += dot;
                 }
             }
         }
-        m
-    })
+    }
+    for mm in 0..BANDS {
+        for l in 0..BANDS {
+            for l2 in 0..BANDS {
+                m[mm][l][l2] /= count[mm] as f64;
+            }
+        }
+    }
+    m
 }
 
 /// Band weights (multipliers of the raw white-noise bands) whose analysed per-band
@@ -335,4 +342,41 @@ pub fn add_noise(clean: &Rgb, noise: &Noise, seed: u64) -> Rgb {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::measured_check::{check, Table};
+
+    /// The stored white-noise tables equal a fresh measurement (tolerance in
+    /// `measured_check::check`).
+    #[test]
+    fn measured_tables_synth() {
+        let unit = measure_unit_band_std();
+        let m = measure_transfer();
+        let flat = |v: &[[[f64; BANDS]; BANDS]; BANDS]| -> Vec<f64> { v.iter().flatten().flatten().copied().collect() };
+        check(
+            "src/synth/measured.rs",
+            "White-noise tables of the Laplacian-pyramid noise synthesis (`noise.rs`), measured once.",
+            &[
+                Table {
+                    name: "UNIT_BAND_STD",
+                    ty: "[f32; crate::model::NOISE_LEVELS + 1]",
+                    doc: "/// `noise::measure_unit_band_std`: band stds of unit white noise, levels 0..4 then the low-pass.",
+                    stored: unit_band_std().iter().map(|&v| v as f64).collect(),
+                    fresh: unit.iter().map(|&v| v as f64).collect(),
+                    literal: format!("{unit:?}"),
+                },
+                Table {
+                    name: "TRANSFER",
+                    ty: "[[[f64; crate::model::NOISE_LEVELS + 1]; crate::model::NOISE_LEVELS + 1]; crate::model::NOISE_LEVELS + 1]",
+                    doc: "/// `noise::measure_transfer`: M[m][l][l'], the pyramid's cross-level energy transfer.",
+                    stored: flat(transfer()),
+                    fresh: flat(&m),
+                    literal: format!("{m:?}"),
+                },
+            ],
+        );
+    }
 }

@@ -65,49 +65,53 @@ const TEXTURE_FLOOR_RELATIVE: f32 = 0.26;
 /// Share of white noise's level-`l` band variance that survives a Catmull–Rom
 /// bicubic resampling at a sub-pixel offset (what `analysis::temporal::align` does
 /// to the neighbour frame), averaged over offsets on a 4×4 grid of phases: the
-/// bicubic kernel low-passes, most at level 0. Measured once on a 256² field.
+/// bicubic kernel low-passes, most at level 0. Measured on a 256² field
+/// (`measure_bicubic_noise_transmission`), stored in `measured.rs` (see
+/// `crate::synth::measured_check` for why).
 fn bicubic_noise_transmission(level: usize) -> f32 {
-    static K: std::sync::OnceLock<[f32; NOISE_LEVELS]> = std::sync::OnceLock::new();
-    K.get_or_init(|| {
-        let n = 256usize;
-        let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, 7, 0x5eed)).collect();
-        let field = Plane::from_vec(n, n, data);
-        let var_of = |p: &Plane| -> [f64; NOISE_LEVELS] {
-            let pyr = laplacian_pyramid(p, NOISE_LEVELS);
-            std::array::from_fn(|l| {
-                // The inner half: away from the clamped borders.
-                let b = &pyr.bands[l];
-                let (x0, y0) = (b.width / 4, b.height / 4);
-                let mut acc = 0.0f64;
-                let mut m = 0usize;
-                for y in y0..b.height - y0 {
-                    for x in x0..b.width - x0 {
-                        acc += (b.get(x, y) as f64).powi(2);
-                        m += 1;
-                    }
-                }
-                acc / m.max(1) as f64
-            })
-        };
-        let base = var_of(&field);
-        let mut sum = [0.0f64; NOISE_LEVELS];
-        let phases = [0.125f32, 0.375, 0.625, 0.875];
-        for &u in &phases {
-            for &v in &phases {
-                let mut shifted = Plane::new(n, n, 0.0);
-                for y in 0..n {
-                    for x in 0..n {
-                        shifted.data[y * n + x] = crate::image::sample_bicubic(&field, x as f32 + u, y as f32 + v);
-                    }
-                }
-                let s = var_of(&shifted);
-                for l in 0..NOISE_LEVELS {
-                    sum[l] += s[l] / base[l] / (phases.len() * phases.len()) as f64;
+    super::measured::BICUBIC_NOISE_TRANSMISSION[level.min(NOISE_LEVELS - 1)]
+}
+
+#[cfg(test)]
+pub(super) fn measure_bicubic_noise_transmission() -> [f32; NOISE_LEVELS] {
+    let n = 256usize;
+    let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, 7, 0x5eed)).collect();
+    let field = Plane::from_vec(n, n, data);
+    let var_of = |p: &Plane| -> [f64; NOISE_LEVELS] {
+        let pyr = laplacian_pyramid(p, NOISE_LEVELS);
+        std::array::from_fn(|l| {
+            // The inner half: away from the clamped borders.
+            let b = &pyr.bands[l];
+            let (x0, y0) = (b.width / 4, b.height / 4);
+            let mut acc = 0.0f64;
+            let mut m = 0usize;
+            for y in y0..b.height - y0 {
+                for x in x0..b.width - x0 {
+                    acc += (b.get(x, y) as f64).powi(2);
+                    m += 1;
                 }
             }
+            acc / m.max(1) as f64
+        })
+    };
+    let base = var_of(&field);
+    let mut sum = [0.0f64; NOISE_LEVELS];
+    let phases = [0.125f32, 0.375, 0.625, 0.875];
+    for &u in &phases {
+        for &v in &phases {
+            let mut shifted = Plane::new(n, n, 0.0);
+            for y in 0..n {
+                for x in 0..n {
+                    shifted.data[y * n + x] = crate::image::sample_bicubic(&field, x as f32 + u, y as f32 + v);
+                }
+            }
+            let s = var_of(&shifted);
+            for l in 0..NOISE_LEVELS {
+                sum[l] += s[l] / base[l] / (phases.len() * phases.len()) as f64;
+            }
         }
-        sum.map(|k| k as f32)
-    })[level.min(NOISE_LEVELS - 1)]
+    }
+    sum.map(|k| k as f32)
 }
 
 /// The relative bias a frame-alone reading `std` (level-0 band std) may carry by the

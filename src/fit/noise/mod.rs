@@ -41,6 +41,7 @@ mod blind;
 mod blocking;
 pub use blocking::compression_blocking;
 mod clip;
+mod measured;
 mod sources;
 pub(super) use blind::fit_fast_with_luma;
 pub use blind::{
@@ -713,33 +714,36 @@ pub fn fit_accurate(
 /// a median ignores a minority of such samples where a mean does not. The window
 /// holds fewer independent samples at coarser levels (σ = 0.5 px at level 3), so
 /// the ratio falls with l. Measured once on a 512×512×3 field (relative standard
-/// error ≤ 0.3% at level 0, ≤ 1.5% at level 3).
+/// error ≤ 0.3% at level 0, ≤ 1.5% at level 3); stored in `measured.rs`
+/// (`measure_white_noise_median_to_mean`; see `crate::synth::measured_check` for why).
 fn white_noise_median_to_mean(level: usize) -> f32 {
-    static R: std::sync::OnceLock<[f32; NOISE_LEVELS]> = std::sync::OnceLock::new();
-    R.get_or_init(|| {
-        let n = 512usize;
-        let mut v: Vec<Vec<f32>> = vec![vec![]; NOISE_LEVELS];
-        let mut sums = [0.0f64; NOISE_LEVELS];
-        for c in 0..3u32 {
-            let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c, 0xb1d)).collect();
-            let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
-            for (l, band) in pyr.bands.iter().enumerate() {
-                let win = window(l);
-                let stride = (4 >> l).max(1);
-                for y in grid(band.height, stride) {
-                    for x in grid(band.width, stride) {
-                        let m = local_mean_sq(band, x, y, &win);
-                        sums[l] += m as f64;
-                        v[l].push(m);
-                    }
+    measured::WHITE_NOISE_MEDIAN_TO_MEAN[level.min(NOISE_LEVELS - 1)]
+}
+
+#[cfg(test)]
+fn measure_white_noise_median_to_mean() -> [f32; NOISE_LEVELS] {
+    let n = 512usize;
+    let mut v: Vec<Vec<f32>> = vec![vec![]; NOISE_LEVELS];
+    let mut sums = [0.0f64; NOISE_LEVELS];
+    for c in 0..3u32 {
+        let data = (0..n * n).map(|i| crate::synth::gaussian((i % n) as u32, (i / n) as u32, c, 0xb1d)).collect();
+        let pyr = laplacian_pyramid(&Plane::from_vec(n, n, data), NOISE_LEVELS);
+        for (l, band) in pyr.bands.iter().enumerate() {
+            let win = window(l);
+            let stride = (4 >> l).max(1);
+            for y in grid(band.height, stride) {
+                for x in grid(band.width, stride) {
+                    let m = local_mean_sq(band, x, y, &win);
+                    sums[l] += m as f64;
+                    v[l].push(m);
                 }
             }
         }
-        std::array::from_fn(|l| {
-            let mean = (sums[l] / v[l].len() as f64) as f32;
-            percentile(&mut v[l], 0.5) / mean
-        })
-    })[level.min(NOISE_LEVELS - 1)]
+    }
+    std::array::from_fn(|l| {
+        let mean = (sums[l] / v[l].len() as f64) as f32;
+        percentile(&mut v[l], 0.5) / mean
+    })
 }
 
 #[cfg(test)]

@@ -321,3 +321,39 @@ mod raster_order_tests {
         }
     }
 }
+
+mod measured_tables_tests {
+    use super::super::*;
+    use crate::synth::measured_check::{check, Table};
+
+    /// The stored white-noise tables of the fits equal a fresh measurement
+    /// (tolerance in `measured_check::check`).
+    #[test]
+    fn measured_tables_fit_noise() {
+        let m2m = measure_white_noise_median_to_mean();
+        let bicubic = blind::measure_bicubic_noise_transmission();
+        let as_f64 = |v: &[f32]| -> Vec<f64> { v.iter().map(|&x| x as f64).collect() };
+        check(
+            "src/fit/noise/measured.rs",
+            "White-noise tables of the noise fits, measured once.",
+            &[
+                Table {
+                    name: "WHITE_NOISE_MEDIAN_TO_MEAN",
+                    ty: "[f32; crate::model::NOISE_LEVELS]",
+                    doc: "/// `measure_white_noise_median_to_mean`: median / mean of white noise's local band variances.",
+                    stored: as_f64(&measured::WHITE_NOISE_MEDIAN_TO_MEAN),
+                    fresh: as_f64(&m2m),
+                    literal: format!("{m2m:?}"),
+                },
+                Table {
+                    name: "BICUBIC_NOISE_TRANSMISSION",
+                    ty: "[f32; crate::model::NOISE_LEVELS]",
+                    doc: "/// `blind::measure_bicubic_noise_transmission`: band variance kept by a bicubic sub-pixel shift.",
+                    stored: as_f64(&measured::BICUBIC_NOISE_TRANSMISSION),
+                    fresh: as_f64(&bicubic),
+                    literal: format!("{bicubic:?}"),
+                },
+            ],
+        );
+    }
+}
