@@ -33,14 +33,14 @@
 
 mod blend;
 mod blind;
+mod measured;
 
 pub use blind::{fit_fast, fit_fast_pooled, POOLED_MAX_EDGE_SAMPLES};
 
 use super::curve::fit_dof_curve;
-use crate::image::{blur_separable, discrete_gaussian_kernel, gradient_sq, reduce, Plane, Rgb};
+use crate::image::{blur_separable, discrete_gaussian_kernel, gradient_sq, Plane, Rgb};
 use crate::model::{DepthOfField, DepthUnits, Diagnostics, DofCurve, DofKernel, Status};
 use blend::{BlendMap, Gram};
-use std::sync::OnceLock;
 use std::time::Instant;
 
 /// Node spacing of the fitting stack. 0.5 px keeps the stack 2× cheaper than the
