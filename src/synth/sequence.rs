@@ -75,6 +75,26 @@ pub fn motorcycle() -> Result<Scene, String> {
     Ok(Scene { image, depth_m, intrinsics })
 }
 
+/// A photograph with measured depth (metres; non-finite or ≤ 0 where unknown, filled
+/// as `motorcycle` fills its holes) taken with focal length `focal_px` and the
+/// principal point at the centre: a scene from another dataset.
+pub fn scene_from_depth(image: Rgb, depth_m: Plane, focal_px: f32) -> Result<Scene, String> {
+    let (w, h) = (image.width, image.height);
+    if (depth_m.width, depth_m.height) != (w, h) {
+        return Err(format!("depth is {}×{}, the photograph {w}×{h}", depth_m.width, depth_m.height));
+    }
+    if !(focal_px.is_finite() && focal_px > 0.0) {
+        return Err(format!("focal length {focal_px} px is not a positive number"));
+    }
+    let known = depth_m.data.iter().filter(|v| v.is_finite() && **v > 0.0).count();
+    if known * 2 < depth_m.data.len() {
+        return Err(format!("depth is known at {known} of {} pixels (under half)", depth_m.data.len()));
+    }
+    let intrinsics =
+        Intrinsics { fx: focal_px, fy: focal_px, cx: w as f32 / 2.0, cy: h as f32 / 2.0, width: w, height: h };
+    Ok(Scene { image, depth_m: fill_holes(depth_m), intrinsics })
+}
+
 /// A scene with the Motorcycle's geometry and a texture whose own blur is known:
 /// `base`'s depth magnified `scale`× (nearest pixel: depth edges stay edges), under
 /// a procedural texture of hard-edged shapes — rotated rectangles (bars down to

@@ -24,7 +24,7 @@ const CORPUS: &[(&str, &str)] = &[
     ("qt/qt3d", "LGPL-3.0 / GPL"),
 ];
 
-fn git(dir: &Path, args: &[&str]) -> Result<Vec<u8>> {
+pub(crate) fn git(dir: &Path, args: &[&str]) -> Result<Vec<u8>> {
     let out = Command::new("git").arg("--git-dir").arg(dir).args(args).output().context("running git")?;
     if !out.status.success() {
         bail!("git {} in {}: {}", args.join(" "), dir.display(), String::from_utf8_lossy(&out.stderr));
@@ -66,7 +66,7 @@ fn kind(reason: &str) -> &'static str {
 
 /// Writes `HEAD:path` of each of `paths` under `dest` through one
 /// `git cat-file --batch`; blobs the mirror lacks are skipped and returned.
-fn extract(git_dir: &Path, paths: &[&str], dest: &Path) -> Result<Vec<String>> {
+pub(crate) fn extract(git_dir: &Path, paths: &[&str], dest: &Path) -> Result<Vec<String>> {
     use std::io::{BufRead as _, Read as _, Write as _};
     let mut child = Command::new("git")
         .arg("--git-dir")

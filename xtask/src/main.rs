@@ -12,6 +12,7 @@ mod apk;
 mod assets;
 mod gltf_corpus;
 mod models;
+mod scenes;
 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -146,7 +147,11 @@ fn main() -> Result<()> {
             Some(dir) => gltf_corpus::run(&root(), &target_dir(), Path::new(dir)),
             None => bail!("usage: cargo xtask gltf-corpus MIRRORS (bare git mirrors as owner+name/repo)"),
         },
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        Some("bench-quality") => match args.get(1).filter(|a| !a.starts_with("--")) {
+            Some(dir) => scenes::run(&target_dir(), Path::new(dir), args.iter().any(|a| a == "--quick")),
+            None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] (bare git mirrors as owner+name/repo)"),
+        },
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS | bench-quality MIRRORS [--quick] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
 
