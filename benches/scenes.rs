@@ -38,6 +38,8 @@ const CHANGE_S: f64 = 2.75;
 const SETTLE_S: f64 = 1.0;
 
 struct Entry {
+    /// Position in the full list: picks the run's camera (`spec_for`).
+    k: usize,
     id: String,
     held_out: bool,
     source: String,
@@ -95,6 +97,7 @@ fn load(manifest: &str) -> Vec<Entry> {
     let mut out = vec![];
     match motorcycle() {
         Ok(scene) => out.push(Entry {
+            k: 0,
             id: "middlebury2014-motorcycle".into(),
             held_out: false,
             source: "bundled (assets/)".into(),
@@ -115,7 +118,13 @@ fn load(manifest: &str) -> Vec<Entry> {
             .and_then(|img| Ok((img, read_depth(depth, read, focal, 20.0)?)))
             .and_then(|(img, z)| scene_from_depth(img, z, focal));
         match scene {
-            Ok(scene) => out.push(Entry { id: id.into(), held_out: split == "held-out", source: source.into(), scene }),
+            Ok(scene) => out.push(Entry {
+                k: out.len(),
+                id: id.into(),
+                held_out: split == "held-out",
+                source: source.into(),
+                scene,
+            }),
             Err(e) => eprintln!("{id}: {e}; skipped"),
         }
     }
@@ -196,6 +205,7 @@ fn median(mut v: Vec<f32>) -> Option<f32> {
 
 fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
     let t0 = Instant::now();
+    let trace = std::env::var_os("BENCH_SCENES_TRACE").is_some();
     let cfg = CalibratorConfig::new(tier, 1.0 / FPS as f64, Some(spec.view));
     let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("valid config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
@@ -205,6 +215,18 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
         let f = spec.frame(&entry.scene, i);
         for e in cal.push_frame(frame(&f)).expect("valid frame") {
             if let Event::Published(u) = e {
+                if trace && !entry.held_out {
+                    let mb = &u.model.motion_blur;
+                    eprintln!(
+                        "t {:.2} λ {:?} (truth {:?}) {:?} noise err {:?} | {}",
+                        u.t_s,
+                        mb.exposure,
+                        f.truth.motion_blur.exposure,
+                        mb.diagnostics.status,
+                        noise_relative_error(&u.model.noise, &f.truth.noise),
+                        mb.diagnostics.reason
+                    );
+                }
                 published.push((u.t_s, u.model, f.truth.clone()));
             }
         }
@@ -255,6 +277,15 @@ fn main() {
         entries.retain(|e| !e.held_out);
         entries.truncate(3);
     }
+    // One tuning scene by name (`BENCH_SCENES_ONLY=Bowling1`), with each publication
+    // traced to stderr (`BENCH_SCENES_TRACE=1`): what a maintainer reads while
+    // tuning. Held-out scenes are never selected this way.
+    let only = std::env::var("BENCH_SCENES_ONLY").ok();
+    if let Some(only) = &only {
+        let keep: Vec<bool> = entries.iter().map(|e| !e.held_out && e.id.contains(only.as_str())).collect();
+        let mut k = keep.iter();
+        entries.retain(|_| *k.next().unwrap_or(&false));
+    }
     println!("### Calibration on real scenes made elsewhere\n");
     println!(
         "{} scenes ({} held out), {WIDTH}×{HEIGHT} at {FPS} fps, {FRAMES} frames, change at {CHANGE_S} s (λ ×2, noise std ×1.6); rests 1.5 s.\n",
@@ -265,8 +296,8 @@ fn main() {
     println!("| scene | split | source | tier | λ error | noise rel. error | follow (s) | MB drops | run (s) |\n|---|---|---|---|---|---|---|---|---|");
     let tiers = [("fast", CalibrationTier::Fast), ("accurate", CalibrationTier::Accurate)];
     let mut results: Vec<(bool, &str, RunResult)> = vec![];
-    for (k, e) in entries.iter().enumerate() {
-        let spec = spec_for(&e.scene, k);
+    for e in &entries {
+        let spec = spec_for(&e.scene, e.k);
         for (name, tier) in tiers {
             let r = run(e, &spec, tier);
             let f = |v: Option<f32>| v.map_or("—".into(), |v| format!("{v:.3}"));

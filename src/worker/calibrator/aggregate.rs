@@ -105,7 +105,10 @@ impl Calibrator {
         for m in &mut models {
             let at_bracket_end = m.motion_blur.exposure.is_some_and(|l| !(1e-6..=1.0 - 1e-6).contains(&l));
             if at_bracket_end || m.motion_blur.diagnostics.stderr.map_or(true, |s| s > 0.05) {
+                // Its presence vote is counted above; as a value it says nothing,
+                // and "present" without a value is no model (`validate`).
                 m.motion_blur.exposure = None;
+                m.motion_blur.present = false;
             }
         }
         // Where the window holds estimates made with a reference (the accurate fits
@@ -160,15 +163,15 @@ impl Calibrator {
         // decision) and the status agree, a present motion blur carries its
         // exposure and an absent one none. Not identifiable (no identifiable
         // estimate in the window) stays distinct from absent.
-        settle(&mut agg.noise.diagnostics, agg.noise.present, (np, ni));
-        settle(&mut agg.depth_of_field.diagnostics, agg.depth_of_field.present, (dp, di));
+        settle(&mut agg.noise.diagnostics, agg.noise.present, on[0], (np, ni));
+        settle(&mut agg.depth_of_field.diagnostics, agg.depth_of_field.present, on[2], (dp, di));
         if agg.motion_blur.present && agg.motion_blur.exposure.is_none() {
             agg.motion_blur.present = false;
         }
         if !agg.motion_blur.present {
             agg.motion_blur.exposure = None;
         }
-        settle(&mut agg.motion_blur.diagnostics, agg.motion_blur.present, (mp, mi));
+        settle(&mut agg.motion_blur.diagnostics, agg.motion_blur.present, on[1], (mp, mi));
         agg.validate().ok()?;
         self.published = Some(agg.clone());
         self.stages.add("aggregation", t_agg);
@@ -184,11 +187,16 @@ impl Calibrator {
     }
 }
 
-/// Sets a published effect's status from its presence and the window's votes
-/// (`present` of `identifiable`), saying so in the reason where it changes.
-fn settle(d: &mut crate::model::Diagnostics, present: bool, (present_votes, identifiable): (usize, usize)) {
+/// Sets a published effect's status from its presence, the hysteresis' decision
+/// `on` and the window's votes (`present` of `identifiable`), saying so in the
+/// reason where it changes. Voted present (`on`) but with no value to publish (no
+/// reading pinned it down) is "not identifiable": the evidence is for the effect,
+/// so it is never "absent".
+fn settle(d: &mut crate::model::Diagnostics, present: bool, on: bool, (present_votes, identifiable): (usize, usize)) {
     let status = if present {
         Status::Present
+    } else if on {
+        Status::NotIdentifiable
     } else if identifiable > 0 {
         Status::Absent
     } else if d.status == Status::NotFitted {
@@ -268,5 +276,23 @@ mod tests {
         let m = last.expect("published");
         assert!(!m.motion_blur.present, "absence shown at 8 px/frame must drop the exposure");
         assert_eq!(m.motion_blur.diagnostics.status, Status::Absent);
+    }
+
+    /// A window whose only identifiable reading says "present" but pins λ down to
+    /// no better than ± 0.05 (a short streak at the start of a turn) publishes
+    /// "not identifiable" — never "absent", which would tell the renderer the
+    /// camera has no exposure (seen on a Middlebury scene's first turn: "absent by
+    /// the window's vote (1 of 1 identifiable estimates present)").
+    #[test]
+    fn a_present_reading_without_a_confident_exposure_is_not_absent() {
+        let cfg = CalibratorConfig::new(CalibrationTier::Fast, 1.0 / 30.0, None);
+        let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Fast)).expect("config");
+        let mut e = estimate(0, Status::Present, Some(0.45), 8.0);
+        e.model.motion_blur.diagnostics.stderr = Some(0.08);
+        cal.estimates.push_back(e);
+        let m = cal.aggregate(0, 0.0, UpdateReason::Schedule, Instant::now()).expect("published").model;
+        let mb = &m.motion_blur;
+        assert!(!mb.present && mb.exposure.is_none(), "no confident λ: nothing to render ({:?})", mb.exposure);
+        assert_eq!(mb.diagnostics.status, Status::NotIdentifiable, "{}", mb.diagnostics.reason);
     }
 }
