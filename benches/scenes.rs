@@ -78,7 +78,13 @@ fn read_depth(path: &str, read: &str, focal_px: f32, dmax_m: f32) -> Result<Plan
                 r as f32 / 1000.0
             }
         }),
+        // The frame's 16-bit PGM holds the Kinect's raw values little-endian
+        // (PGM is big-endian: Open3D's loader swaps the bytes too); 2047 is none.
         ["nyu"] => Box::new(|v: u16| {
+            let v = v.swap_bytes();
+            if v >= 2047 {
+                return f32::NAN;
+            }
             let z = 351.3 / (1092.5 - v as f32);
             if z > 0.0 {
                 z

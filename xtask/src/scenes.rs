@@ -22,8 +22,9 @@ enum Depth {
     Tum,
     /// SUN RGB-D: the value's bits rotated right by 3, then millimetres.
     Sun,
-    /// NYU Depth v2 raw Kinect: metres = 351.3 / (1092.5 − value) (the NYU toolbox's
-    /// conversion, as Open3D's `CreateRGBDImageFromNYUFormat` applies it).
+    /// NYU Depth v2 raw Kinect (little-endian in the PGM): metres = 351.3 / (1092.5 −
+    /// value), 2047 none (the NYU toolbox's conversion, as Open3D's
+    /// `CreateRGBDImageFromNYUFormat` applies it).
     Nyu,
 }
 
