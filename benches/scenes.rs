@@ -223,9 +223,14 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
             if let Event::Published(u) = e {
                 if trace && !entry.held_out {
                     let mb = &u.model.motion_blur;
+                    let mut sp: Vec<f32> = f.flow.dx.iter().zip(&f.flow.dy).map(|(a, b)| a.hypot(*b)).collect();
+                    sp.sort_by(f32::total_cmp);
                     eprintln!(
-                        "t {:.2} λ {:?} (truth {:?}) {:?} noise err {:?} | {}",
+                        "t {:.2} frame t {:.2} truth flow p90 {:.2} px, frames {:?}: λ {:?} (truth {:?}) {:?} noise err {:?} | {}",
                         u.t_s,
+                        f.t_s,
+                        sp[sp.len() * 9 / 10],
+                        u.frames_used,
                         mb.exposure,
                         f.truth.motion_blur.exposure,
                         mb.diagnostics.status,
