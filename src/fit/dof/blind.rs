@@ -31,57 +31,18 @@
 
 use super::*;
 
-/// Edge-spread function of a unit step at distance `d` (px) blurred by `kernel` of
-/// second-moment std `sigma`: erf for the Gaussian; for the disc of radius R the
-/// integral of its line-spread function (2/(πR²))·√(R² − t²).
 #[cfg(test)]
-fn edge_spread(kernel: DofKernel, d: f32, sigma: f32) -> f32 {
-    if sigma < 1e-3 {
-        return (d > 0.0) as u8 as f32;
-    }
-    match kernel {
-        DofKernel::Gaussian => 0.5 * (1.0 + erf(d / (sigma * std::f32::consts::SQRT_2))),
-        DofKernel::Disc => {
-            let r = crate::model::kernels::disc_radius_px(sigma).max(1e-3);
-            let t = (d / r).clamp(-1.0, 1.0);
-            0.5 + (t * (1.0 - t * t).sqrt() + t.asin()) / std::f32::consts::PI
-        }
-    }
-}
+#[path = "blind_tables.rs"]
+mod tables;
 
 /// Raw Zhuo–Sim estimate → true σ for each kernel shape, from a 1-D simulation
-/// (see module docs; `measure_zhuo_sim_table`), stored in `measured.rs`: simulated
+/// (see module docs; `tables::measure_zhuo_sim_table`), stored in `measured.rs`: simulated
 /// on first use it cost a fresh process ~5 ms (`crate::synth::measured_check`).
 fn zhuo_sim_table(kernel: DofKernel) -> &'static [(f32, f32)] {
     match kernel {
         DofKernel::Gaussian => &super::measured::ZHUO_SIM_GAUSSIAN,
         DofKernel::Disc => &super::measured::ZHUO_SIM_DISC,
     }
-}
-
-#[cfg(test)]
-fn measure_zhuo_sim_table(kernel: DofKernel) -> Vec<(f32, f32)> {
-    let n = 96usize;
-    let mut table = vec![];
-    for i in 0..=220 {
-        let sigma = i as f32 * 0.05;
-        let mut raw_sum = 0.0;
-        // Sub-pixel phases over the half-resolution grid's 2-px period.
-        let phases: Vec<f32> = (0..8).map(|k| k as f32 * 0.25).collect();
-        for &ph in &phases {
-            // Step at n/2 + ph blurred by the kernel of std σ, sampled at pixel
-            // centres.
-            let data: Vec<f32> = (0..n).map(|x| edge_spread(kernel, x as f32 - (n as f32 / 2.0 + ph), sigma)).collect();
-            let p = Plane::from_vec(n, 1, data);
-            let re = Reblurred::new(reblur_half(&crate::image::reduce(&p)));
-            let g = (1..n - 1).map(|x| 0.5 * (p.get(x + 1, 0) - p.get(x - 1, 0))).fold(0.0f32, f32::max);
-            let g_re = (1..n - 1).map(|x| re.grad(x, 0).0).fold(0.0f32, f32::max);
-            let r = g / g_re;
-            raw_sum += ZS_SIGMA0 / (r * r - 1.0).max(1e-6).sqrt();
-        }
-        table.push((raw_sum / phases.len() as f32, sigma));
-    }
-    table
 }
 
 /// The Zhuo–Sim re-blur (Gaussian of std `ZS_SIGMA0`) of the frame at half resolution,
@@ -350,17 +311,6 @@ impl GradRows {
         let i = slot * self.w + x;
         (self.gx[i], self.gy[i])
     }
-}
-
-/// Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7), enough for a calibration table.
-#[cfg(test)]
-fn erf(x: f32) -> f32 {
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let y = 1.0
-        - (((((1.061_405_4 * t - 1.453_152_1) * t) + 1.421_413_8) * t - 0.284_496_74) * t + 0.254_829_6)
-            * t
-            * (-x * x).exp();
-    y.copysign(x)
 }
 
 fn calibrate(raw: f32, kernel: DofKernel) -> f32 {
@@ -739,41 +689,6 @@ mod tests {
     /// with σ from the first entry above the σ = 0 value on (below it, σ < 0.3 px,
     /// the raw value dips: unresolvable, read as 0); the mapping then inverts the
     /// table there (to 1e-3 px: float rounding of the interpolation).
-    /// The stored Zhuo–Sim tables equal a fresh simulation (tolerance in
-    /// `crate::synth::measured_check::check`).
-    #[test]
-    fn measured_tables_fit_dof() {
-        use crate::synth::measured_check::{check, Table};
-        let table = |kernel: DofKernel, name: &'static str, doc: &'static str| {
-            let fresh = measure_zhuo_sim_table(kernel);
-            let flat = |t: &[(f32, f32)]| -> Vec<f64> { t.iter().flat_map(|&(a, b)| [a as f64, b as f64]).collect() };
-            Table {
-                name,
-                ty: "[(f32, f32); 221]",
-                doc,
-                stored: flat(zhuo_sim_table(kernel)),
-                fresh: flat(&fresh),
-                literal: format!("{fresh:?}"),
-            }
-        };
-        check(
-            "src/fit/dof/measured.rs",
-            "The blind defocus fit's Zhuo–Sim calibration tables (`blind.rs`), simulated once.",
-            &[
-                table(
-                    DofKernel::Gaussian,
-                    "ZHUO_SIM_GAUSSIAN",
-                    "/// `blind::measure_zhuo_sim_table(Gaussian)`: (raw estimate, true σ px) pairs.",
-                ),
-                table(
-                    DofKernel::Disc,
-                    "ZHUO_SIM_DISC",
-                    "/// `blind::measure_zhuo_sim_table(Disc)`: (raw estimate, true σ px) pairs.",
-                ),
-            ],
-        );
-    }
-
     #[test]
     fn zhuo_sim_tables_are_monotone() {
         for kernel in [DofKernel::Gaussian, DofKernel::Disc] {
