@@ -22,7 +22,7 @@ mod common;
 /// whose error isotropy's band gauges). Closer to the axis the bound the diagonals
 /// prove is not enough (20°: 1 frame of 12 at 800×700, and two whose streak zeros pass their
 /// side-lobe gate at exactly e^0.2 at 640×480), and along it (0°) one frame
-/// cannot tell the two apart (BENCHMARKS.md "Oriented texture at an angle to the
+/// cannot tell the two apart (docs/blind-motion-blur.md "Oriented texture at an angle to the
 /// flow"); nothing is asserted there.
 #[test]
 fn oriented_texture_off_the_flow_is_not_read_as_a_streak() {

@@ -60,7 +60,7 @@ pub(super) fn root_at_one(lambda: f32, top_excess: f64, top_excess_se: f64) -> O
 /// at 8 px/frame reads λ 1.000 ± 0.05–0.13 *present* without this refusal on 5 of
 /// its 36 frames (truths 0 and 0.5), all refused with it; the price, an isotropic
 /// texture at λ 1 whose zeros heavy defocus (σ 2–2.5 px) fills: 3 of its 72 frames,
-/// which read 1.000 ± 0.06–0.07, are refused too (BENCHMARKS.md "λ = 1 where both
+/// which read 1.000 ± 0.06–0.07, are refused too (docs/blind-motion-blur.md "λ = 1 where both
 /// searches end"). With isotropy's root inside [0, 1] a shape refused past the full
 /// frame leaves isotropy's answer, as every refusal of the shape does.
 pub(super) fn both_at_full_frame(lambda: f32, shape: &Result<AcfShape, Refusal>) -> Option<String> {

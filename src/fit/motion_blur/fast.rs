@@ -145,7 +145,7 @@ pub fn fit_fast(
         let lambda = sig.lambda.clamp(0.0, 1.0);
         // Long streaks read short by their zeros (31 px box streaks: 27.7–30.7 px, 24
         // px: 21.2–23.5, at a stated ± 0.13–1.7 px — the truth outside two standard
-        // errors on most; BENCHMARKS.md "The zeros' error at long streaks"), where the
+        // errors on most; docs/blind-motion-blur.md "The zeros' error at long streaks"), where the
         // dip read 30.8–31.9 / 23.9–24.4: from `acf_shape::MIN_DIP_LENGTH_PX` half
         // the two lengths' difference joins the zeros' standard error.
         let (stderr, widened) = match check_dip {

@@ -58,7 +58,7 @@
 //!    Without them 31 px streaks across text lines read 3.4–5.5 px (± 0.15) and
 //!    sharp photographs (coffee, rocket) 19–20 px streaks, all identified; a sharp
 //!    scanned page's 17.5 px and a 31 px streak at 45° to text lines read as 4.4
-//!    px still pass (BENCHMARKS.md "Zeros of the ratio that are not zeros of the
+//!    px still pass (docs/blind-motion-blur.md "Zeros of the ratio that are not zeros of the
 //!    streak").
 //!
 //! Standard error: the spread of λ over `SUBSETS` interleaved subsets of lines /
@@ -153,7 +153,7 @@ pub const MIN_SIDE_LOBE: f32 = 0.2;
 /// ratio also dips where the across-flow spectrum peaks; a streak's zero is in the
 /// along-flow power. Measured (`benches/streak_gates/probe.py`: nine photographs
 /// and four text pages, box streaks 0–31 px at 0°/45°/90°, clean and with 3 DN
-/// noise, 50 px/frame; BENCHMARKS.md "Zeros of the ratio that are not zeros of the
+/// noise, 50 px/frame; docs/blind-motion-blur.md "Zeros of the ratio that are not zeros of the
 /// streak"): right reads' dips 0.23 (31 px under noise) to 2.2; six of the eleven
 /// wrong identifications −0.32 to 0.20 (the sharp coffee cup and rocket read as
 /// 19–20 px streaks: 0.20, 0.12; a 16 px streak on text under noise read 40.6 px:
@@ -174,7 +174,7 @@ pub const MAX_ACROSS_SHARE: f32 = 0.6;
 /// sampling low-passes it, `interpolated_noise_correlation`), a 1/f² texture ~400,
 /// a streak more. With the per-line normalisation a pair of pure-noise lines over a
 /// flat area weighs as much as a textured one. Measured (`benches/streak_gates/
-/// probe.py`, BENCHMARKS.md "Lines with no texture along the flow"): on the
+/// probe.py`, docs/blind-motion-blur.md "Lines with no texture along the flow"): on the
 /// held-out set (144 frames with 0 and 2 DN of noise) the rule cuts the wrong
 /// identifications from 6 to 2 (the colour wheel at 120° with 12 px and at 30°
 /// with 6 px, the silhouette's two: gone; the moon's sky and the colour wheel with no

@@ -1,6 +1,6 @@
 //! The blind exposure's second single-frame reading where the streak's zeros are not
 //! identified: the *shape* of the derivative autocorrelation along the flow matched to
-//! the one across it (BENCHMARKS.md "The derivative autocorrelation's shape, shipped").
+//! the one across it (docs/blind-motion-blur.md "The derivative autocorrelation's shape, shipped").
 //!
 //! Gradient-energy isotropy (`isotropy.rs`) balances one number per direction: blur
 //! the frame across the flow by a candidate box L and take the L at which the
