@@ -38,7 +38,8 @@ const CHANGE_S: f64 = 2.75;
 const SETTLE_S: f64 = 1.0;
 
 struct Entry {
-    /// Position in the full list: picks the run's camera (`spec_for`).
+    /// Picks the run's camera (`spec_for`): from the scene's name, so a scene's run
+    /// does not change when others join the list.
     k: usize,
     id: String,
     held_out: bool,
@@ -98,12 +99,17 @@ fn read_depth(path: &str, read: &str, focal_px: f32, dmax_m: f32) -> Result<Plan
     Ok(Plane::from_vec(w, h, data))
 }
 
+/// FNV-1a of the scene's name.
+fn name_hash(id: &str) -> usize {
+    id.bytes().fold(0x811c_9dc5u32, |h, b| (h ^ b as u32).wrapping_mul(0x0100_0193)) as usize
+}
+
 fn load(manifest: &str) -> Vec<Entry> {
     let text = std::fs::read_to_string(manifest).unwrap_or_else(|e| panic!("{manifest}: {e}"));
     let mut out = vec![];
     match motorcycle() {
         Ok(scene) => out.push(Entry {
-            k: 0,
+            k: name_hash("middlebury2014-motorcycle"),
             id: "middlebury2014-motorcycle".into(),
             held_out: false,
             source: "bundled (assets/)".into(),
@@ -125,7 +131,7 @@ fn load(manifest: &str) -> Vec<Entry> {
             .and_then(|(img, z)| scene_from_depth(img, z, focal));
         match scene {
             Ok(scene) => out.push(Entry {
-                k: out.len(),
+                k: name_hash(id),
                 id: id.into(),
                 held_out: split == "held-out",
                 source: source.into(),
