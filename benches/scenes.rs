@@ -11,8 +11,9 @@
 //! * λ: median |λ − truth| of the published exposures;
 //! * noise: median relative error of the published per-level stds
 //!   (`model::compare::noise_relative_error`);
-//! * follow: seconds from the change to the first publication with λ within
-//!   max(0.05, 10%) of the new truth;
+//! * follow: seconds from the first frame after the change that can show λ (truth
+//!   flow ≥ 4 px/frame at its 90th percentile) to the first publication with λ
+//!   within max(0.05, 10%) of the new truth;
 //! * drops: publications where motion blur is not present after it first was (the
 //!   truth's exposure never vanishes; a still head is "not identifiable", never
 //!   "absent").
@@ -222,9 +223,20 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
     let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("valid config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
     let mut published: Vec<(f64, CameraModel, CameraModel)> = vec![];
+    // The first frame after the change whose streak λ can be read (truth flow ≥
+    // 4 px/frame at its 90th percentile, the temporal fit's shortest flow): a change
+    // during a rest cannot show in λ before it.
+    let mut moving_after_change: Option<f64> = None;
     for i in 0..spec.frames {
         cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
         let f = spec.frame(&entry.scene, i);
+        if f.t_s >= CHANGE_S && moving_after_change.is_none() {
+            let mut sp: Vec<f32> = f.flow.dx.iter().zip(&f.flow.dy).map(|(a, b)| a.hypot(*b)).collect();
+            sp.sort_by(f32::total_cmp);
+            if sp.get(sp.len() * 9 / 10).is_some_and(|&v| v >= 4.0) {
+                moving_after_change = Some(f.t_s);
+            }
+        }
         for e in cal.push_frame(frame(&f)).expect("valid frame") {
             if let Event::Published(u) = e {
                 if trace && !entry.held_out {
@@ -257,11 +269,12 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
     let noise =
         published.iter().filter(|p| settled(p.0)).filter_map(|(_, m, tr)| noise_relative_error(&m.noise, &tr.noise));
     let after = spec.change.as_ref().and_then(|(_, a)| a.motion_blur.exposure).unwrap_or(0.0);
+    let from = moving_after_change.unwrap_or(CHANGE_S);
     let follow_s = published
         .iter()
         .filter(|p| p.0 >= CHANGE_S)
         .find(|(_, m, _)| m.motion_blur.exposure.is_some_and(|l| (l - after).abs() <= (0.1 * after).max(0.05)))
-        .map(|p| p.0 - CHANGE_S);
+        .map(|p| (p.0 - from).max(0.0));
     let first = published.iter().position(|p| p.1.motion_blur.present);
     let drops = first.map_or(0, |i| published[i..].iter().filter(|p| !p.1.motion_blur.present).count());
     RunResult {
