@@ -211,6 +211,13 @@ struct RunResult {
     secs: f64,
 }
 
+/// 90th percentile of a flow's speed (px/frame; 0 for an empty flow).
+fn p90_speed_px(flow: &blind_augment::image::Flow) -> f32 {
+    let mut sp: Vec<f32> = flow.dx.iter().zip(&flow.dy).map(|(a, b)| a.hypot(*b)).collect();
+    sp.sort_by(f32::total_cmp);
+    sp.get(sp.len() * 9 / 10).copied().unwrap_or(0.0)
+}
+
 fn median(mut v: Vec<f32>) -> Option<f32> {
     v.sort_by(f32::total_cmp);
     v.get(v.len() / 2).copied()
@@ -230,24 +237,18 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
     for i in 0..spec.frames {
         cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
         let f = spec.frame(&entry.scene, i);
-        if f.t_s >= CHANGE_S && moving_after_change.is_none() {
-            let mut sp: Vec<f32> = f.flow.dx.iter().zip(&f.flow.dy).map(|(a, b)| a.hypot(*b)).collect();
-            sp.sort_by(f32::total_cmp);
-            if sp.get(sp.len() * 9 / 10).is_some_and(|&v| v >= 4.0) {
-                moving_after_change = Some(f.t_s);
-            }
+        if f.t_s >= CHANGE_S && moving_after_change.is_none() && p90_speed_px(&f.flow) >= 4.0 {
+            moving_after_change = Some(f.t_s);
         }
         for e in cal.push_frame(frame(&f)).expect("valid frame") {
             if let Event::Published(u) = e {
                 if trace && !entry.held_out {
                     let mb = &u.model.motion_blur;
-                    let mut sp: Vec<f32> = f.flow.dx.iter().zip(&f.flow.dy).map(|(a, b)| a.hypot(*b)).collect();
-                    sp.sort_by(f32::total_cmp);
                     eprintln!(
                         "t {:.2} frame t {:.2} truth flow p90 {:.2} px, frames {:?}: λ {:?} (truth {:?}) {:?} noise err {:?} | {}",
                         u.t_s,
                         f.t_s,
-                        sp[sp.len() * 9 / 10],
+                        p90_speed_px(&f.flow),
                         u.frames_used,
                         mb.exposure,
                         f.truth.motion_blur.exposure,

@@ -63,21 +63,12 @@ pub fn motorcycle() -> Result<Scene, String> {
         .into_iter()
         .map(|v| if v == 0 { f32::NAN } else { MOTORCYCLE_FOCAL_PX * BASELINE_M / (v as f32 / 64.0 + DOFFS_PX) })
         .collect();
-    let depth_m = fill_holes(Plane::from_vec(w, h, z));
-    let intrinsics = Intrinsics {
-        fx: MOTORCYCLE_FOCAL_PX,
-        fy: MOTORCYCLE_FOCAL_PX,
-        cx: w as f32 / 2.0,
-        cy: h as f32 / 2.0,
-        width: w,
-        height: h,
-    };
-    Ok(Scene { image, depth_m, intrinsics })
+    scene_from_depth(image, Plane::from_vec(w, h, z), MOTORCYCLE_FOCAL_PX)
 }
 
 /// A photograph with measured depth (metres; non-finite or ≤ 0 where unknown, filled
-/// as `motorcycle` fills its holes) taken with focal length `focal_px` and the
-/// principal point at the centre: a scene from another dataset.
+/// by `fill_holes`) taken with focal length `focal_px` and the principal point at the
+/// centre: the bundled Motorcycle, or a scene from another dataset.
 pub fn scene_from_depth(image: Rgb, depth_m: Plane, focal_px: f32) -> Result<Scene, String> {
     let (w, h) = (image.width, image.height);
     if (depth_m.width, depth_m.height) != (w, h) {
