@@ -148,10 +148,15 @@ fn main() -> Result<()> {
             None => bail!("usage: cargo xtask gltf-corpus MIRRORS (bare git mirrors as owner+name/repo)"),
         },
         Some("bench-quality") => match args.get(1).filter(|a| !a.starts_with("--")) {
-            Some(dir) => scenes::run(&target_dir(), Path::new(dir), args.iter().any(|a| a == "--quick")),
-            None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] (bare git mirrors as owner+name/repo)"),
+            Some(dir) => scenes::run(
+                &target_dir(),
+                Path::new(dir),
+                args.iter().any(|a| a == "--quick"),
+                args.iter().any(|a| a == "--noise-only"),
+            ),
+            None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] [--noise-only] (bare git mirrors as owner+name/repo)"),
         },
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS | bench-quality MIRRORS [--quick] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS | bench-quality MIRRORS [--quick] [--noise-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
 

@@ -4,6 +4,9 @@
 //! `target/bench-scenes/`, writes `manifest.tsv` (how to read each one's depth), and
 //! runs `cargo bench --bench scenes` on them; its Markdown goes to
 //! `target/bench/scenes.md`. Nothing is vendored: each scene names its repository.
+//! With a mirror of the PolyU real-world noisy image dataset it first runs `cargo
+//! bench --bench real_noise` on its crops (`target/bench/real_noise.md`);
+//! `--noise-only` stops there.
 //!
 //! The split is fixed here: the `held-out` scenes are never looked at while tuning an
 //! estimator (only their aggregate is read, to report it).
@@ -163,7 +166,16 @@ const SCENES: &[SceneDef] = &[
     },
 ];
 
-pub fn run(target: &Path, mirrors: &Path, quick: bool) -> Result<()> {
+pub fn run(target: &Path, mirrors: &Path, quick: bool, noise_only: bool) -> Result<()> {
+    let bench = target.join("bench");
+    std::fs::create_dir_all(&bench)?;
+    if let Some(out) = run_real_noise(target, mirrors)? {
+        std::fs::write(bench.join("real_noise.md"), out).context("writing target/bench/real_noise.md")?;
+        eprintln!("results in {}", bench.join("real_noise.md").display());
+    }
+    if noise_only {
+        return Ok(());
+    }
     let dir = target.join("bench-scenes");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -225,9 +237,80 @@ pub fn run(target: &Path, mirrors: &Path, quick: bool) -> Result<()> {
         std::env::set_var("BENCH_SCENES_QUICK", "1");
     }
     let out = crate::cargo(&["bench", "--bench", "scenes"])?;
-    let bench = target.join("bench");
-    std::fs::create_dir_all(&bench)?;
     std::fs::write(bench.join("scenes.md"), out).context("writing target/bench/scenes.md")?;
     eprintln!("results in {}", bench.join("scenes.md").display());
     Ok(())
+}
+
+/// The PolyU real-world noisy image dataset's held-out scenes (camera_ISO_scene, as
+/// its crops are named): every third of the 29 in sorted order, fixed here. Their
+/// crops are only ever reported in aggregate.
+const REAL_NOISE_HELD_OUT: &[&str] = &[
+    "Canon5D2_3200_plug",
+    "Canon5D2_6400_circuit",
+    "Canon600D_1600_book",
+    "Canon80D_12800_printer",
+    "Canon80D_800_GO",
+    "NikonD800_4000_flower",
+    "NikonD800_6400_photo",
+    "NikonD800_6400_wall",
+    "Sony_3200_door",
+];
+
+/// The repository of real camera noise with a multi-shot reference (Xu et al. 2018).
+const REAL_NOISE_REPO: &str = "csjunxu/PolyU-Real-World-Noisy-Images-Dataset";
+
+/// Extracts the PolyU crops (each `*_real.JPG` shot with its `*_mean.JPG`) into
+/// `target/bench-real-noise/`, writes `manifest.tsv` and runs `cargo bench --bench
+/// real_noise`; `None` without the mirror.
+pub fn run_real_noise(target: &Path, mirrors: &Path) -> Result<Option<String>> {
+    let git_dir = mirrors.join(REAL_NOISE_REPO.replace('/', "+")).join("repo");
+    if !git_dir.exists() {
+        eprintln!("skipped real camera noise: no mirror of {REAL_NOISE_REPO} at {}", git_dir.display());
+        return Ok(None);
+    }
+    let dir = target.join("bench-real-noise");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let listing = String::from_utf8(crate::gltf_corpus::git(
+        &git_dir,
+        &["ls-tree", "-r", "--name-only", "HEAD", "CroppedImages"],
+    )?)?;
+    let shots: Vec<&str> = listing.lines().filter(|p| p.ends_with("_real.JPG")).collect();
+    let mut paths = vec![];
+    for s in &shots {
+        paths.push(s.to_string());
+        paths.push(s.replace("_real.JPG", "_mean.JPG"));
+    }
+    let refs: Vec<&str> = paths.iter().map(|s| s.as_str()).collect();
+    let missing = crate::gltf_corpus::extract(&git_dir, &refs, &dir)?;
+    let mut manifest = String::from("# id\tsplit\tshot\tmean\n");
+    let mut held = 0;
+    for s in &shots {
+        let mean = s.replace("_real.JPG", "_mean.JPG");
+        if missing.iter().any(|m| m == s || *m == mean) {
+            eprintln!("skipped {s}: not in the mirror");
+            continue;
+        }
+        // Canon5D2_5_160_3200_chair_11_real.JPG: camera, aperture, shutter, ISO, scene, crop.
+        let name = s.trim_start_matches("CroppedImages/").trim_end_matches("_real.JPG");
+        let f: Vec<&str> = name.split('_').collect();
+        let scene = match f[..] {
+            [camera, _, _, iso, scene, ..] => format!("{camera}_{iso}_{scene}"),
+            _ => anyhow::bail!("{s}: not named camera_aperture_shutter_ISO_scene_crop"),
+        };
+        let held_out = REAL_NOISE_HELD_OUT.contains(&scene.as_str());
+        held += held_out as usize;
+        writeln!(
+            manifest,
+            "{name}\t{}\t{}\t{}",
+            if held_out { "held-out" } else { "tuning" },
+            dir.join(s).display(),
+            dir.join(&mean).display()
+        )?;
+    }
+    std::fs::write(dir.join("manifest.tsv"), &manifest).context("writing manifest.tsv")?;
+    eprintln!("{} crops ({held} held out) in {}", manifest.lines().count() - 1, dir.display());
+    std::env::set_var("BENCH_REAL_NOISE", dir.join("manifest.tsv"));
+    Ok(Some(crate::cargo(&["bench", "--bench", "real_noise"])?))
 }

@@ -357,3 +357,48 @@ mod measured_tables_tests {
         );
     }
 }
+
+mod status_tests {
+    use super::super::*;
+
+    /// One level-0 map of std `std` (linear-std form, flat in luma) with a variance
+    /// standard error of `var_se`, and three bins of samples.
+    fn finished(std: f64, var_se: f64) -> Noise {
+        let level = NoiseLevel { slope: [0.0; 3], intercept: [std as f32; 3] };
+        let cov = [[var_se * var_se, 0.0], [0.0, 0.0]];
+        let fit = LevelFit {
+            form: NoiseForm::LinearStd,
+            intensity: NoiseIntensity::Luma,
+            levels: vec![level; NOISE_LEVELS],
+            covs: vec![[cov; 3]; NOISE_LEVELS],
+            rel_res: 0.01,
+            nll: 0.0,
+        };
+        let v = (std * std) as f32;
+        let samples = vec![LevelSamples {
+            y: vec![0.3, 0.5, 0.7],
+            y2: vec![0.09, 0.25, 0.49],
+            own: None,
+            var: [vec![v; 3], vec![v; 3], vec![v; 3]],
+        }];
+        finish("fast", Instant::now(), Some(fit), &samples, [0.3, 0.7], false)
+    }
+
+    /// A level-0 std pinned down is present; one of 1/1000 whose standard error
+    /// spans zero is not identifiable — never absent (a real in-camera JPEG shot
+    /// read that way: `cargo xtask bench-quality`'s real camera noise); one below
+    /// 1e-4 is absent whatever its error.
+    #[test]
+    fn an_uncertain_reading_is_not_identifiable_and_an_invisible_one_absent() {
+        let s = 4e-3;
+        let sure = finished(s, 0.05 * s * s);
+        assert_eq!(sure.diagnostics.status, Status::Present, "{}", sure.diagnostics.reason);
+        assert!(sure.present);
+        let unsure = finished(s, 2.0 * s * s);
+        assert_eq!(unsure.diagnostics.status, Status::NotIdentifiable, "{}", unsure.diagnostics.reason);
+        assert!(!unsure.present);
+        let invisible = finished(5e-5, 2.0 * 5e-5 * 5e-5);
+        assert_eq!(invisible.diagnostics.status, Status::Absent, "{}", invisible.diagnostics.reason);
+        assert!(!invisible.present);
+    }
+}

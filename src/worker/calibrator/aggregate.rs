@@ -15,6 +15,15 @@ const NEIGHBOUR_WAIT_S: f64 = 0.3;
 /// frame failed to show was clearly visible.
 const SHOWN_STREAK_PX: f32 = 0.7;
 
+/// Fewest "absent" votes in the window that drop an effect once it is on. One
+/// reading is not evidence enough: as a turn decelerates, a temporal reference
+/// aligned from ~40 px away read λ = 0.000 ± 0.013 (confident) where the truth was
+/// 0.4 (a Middlebury scene of `cargo xtask bench-quality`), and once the turn's
+/// present readings had left the window that lone vote dropped the exposure for
+/// the whole rest that followed. Three readings span a tenth of a second at the
+/// worker's 30 Hz burst and a few tenths on schedule.
+const MIN_ABSENT_VOTES: usize = 3;
+
 /// Presence with hysteresis.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Presence {
@@ -28,10 +37,11 @@ impl Presence {
             return self.on.unwrap_or(false);
         }
         let frac = present as f64 / identifiable as f64;
+        let absent = identifiable.saturating_sub(present);
         let on = match self.on {
             None => frac > 0.5,
             Some(false) => frac >= 0.6,
-            Some(true) => frac > 0.3,
+            Some(true) => frac > 0.3 || absent < MIN_ABSENT_VOTES,
         };
         self.on = Some(on);
         on
@@ -276,6 +286,28 @@ mod tests {
         let m = last.expect("published");
         assert!(!m.motion_blur.present, "absence shown at 8 px/frame must drop the exposure");
         assert_eq!(m.motion_blur.diagnostics.status, Status::Absent);
+    }
+
+    /// Present readings through a turn, one confident "absent" as it decelerates
+    /// (5 px/frame, where the held λ would streak 2.5 px), then two seconds of rest
+    /// (readings at 0.2 px/frame, no evidence either way): the exposure is held
+    /// through the rest — one reading is not the evidence that drops it.
+    #[test]
+    fn one_absent_reading_does_not_drop_the_exposure_over_the_rest_after_it() {
+        let cfg = CalibratorConfig::new(CalibrationTier::Fast, 1.0 / 30.0, None);
+        let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Fast)).expect("config");
+        let mut frames = vec![];
+        frames.extend((0..15).map(|f| estimate(f, Status::Present, Some(0.5), 8.0)));
+        frames.push(estimate(15, Status::Absent, Some(0.0), 5.0));
+        frames.extend((16..76).map(|f| estimate(f, Status::Absent, Some(0.0), 0.2)));
+        for e in frames {
+            let (frame, t_s) = (e.frame, e.t_s);
+            cal.estimates.push_back(e);
+            let m = cal.aggregate(frame, t_s, UpdateReason::Schedule, Instant::now()).expect("published").model;
+            assert!(m.motion_blur.present, "frame {frame}: dropped: {}", m.motion_blur.diagnostics.reason);
+            assert_eq!(m.motion_blur.exposure, Some(0.5), "frame {frame}");
+            assert_eq!(m.motion_blur.diagnostics.status, Status::Present, "frame {frame}");
+        }
     }
 
     /// A window whose only identifiable reading says "present" but pins λ down to
