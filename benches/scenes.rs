@@ -203,6 +203,36 @@ fn spec_for(scene: &Scene, k: usize) -> SequenceSpec {
     SequenceSpec { frames: FRAMES, fps: FPS, view, path, truth, change: Some((CHANGE_S, after)), seed: 11 + k as u64 }
 }
 
+/// The current frame's own sharp rendering as the motion-blur reference
+/// (`BENCH_SCENES_TRUTH_SHARP`).
+struct TruthSharp(std::sync::Arc<std::sync::Mutex<Option<blind_augment::image::Rgb>>>);
+
+impl blind_augment::analysis::MotionDeblurrer for TruthSharp {
+    fn name(&self) -> &str {
+        "truth sharp"
+    }
+    fn deblur(
+        &mut self,
+        ctx: &blind_augment::analysis::FrameContext,
+        _flow: &blind_augment::image::Flow,
+    ) -> Result<blind_augment::analysis::Reference, blind_augment::analysis::AnalysisError> {
+        let image =
+            self.0.lock().expect("slot").clone().ok_or(blind_augment::analysis::AnalysisError::Unavailable {
+                frame: ctx.current.frame.index,
+                provider: "truth sharp",
+                reason: "no rendering".into(),
+            })?;
+        let noisy = std::env::var("BENCH_SCENES_TRUTH_SHARP").ok().as_deref() == Some("noisy");
+        Ok(blind_augment::analysis::Reference {
+            second: (!noisy).then(|| image.clone()),
+            image,
+            valid: None,
+            noise_variance_ratio: 0.0,
+            sources: vec![ctx.current.frame.index],
+        })
+    }
+}
+
 struct RunResult {
     lambda_err: Option<f32>,
     noise_err: Option<f32>,
@@ -227,7 +257,23 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
     let t0 = Instant::now();
     let trace = std::env::var_os("BENCH_SCENES_TRACE").is_some();
     let cfg = CalibratorConfig::new(tier, 1.0 / FPS as f64, Some(spec.view));
-    let mut cal = Calibrator::new(cfg, Providers::for_tier(tier)).expect("valid config");
+    // `BENCH_SCENES_TRUTH_FLOW=1`: the frames carry the truth flow and the worker
+    // reads it instead of the pose + depth flow (the references still come from
+    // poses and depth): separates the flow's part of a λ error from the references'.
+    let truth_flow = std::env::var_os("BENCH_SCENES_TRUTH_FLOW").is_some();
+    let mut providers = Providers::for_tier(tier);
+    if truth_flow {
+        providers.flow = Box::new(blind_augment::analysis::GivenFlow);
+    }
+    // `BENCH_SCENES_TRUTH_SHARP=1`: the motion-blur reference is the frame's own
+    // camera without motion blur and noise (its defocus kept): separates the
+    // references' part of a λ error from the fit's.
+    let truth_sharp = std::env::var_os("BENCH_SCENES_TRUTH_SHARP").is_some();
+    let sharp_slot: std::sync::Arc<std::sync::Mutex<Option<blind_augment::image::Rgb>>> = Default::default();
+    if truth_sharp {
+        providers.motion_deblur = Some(Box::new(TruthSharp(sharp_slot.clone())));
+    }
+    let mut cal = Calibrator::new(cfg, providers).expect("valid config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
     let mut published: Vec<(f64, CameraModel, CameraModel)> = vec![];
     // The first frame after the change whose streak λ can be read (truth flow ≥
@@ -240,7 +286,21 @@ fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
         if f.t_s >= CHANGE_S && moving_after_change.is_none() && p90_speed_px(&f.flow) >= 4.0 {
             moving_after_change = Some(f.t_s);
         }
-        for e in cal.push_frame(frame(&f)).expect("valid frame") {
+        if truth_sharp {
+            let mut m = f.truth.clone();
+            m.motion_blur = MotionBlur::absent(Diagnostics::not_fitted("reference"));
+            if std::env::var("BENCH_SCENES_TRUTH_SHARP").ok().as_deref() != Some("noisy") {
+                m.noise = Noise::absent(Diagnostics::not_fitted("reference"));
+            }
+            let r =
+                blind_augment::synth::apply_camera_model(&f.clean, &m, Some(&f.depth_m), Some(&f.flow), 977 + i as u64);
+            *sharp_slot.lock().expect("slot") = Some(r.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0));
+        }
+        let mut input = frame(&f);
+        if truth_flow {
+            input.flow = Some(f.flow.clone());
+        }
+        for e in cal.push_frame(input).expect("valid frame") {
             if let Event::Published(u) = e {
                 if trace && !entry.held_out {
                     let mb = &u.model.motion_blur;

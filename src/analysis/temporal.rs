@@ -8,8 +8,9 @@
 //!   low-passes the aligned frames' finest band a little, so at level 0 the true
 //!   ratio is somewhat below 1/m (≈ 0.7/m): a bias ≤ 2% in std for m = 8, none at
 //!   coarser levels.
-//! * I_noMB (`TemporalMotionDeblur`): the mean of the sharpest frames held in the
-//!   window (the head at rest: motion ≤ `max_motion_px` per frame), aligned.
+//! * I_noMB (`TemporalMotionDeblur`): the sharpest frames held in the window (the
+//!   head at rest: motion ≤ `max_motion_px` per frame), aligned, as the mean of one
+//!   half and `Reference::second`, the mean of the other (`split`).
 //!
 //! Alignment (`align`) warps a source frame into the current camera: each current
 //! pixel's surface point (its depth, the intrinsics, `world_from_camera`) is
@@ -421,6 +422,19 @@ impl TemporalMotionDeblur {
     /// long λ.
     pub fn sparse() -> Self {
         Self { frames: 2, max_aligned_px: Some(204_800), split: true, ..Default::default() }
+    }
+
+    /// The accurate tier's: the three sharpest frames aligned whole, split into two
+    /// references with independent noise (one frame and the mean of two) for the
+    /// cross loss. Averaged into one reference instead, their noise biased λ up on
+    /// real scenes made elsewhere (`cargo xtask bench-quality`, tuning split:
+    /// 0.265 / 0.458 for 0.2 / 0.4 at 12 px/frame, 0.318 / 0.649 for 0.3 / 0.6 at
+    /// 5–6 px/frame; the same fit against a noise-free reference 0.207 / 0.390 and
+    /// 0.304 / 0.610, against one with the camera's noise 0.248 / 0.435 and 0.360 /
+    /// 0.664): a streak averages the reference's noise, which lowers the squared
+    /// loss at long λ.
+    pub fn whole_split() -> Self {
+        Self { split: true, ..Default::default() }
     }
 
     /// Band stride that keeps a `w`×`h` frame within `max_aligned_px`.
