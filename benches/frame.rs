@@ -84,8 +84,8 @@ fn setup(scene: &Scene, r: &StereoRenderer<'_>, f: f32, coverage: f64) -> (Setup
             frame: GBufferFrame {
                 eyes: eyes(0.6 * t, f, w, h),
                 prev_eyes: eyes(0.6 * (t - dt), f, w, h),
-                world_from_nodes: scene.world_from_nodes(t as f64, place),
-                prev_world_from_nodes: scene.world_from_nodes((t - dt) as f64, place),
+                pose: scene.pose_at(t as f64, place),
+                prev_pose: scene.pose_at((t - dt) as f64, place),
                 light_dir: blind_augment::render::gbuffer::SCENE_LIGHT_DIR,
                 ambient: blind_augment::render::gbuffer::SCENE_AMBIENT,
             },

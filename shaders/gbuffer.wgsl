@@ -4,7 +4,7 @@
 //   0: premultiplied colour, sRGB-encoded (the camera model is fitted on encoded
 //      frames, so the effects and the composite run in that space), alpha;
 //   1: screen motion (px per render frame, +x right, +y down) from the previous
-//      frame's camera and object transforms, linear view depth in metres, and 1
+//      frame's camera, object transforms and vertices, linear view depth in metres, and 1
 //      where a surface was drawn.
 // WGSL, not GLSL: naga's GLSL front end has no gl_ViewIndex.
 
@@ -43,9 +43,12 @@ fn vs_main(
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) uv: vec2<f32>,
+    // The vertex one render frame ago (binding 1): `position` again for a rigid
+    // mesh, the previous skinned/morphed vertex for a deforming one.
+    @location(3) prev_position: vec3<f32>,
 ) -> VsOut {
     let world = draw.world_from_object * vec4<f32>(position, 1.0);
-    let prev_world = draw.prev_world_from_object * vec4<f32>(position, 1.0);
+    let prev_world = draw.prev_world_from_object * vec4<f32>(prev_position, 1.0);
     var out: VsOut;
     out.cur_clip = frame.clip_from_world[view] * world;
     out.prev_clip = frame.prev_clip_from_world[view] * prev_world;

@@ -53,8 +53,8 @@ fn gbuffer_stereo_depth_and_motion() {
     let frame = GBufferFrame {
         eyes,
         prev_eyes,
-        world_from_nodes: now.clone(),
-        prev_world_from_nodes: prev.clone(),
+        pose: scene.pose_at(0.0, Mat4::IDENTITY),
+        prev_pose: scene.pose_at(0.0, Mat4::from_translation(Vec3::new(0.0, -0.02, 0.0))),
         light_dir: Vec3::new(0.3, 1.0, 0.5),
         ambient: 0.3,
     };
@@ -183,8 +183,8 @@ fn confined_gbuffer_leaves_no_ghost() {
             GBufferFrame {
                 eyes: eyes(0.0),
                 prev_eyes: eyes(-0.01),
-                world_from_nodes: scene.world_from_nodes(0.5, place(x_m)),
-                prev_world_from_nodes: scene.world_from_nodes(0.48, place(x_m)),
+                pose: scene.pose_at(0.5, place(x_m)),
+                prev_pose: scene.pose_at(0.48, place(x_m)),
                 light_dir: Vec3::new(0.3, 1.0, 0.5),
                 ambient: 0.3,
             },

@@ -159,15 +159,17 @@ fn animation_time_is_exact_at_an_epoch_of_days() {
         );
         let (g, h) = (&at_days.gbuffer, &at_secs.gbuffer);
         for (m, n) in g
+            .pose
             .world_from_nodes
             .iter()
-            .zip(&h.world_from_nodes)
-            .chain(g.prev_world_from_nodes.iter().zip(&h.prev_world_from_nodes))
+            .zip(&h.pose.world_from_nodes)
+            .chain(g.prev_pose.world_from_nodes.iter().zip(&h.prev_pose.world_from_nodes))
         {
             assert!(m.abs_diff_eq(*n, 1e-5), "frame {k}: {m:?} vs {n:?}");
         }
         moved +=
-            g.world_from_nodes.iter().zip(&g.prev_world_from_nodes).any(|(m, n)| !m.abs_diff_eq(*n, 1e-6)) as usize;
+            g.pose.world_from_nodes.iter().zip(&g.prev_pose.world_from_nodes).any(|(m, n)| !m.abs_diff_eq(*n, 1e-6))
+                as usize;
     }
     assert!(moved >= run.records.len() - 2, "the animation moves every frame ({moved} of {})", run.records.len() - 1);
 }

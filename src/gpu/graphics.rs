@@ -259,6 +259,9 @@ pub struct GraphicsDesc<'s> {
     pub fragment_entry: &'s CStr,
     pub stride: u32,
     pub attributes: &'s [VertexAttribute],
+    /// Attributes read from a second vertex buffer (binding 1) of the same
+    /// stride: the G-buffer's previous-frame positions.
+    pub second_binding: &'s [VertexAttribute],
     pub push_size: u32,
     pub frame_sets: u32,
     pub material_sets: u32,
@@ -343,17 +346,21 @@ impl<'a> GraphicsPipeline<'a> {
                 .module(fs)
                 .name(desc.fragment_entry),
         ];
-        let binding = [vk::VertexInputBindingDescription::default()
-            .binding(0)
-            .stride(desc.stride)
-            .input_rate(vk::VertexInputRate::VERTEX)];
-        let attrs: Vec<_> = desc
-            .attributes
-            .iter()
-            .map(|a| {
+        let bindings = if desc.second_binding.is_empty() { 1 } else { 2 };
+        let binding: Vec<_> = (0..bindings)
+            .map(|b| {
+                vk::VertexInputBindingDescription::default()
+                    .binding(b)
+                    .stride(desc.stride)
+                    .input_rate(vk::VertexInputRate::VERTEX)
+            })
+            .collect();
+        let attrs: Vec<_> = (desc.attributes.iter().map(|a| (0, a)))
+            .chain(desc.second_binding.iter().map(|a| (1, a)))
+            .map(|(b, a)| {
                 vk::VertexInputAttributeDescription::default()
                     .location(a.location)
-                    .binding(0)
+                    .binding(b)
                     .format(a.format)
                     .offset(a.offset)
             })
@@ -502,6 +509,7 @@ impl<'a> GraphicsPipeline<'a> {
         cmd: vk::CommandBuffer,
         material: usize,
         vertices: &Buffer<'_>,
+        second: Option<(&Buffer<'_>, u64)>,
         indices: &Buffer<'_>,
         index_count: u32,
         push: &[u8],
@@ -522,6 +530,9 @@ impl<'a> GraphicsPipeline<'a> {
                 );
             }
             d.cmd_bind_vertex_buffers(cmd, 0, &[vertices.buffer], &[0]);
+            if let Some((b, offset)) = second {
+                d.cmd_bind_vertex_buffers(cmd, 1, &[b.buffer], &[offset]);
+            }
             d.cmd_bind_index_buffer(cmd, indices.buffer, 0, vk::IndexType::UINT32);
             d.cmd_draw_indexed(cmd, index_count, 1, 0, 0, 0);
         }

@@ -1,12 +1,13 @@
 //! Multiview G-buffer pass (shaders/gbuffer.wgsl): draws a glTF scene into both
 //! eyes at once and writes premultiplied colour + alpha, and motion (px per render
-//! frame from the previous frame's camera and node transforms) + linear depth.
+//! frame from the previous frame's camera, node transforms and, for skinned and
+//! morphed meshes, deformed vertices) + linear depth.
 
 use crate::gpu::{
     Buffer, GpuContext, GpuError, GraphicsDesc, GraphicsPipeline, Image, MultiviewTarget, Texture, VertexAttribute,
 };
 use crate::model::Rect;
-use crate::scene::{Scene, Vertex};
+use crate::scene::{Pose, Scene, Vertex};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
@@ -73,24 +74,29 @@ pub const SCENE_AMBIENT: f32 = 0.35;
 pub const FAR_M: f32 = 100.0;
 
 /// Everything one frame of the G-buffer needs: both eyes now and one render frame
-/// ago, and the scene's node transforms now and then.
+/// ago, and the scene's pose (`Scene::pose_at`) now and then.
 #[derive(Clone, Debug)]
 pub struct GBufferFrame {
     pub eyes: [Eye; 2],
     pub prev_eyes: [Eye; 2],
-    pub world_from_nodes: Vec<Mat4>,
-    pub prev_world_from_nodes: Vec<Mat4>,
+    pub pose: Pose,
+    pub prev_pose: Pose,
     /// Towards the light, world space.
     pub light_dir: Vec3,
     pub ambient: f32,
 }
 
 struct GpuMesh<'a> {
-    node: usize,
     material: usize,
     vertices: Buffer<'a>,
     indices: Buffer<'a>,
     count: u32,
+    /// A deforming mesh: per frame slot, its vertices now followed by its
+    /// vertices one render frame ago (binding 1 reads the second half's
+    /// positions), written by `record_in`. Empty for a rigid mesh, whose
+    /// previous positions are its positions.
+    deformed: Vec<Buffer<'a>>,
+    vertex_count: usize,
 }
 
 pub struct GBufferPass<'a> {
@@ -118,6 +124,9 @@ impl<'a> GBufferPass<'a> {
             VertexAttribute { location: 1, format: vk::Format::R32G32B32_SFLOAT, offset: 12 },
             VertexAttribute { location: 2, format: vk::Format::R32G32_SFLOAT, offset: 24 },
         ];
+        // Previous-frame position (location 3) from binding 1: the same buffer for
+        // a rigid mesh, the previous deformed vertices for a skinned/morphed one.
+        let second = [VertexAttribute { location: 3, format: vk::Format::R32G32B32_SFLOAT, offset: 0 }];
         let frames = frames_in_flight.max(1);
         let pipeline = GraphicsPipeline::new(
             ctx,
@@ -129,6 +138,7 @@ impl<'a> GBufferPass<'a> {
                 fragment_entry: c"fs_main",
                 stride: std::mem::size_of::<Vertex>() as u32,
                 attributes: &attributes,
+                second_binding: &second,
                 push_size: std::mem::size_of::<DrawPush>() as u32,
                 frame_sets: frames as u32,
                 material_sets: scene.materials.len() as u32,
@@ -160,8 +170,21 @@ impl<'a> GBufferPass<'a> {
         }
         let mut meshes = Vec::new();
         for (i, m) in scene.meshes.iter().enumerate() {
+            let mut deformed = Vec::new();
+            if m.deform.is_some() {
+                for slot in 0..frames {
+                    deformed.push(Buffer::new(
+                        ctx,
+                        (2 * m.vertices.len().max(1) * std::mem::size_of::<Vertex>()) as u64,
+                        vk::BufferUsageFlags::VERTEX_BUFFER,
+                        vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
+                        &format!("mesh {i} deformed vertices {slot}"),
+                    )?);
+                }
+            }
             meshes.push(GpuMesh {
-                node: m.node,
+                deformed,
+                vertex_count: m.vertices.len(),
                 material: m.material,
                 vertices: ctx.upload_as(
                     bytemuck::cast_slice(&m.vertices),
@@ -242,18 +265,57 @@ impl<'a> GBufferPass<'a> {
         let area = [area.x.max(0) as u32, area.y.max(0) as u32, area.w.max(0) as u32, area.h.max(0) as u32];
         self.target.record_begin(cmd, &[[0.0; 4], [0.0; 4]], area);
         self.pipeline.record_bind(cmd, slot);
-        for m in &self.meshes {
-            let (Some(now), Some(prev)) = (frame.world_from_nodes.get(m.node), frame.prev_world_from_nodes.get(m.node))
+        if !frame.pose.is_finite() || !frame.prev_pose.is_finite() {
+            return Err(GpuError::Input { input: "g-buffer frame", problem: "non-finite scene pose".into() });
+        }
+        for (mi, m) in self.meshes.iter().enumerate() {
+            let (Some(now), Some(prev)) =
+                (frame.pose.world_from_object.get(mi), frame.prev_pose.world_from_object.get(mi))
             else {
                 continue;
             };
             let push =
                 DrawPush { world_from_object: now.to_cols_array(), prev_world_from_object: prev.to_cols_array() };
-            self.pipeline.record_draw(cmd, m.material, &m.vertices, &m.indices, m.count, bytemuck::bytes_of(&push));
+            match (
+                m.deformed.get(slot),
+                deformed_of(&frame.pose, mi, m.vertex_count),
+                deformed_of(&frame.prev_pose, mi, m.vertex_count),
+            ) {
+                (Some(buf), Some(cur), Some(before)) => {
+                    let mut bytes = Vec::with_capacity(2 * m.vertex_count * std::mem::size_of::<Vertex>());
+                    bytes.extend_from_slice(bytemuck::cast_slice(cur));
+                    bytes.extend_from_slice(bytemuck::cast_slice(before));
+                    buf.write(&bytes)?;
+                    let half = (m.vertex_count * std::mem::size_of::<Vertex>()) as u64;
+                    self.pipeline.record_draw(
+                        cmd,
+                        m.material,
+                        buf,
+                        Some((buf, half)),
+                        &m.indices,
+                        m.count,
+                        bytemuck::bytes_of(&push),
+                    );
+                }
+                _ => self.pipeline.record_draw(
+                    cmd,
+                    m.material,
+                    &m.vertices,
+                    Some((&m.vertices, 0)),
+                    &m.indices,
+                    m.count,
+                    bytemuck::bytes_of(&push),
+                ),
+            }
         }
         self.target.record_end(cmd);
         Ok(())
     }
+}
+
+/// Mesh `mi`'s deformed vertices in `pose`, when it has as many as the mesh.
+fn deformed_of(pose: &Pose, mi: usize, count: usize) -> Option<&[Vertex]> {
+    pose.deformed.get(mi).and_then(|d| d.as_deref()).map(|v| v.as_slice()).filter(|v| v.len() == count)
 }
 
 fn srgb_decode(v: f32) -> f32 {

@@ -7,7 +7,10 @@
 //! what is wrong, never a panic.
 
 use super::accessor::Data;
-use super::{invalid, Channel, Material, Mesh, Node, Property, Scene, SceneError, TextureData, Trs, Vertex};
+use super::{
+    invalid, Channel, Deform, Material, Mesh, MorphTarget, Node, Property, Scene, SceneError, Skin, TextureData, Trs,
+    Vertex, WeightChannel,
+};
 use glam::{Mat4, Quat, Vec2, Vec3};
 use gltf::json;
 use json::accessor::Type;
@@ -367,15 +370,40 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     materials.push(Material { base_colour: [0.8, 0.8, 0.8, 1.0], texture: None });
     material_uv.push(UvSet::default());
 
+    // Skins (glTF 2.0 §5.28): joints and inverse bind matrices (identity when
+    // the file gives none).
+    let mut skins = Vec::with_capacity(root.skins.len());
+    for (si, sk) in root.skins.iter().enumerate() {
+        let what = format!("skin {si}");
+        let joints: Vec<usize> = sk.joints.iter().map(|j| j.value()).collect();
+        let inverse_bind: Vec<Mat4> = match sk.inverse_bind_matrices {
+            Some(ix) => {
+                let (v, _) =
+                    data.read_f32(ix.value(), &[Type::Mat4], &format!("{what} inverseBindMatrices")).map_err(err)?;
+                v.chunks_exact(16).map(Mat4::from_cols_slice).collect()
+            }
+            None => vec![Mat4::IDENTITY; joints.len()],
+        };
+        if inverse_bind.len() < joints.len() {
+            return Err(invalid(
+                name,
+                format!("{what}: {} inverse bind matrices for {} joints", inverse_bind.len(), joints.len()),
+            ));
+        }
+        if let Some(j) = joints.iter().find(|&&j| j >= nodes.len()) {
+            return Err(invalid(name, format!("{what}: joint node {j} does not exist")));
+        }
+        skins.push(Skin { joints, inverse_bind });
+    }
+
     let draco_used = root.extensions_used.iter().any(|e| e == "KHR_draco_mesh_compression");
     let mut meshes = Vec::new();
-    let (mut skipped_modes, mut skinned, mut morphed) = (Vec::new(), false, false);
+    let mut skipped_modes = Vec::new();
+    let mut unskinned = false;
     for (ni, n) in root.nodes.iter().enumerate() {
         let Some(mi) = n.mesh.filter(|_| drawn[ni]).map(|m| m.value()) else { continue };
-        skinned |= n.skin.is_some();
         for (pi, prim) in root.meshes[mi].primitives.iter().enumerate() {
             let what = format!("mesh {mi} primitive {pi}");
-            morphed |= prim.targets.as_ref().is_some_and(|t| !t.is_empty());
             use json::mesh::{Mode, Semantic};
             let mode = match prim.mode {
                 Checked::Valid(m) => m,
@@ -444,7 +472,10 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             let (lo, hi) = positions.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| {
                 (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p)))
             });
-            meshes.push(Mesh { node: ni, material, vertices, indices, bounds: (lo, hi) });
+            let deform = read_deform(&data, prim, n, &root.meshes[mi], &skins, positions.len(), &what)
+                .map_err(|e| invalid(name, e))?;
+            unskinned |= n.skin.is_some() && deform.as_ref().is_none_or(|d| d.skin.is_none());
+            meshes.push(Mesh { node: ni, material, vertices, indices, bounds: (lo, hi), deform: deform.map(Box::new) });
         }
     }
     if !skipped_modes.is_empty() {
@@ -452,17 +483,15 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
         skipped_modes.dedup();
         notes.push(format!("primitives not drawn: {} (only triangles with positions are)", skipped_modes.join(", ")));
     }
-    if skinned {
-        notes.push("skins not applied: skinned meshes drawn in their bind pose".into());
-    }
-    if morphed {
-        notes.push("morph targets not applied: meshes drawn with their base shape".into());
+    if unskinned {
+        notes.push("a node with a skin draws a primitive without JOINTS_0/WEIGHTS_0: drawn rigid".into());
     }
     if meshes.is_empty() {
         return Err(invalid(name, "no triangles to draw in the scene"));
     }
 
     let mut channels = Vec::new();
+    let mut weight_channels = Vec::new();
     let mut duration_s = 0.0f32;
     for (ai, anim) in root.animations.iter().enumerate() {
         for (ci, ch) in anim.channels.iter().enumerate() {
@@ -471,7 +500,17 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
                 Checked::Valid(json::animation::Property::Translation) => Property::Translation,
                 Checked::Valid(json::animation::Property::Rotation) => Property::Rotation,
                 Checked::Valid(json::animation::Property::Scale) => Property::Scale,
-                _ => continue, // morph weights: not applied (noted above)
+                Checked::Valid(json::animation::Property::MorphTargetWeights) => {
+                    let sampler = &anim.samplers[ch.sampler.value()];
+                    let wc = read_weight_channel(&data, &root, ch.target.node.value(), sampler, &what)
+                        .map_err(|e| invalid(name, e))?;
+                    if let Some(wc) = wc {
+                        duration_s = duration_s.max(*wc.times_s.last().unwrap_or(&0.0));
+                        weight_channels.push(wc);
+                    }
+                    continue;
+                }
+                Checked::Invalid => continue,
             };
             let sampler = &anim.samplers[ch.sampler.value()];
             let (times_s, _) =
@@ -518,7 +557,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             });
         }
     }
-    let reach_m = reach_bound_m(&nodes, &meshes, &channels);
+    let reach_m = reach_bound_m(&nodes, &meshes, &channels, &skins, &weight_channels);
     if reach_m.is_nan() || reach_m > MAX_REACH_M {
         return Err(invalid(
             name,
@@ -528,7 +567,141 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             ),
         ));
     }
-    Ok(Scene { nodes, meshes, materials, textures, channels, duration_s, notes })
+    Ok(Scene { nodes, meshes, materials, textures, channels, skins, weight_channels, duration_s, notes })
+}
+
+/// A primitive's skin and morph targets (`None` when it has neither): JOINTS_0 /
+/// WEIGHTS_0 when its node has a skin (glTF 2.0 §3.7.3), every target's POSITION
+/// and NORMAL displacements (§3.7.2.2; TANGENT is not used by the G-buffer), and
+/// the default weights (node's, else mesh's). Every index is checked here so the
+/// per-frame evaluation reads in range.
+fn read_deform(
+    data: &Data,
+    prim: &json::mesh::Primitive,
+    node: &json::Node,
+    mesh: &json::Mesh,
+    skins: &[Skin],
+    vertex_count: usize,
+    what: &str,
+) -> Result<Option<Deform>, String> {
+    use json::mesh::Semantic;
+    let attr = |s: Semantic| prim.attributes.get(&Checked::Valid(s)).map(|a| a.value());
+    let mut d = Deform::default();
+    if let (Some(si), Some(jix), Some(wix)) = (node.skin, attr(Semantic::Joints(0)), attr(Semantic::Weights(0))) {
+        let skin = skins.get(si.value()).ok_or_else(|| format!("{what}: skin {} does not exist", si.value()))?;
+        let (j, _) = data.read_f32(jix, &[Type::Vec4], &format!("{what} JOINTS_0"))?;
+        let (w, _) = data.read_f32(wix, &[Type::Vec4], &format!("{what} WEIGHTS_0"))?;
+        if j.len() != vertex_count * 4 || w.len() != vertex_count * 4 {
+            return Err(format!("{what}: JOINTS_0 / WEIGHTS_0 count differs from POSITION's {vertex_count}"));
+        }
+        for (vi, (jc, wc)) in j.chunks_exact(4).zip(w.chunks_exact(4)).enumerate() {
+            let mut ws = [wc[0], wc[1], wc[2], wc[3]];
+            if ws.iter().any(|&x| x < 0.0) {
+                return Err(format!("{what}: vertex {vi} has a negative skin weight"));
+            }
+            let mut js = [0u16; 4];
+            for k in 0..4 {
+                // An unused influence (weight 0) may name any joint (§3.7.3.3).
+                if ws[k] == 0.0 {
+                    continue;
+                }
+                if jc[k] < 0.0 || jc[k] as usize >= skin.joints.len() || jc[k].fract() != 0.0 {
+                    return Err(format!(
+                        "{what}: vertex {vi} names joint {} of a skin with {}",
+                        jc[k],
+                        skin.joints.len()
+                    ));
+                }
+                js[k] = jc[k] as u16;
+            }
+            // §3.7.3.3: the weights sum to 1; quantized weights drift from it.
+            let sum: f32 = ws.iter().sum();
+            if sum > 1e-6 {
+                ws.iter_mut().for_each(|x| *x /= sum);
+            } else {
+                ws = [1.0, 0.0, 0.0, 0.0];
+            }
+            d.joints.push(js);
+            d.weights.push(ws);
+        }
+        d.skin = Some(si.value());
+    }
+    for (ti, t) in prim.targets.iter().flatten().enumerate() {
+        let mut target = MorphTarget::default();
+        let read = |ix: Option<json::Index<json::Accessor>>, which: &str| -> Result<Vec<[f32; 3]>, String> {
+            let Some(ix) = ix else { return Ok(Vec::new()) };
+            let (v, _) = data.read_f32(ix.value(), &[Type::Vec3], &format!("{what} target {ti} {which}"))?;
+            if v.len() != vertex_count * 3 {
+                return Err(format!("{what}: target {ti} {which} count differs from POSITION's {vertex_count}"));
+            }
+            Ok(v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+        };
+        target.positions = read(t.positions, "POSITION")?;
+        target.normals = read(t.normals, "NORMAL")?;
+        d.targets.push(target);
+    }
+    if !d.targets.is_empty() {
+        let defaults = node.weights.as_ref().or(mesh.weights.as_ref());
+        d.default_weights = defaults.cloned().unwrap_or_default();
+        d.default_weights.resize(d.targets.len(), 0.0);
+        if d.default_weights.iter().any(|w| !w.is_finite()) {
+            return Err(format!("{what}: non-finite morph weight"));
+        }
+    }
+    Ok((d.skin.is_some() || !d.targets.is_empty()).then_some(d))
+}
+
+/// A `weights` animation channel: `count` weights per keyframe, where `count` is
+/// the number of morph targets of the node's mesh (glTF 2.0 §3.11). `None` for a
+/// node without a morphed mesh (nothing to drive).
+fn read_weight_channel(
+    data: &Data,
+    root: &json::Root,
+    node: usize,
+    sampler: &json::animation::Sampler,
+    what: &str,
+) -> Result<Option<WeightChannel>, String> {
+    let count = root
+        .nodes
+        .get(node)
+        .and_then(|n| n.mesh)
+        .and_then(|m| root.meshes.get(m.value()))
+        .and_then(|m| m.primitives.first())
+        .map_or(0, |p| p.targets.as_ref().map_or(0, |t| t.len()));
+    if count == 0 {
+        return Ok(None);
+    }
+    let (times_s, _) = data.read_f32(sampler.input.value(), &[Type::Scalar], &format!("{what} input"))?;
+    let (flat, _) = data.read_f32(sampler.output.value(), &[Type::Scalar], &format!("{what} output"))?;
+    let cubic = sampler.interpolation == Checked::Valid(json::animation::Interpolation::CubicSpline);
+    let per_key = if cubic { 3 * count } else { count };
+    if times_s.is_empty() || flat.len() != times_s.len() * per_key || times_s.windows(2).any(|w| w[1] < w[0]) {
+        return Err(format!(
+            "{what}: {} weights for {} keyframe times and {count} morph targets, or times not increasing",
+            flat.len(),
+            times_s.len()
+        ));
+    }
+    let (values, tangents) = if cubic {
+        // Appendix C: per keyframe `count` in-tangents, `count` values, `count` out-tangents.
+        let (mut ins, mut vals, mut outs) = (Vec::new(), Vec::new(), Vec::new());
+        for k in flat.chunks_exact(3 * count) {
+            ins.extend_from_slice(&k[..count]);
+            vals.extend_from_slice(&k[count..2 * count]);
+            outs.extend_from_slice(&k[2 * count..]);
+        }
+        (vals, Some((ins, outs)))
+    } else {
+        (flat, None)
+    };
+    Ok(Some(WeightChannel {
+        node,
+        count,
+        times_s,
+        values,
+        step: sampler.interpolation == Checked::Valid(json::animation::Interpolation::Step),
+        tangents,
+    }))
 }
 
 /// Farthest a drawn vertex may lie from the scene's origin (m) for the scene to be
@@ -540,7 +713,13 @@ const MAX_REACH_M: f32 = 1.0e6;
 /// keyframe (linear, step and spline-value interpolation stay within them;
 /// rotations keep lengths), chained down the hierarchy, times the mesh bounds.
 /// Finite values whose products overflow come out as infinity, which fails the check.
-fn reach_bound_m(nodes: &[Node], meshes: &[Mesh], channels: &[Channel]) -> f32 {
+fn reach_bound_m(
+    nodes: &[Node],
+    meshes: &[Mesh],
+    channels: &[Channel],
+    skins: &[Skin],
+    weight_channels: &[WeightChannel],
+) -> f32 {
     let mut scale: Vec<f32> = nodes.iter().map(|n| n.rest.scale.abs().max_element()).collect();
     let mut shift: Vec<f32> = nodes.iter().map(|n| n.rest.translation.length()).collect();
     for ch in channels {
@@ -571,11 +750,46 @@ fn reach_bound_m(nodes: &[Node], meshes: &[Mesh], channels: &[Channel]) -> f32 {
         }
         path.iter().rev().fold((1.0f32, 0.0f32), |(s_acc, t_acc), &k| (s_acc * scale[k], t_acc + s_acc * shift[k]))
     };
+    // Largest |weight| each node's morph channels reach (a cubic spline's
+    // overshoot bounded as above).
+    let mut weight_reach: HashMap<usize, f32> = HashMap::new();
+    for ch in weight_channels {
+        let dt_max = ch.times_s.windows(2).map(|w| w[1] - w[0]).fold(0.0f32, f32::max);
+        let m_max = ch.tangents.as_ref().map_or(0.0, |(a, b)| a.iter().chain(b).fold(0.0f32, |m, x| m.max(x.abs())));
+        let v_max = ch.values.iter().fold(0.0f32, |m, x| m.max(x.abs())) + 4.0 / 27.0 * dt_max * 2.0 * m_max;
+        let e = weight_reach.entry(ch.node).or_insert(0.0);
+        *e = e.max(v_max);
+    }
     meshes
         .iter()
         .map(|m| {
+            let mut r = m.bounds.0.abs().max(m.bounds.1.abs()).length();
+            if let Some(d) = &m.deform {
+                let w_anim = weight_reach.get(&m.node).copied().unwrap_or(0.0);
+                for (k, t) in d.targets.iter().enumerate() {
+                    let w = d.default_weights.get(k).map_or(0.0, |w| w.abs()).max(w_anim);
+                    let dp = t.positions.iter().map(|p| Vec3::from(*p).length()).fold(0.0f32, f32::max);
+                    r += w * dp;
+                }
+                if let Some(skin) = d.skin.and_then(|s| skins.get(s)) {
+                    // A skinned vertex is a convex blend of joint transforms of the
+                    // morphed vertex: |J·IBM·p| ≤ s_J·(‖IBM₃ₓ₃‖_F·r + |IBM_t|) + t_J.
+                    return skin
+                        .joints
+                        .iter()
+                        .zip(&skin.inverse_bind)
+                        .map(|(&j, ibm)| {
+                            let (s, t) = chain(j);
+                            let m3 = glam::Mat3::from_mat4(*ibm);
+                            let frob =
+                                (m3.x_axis.length_squared() + m3.y_axis.length_squared() + m3.z_axis.length_squared())
+                                    .sqrt();
+                            s * (frob * r + ibm.w_axis.truncate().length()) + t
+                        })
+                        .fold(0.0f32, |a, b| if b.is_nan() { f32::INFINITY } else { a.max(b) });
+                }
+            }
             let (s, t) = chain(m.node);
-            let r = m.bounds.0.abs().max(m.bounds.1.abs()).length();
             s * r + t
         })
         .fold(0.0f32, |a, b| if b.is_nan() { f32::INFINITY } else { a.max(b) })

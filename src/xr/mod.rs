@@ -226,17 +226,19 @@ impl FrameGeometry {
         // it would step by 7.8 ms after a day awake, and motion vectors jump.
         let t_s = (display_ns - origin_ns) as f64 * 1e-9;
         let t_prev_s = (prev_t_ns - origin_ns) as f64 * 1e-9;
+        let (pose, prev_pose) = (scene.pose_at(t_s, local_from_scene), scene.pose_at(t_prev_s, local_from_scene));
+        let (corners_now, corners_prev) = (pose.world_corners(scene), prev_pose.world_corners(scene));
         Self {
             gbuffer: GBufferFrame {
                 eyes,
                 prev_eyes,
-                world_from_nodes: scene.world_from_nodes(t_s, local_from_scene),
-                prev_world_from_nodes: scene.world_from_nodes(t_prev_s, local_from_scene),
+                pose,
+                prev_pose,
                 light_dir: crate::render::gbuffer::SCENE_LIGHT_DIR,
                 ambient: crate::render::gbuffer::SCENE_AMBIENT,
             },
-            corners_now: scene.world_corners(t_s, local_from_scene),
-            corners_prev: scene.world_corners(t_prev_s, local_from_scene),
+            corners_now,
+            corners_prev,
             render_interval_s: ((display_ns - prev_t_ns) as f64 * 1e-9) as f32,
         }
     }

@@ -160,13 +160,13 @@ pub fn render_sequence(
         let frame = GBufferFrame {
             eyes: eyes((motion.head)(t), eye_focal_px, w, h),
             prev_eyes: eyes((motion.head)(t_prev), eye_focal_px, w, h),
-            world_from_nodes: scene.world_from_nodes(t as f64, motion.world_from_scene),
-            prev_world_from_nodes: scene.world_from_nodes(t_prev as f64, motion.world_from_scene),
+            pose: scene.pose_at(t as f64, motion.world_from_scene),
+            prev_pose: scene.pose_at(t_prev as f64, motion.world_from_scene),
             light_dir: blind_augment::render::gbuffer::SCENE_LIGHT_DIR,
             ambient: blind_augment::render::gbuffer::SCENE_AMBIENT,
         };
-        let now = scene.world_corners(t as f64, motion.world_from_scene);
-        let before = scene.world_corners(t_prev as f64, motion.world_from_scene);
+        let now = frame.pose.world_corners(&scene);
+        let before = frame.prev_pose.world_corners(&scene);
         let input = FrameInput { gbuffer: &frame, corners_now: &now, corners_prev: &before };
         let mut images = [Rgb::new(1, 1, [0.0; 3]), Rgb::new(1, 1, [0.0; 3])];
         for (i, matched) in [false, true].into_iter().enumerate() {
