@@ -18,9 +18,20 @@ struct Frame {
     size: vec4<f32>,
 }
 
+// Affine transforms as their top three rows (row-major); the material's alpha
+// handling (glTF 2.0 §3.9.4) and emission.
 struct Draw {
-    world_from_object: mat4x4<f32>,
-    prev_world_from_object: mat4x4<f32>,
+    world_from_object: array<vec4<f32>, 3>,
+    prev_world_from_object: array<vec4<f32>, 3>,
+    // x: alpha cutoff (MASK), y: mode (0 OPAQUE, 1 MASK, 2 BLEND), z: 1 if double-sided.
+    material: vec4<f32>,
+    // rgb: emissive factor (linear).
+    emissive: vec4<f32>,
+}
+
+fn affine(rows: array<vec4<f32>, 3>, p: vec3<f32>) -> vec4<f32> {
+    let h = vec4<f32>(p, 1.0);
+    return vec4<f32>(dot(rows[0], h), dot(rows[1], h), dot(rows[2], h), 1.0);
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -47,15 +58,15 @@ fn vs_main(
     // mesh, the previous skinned/morphed vertex for a deforming one.
     @location(3) prev_position: vec3<f32>,
 ) -> VsOut {
-    let world = draw.world_from_object * vec4<f32>(position, 1.0);
-    let prev_world = draw.prev_world_from_object * vec4<f32>(prev_position, 1.0);
+    let world = affine(draw.world_from_object, position);
+    let prev_world = affine(draw.prev_world_from_object, prev_position);
     var out: VsOut;
     out.cur_clip = frame.clip_from_world[view] * world;
     out.prev_clip = frame.prev_clip_from_world[view] * prev_world;
     out.clip = out.cur_clip;
     // Normals: the upper 3×3 (uniform scale assumed; renormalised per fragment).
-    let m = draw.world_from_object;
-    out.normal_world = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz) * normal;
+    let r = draw.world_from_object;
+    out.normal_world = vec3<f32>(dot(r[0].xyz, normal), dot(r[1].xyz, normal), dot(r[2].xyz, normal));
     out.uv = uv;
     out.depth_m = -(frame.view_from_world[view] * world).z;
     return out;
@@ -76,13 +87,32 @@ fn srgb_encode(c: vec3<f32>) -> vec3<f32> {
 @fragment
 fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> FsOut {
     let texel = textureSample(base_colour, base_sampler, in.uv);
+    // Single-sided materials show their front faces only (glTF 2.0 §3.9.6).
+    if (!front && draw.material.z < 0.5) {
+        discard;
+    }
     var n = normalize(in.normal_world);
     if (!front) {
         n = -n;
     }
+    // §3.9.4: OPAQUE ignores alpha; MASK draws, fully opaque, where alpha ≥ the
+    // cutoff and nothing elsewhere; BLEND's alpha is the coverage the composite
+    // blends the passthrough by (nothing drawn at zero alpha, so no depth or
+    // motion is written for an invisible surface).
+    var alpha = clamp(texel.a, 0.0, 1.0);
+    let mode = draw.material.y;
+    if (mode < 0.5) {
+        alpha = 1.0;
+    } else if (mode < 1.5) {
+        if (alpha < draw.material.x) {
+            discard;
+        }
+        alpha = 1.0;
+    } else if (alpha < 0.5 / 255.0) {
+        discard;
+    }
     let ambient = frame.light.w;
-    let lit = texel.rgb * (ambient + (1.0 - ambient) * max(dot(n, frame.light.xyz), 0.0));
-    let alpha = clamp(texel.a, 0.0, 1.0);
+    let lit = texel.rgb * (ambient + (1.0 - ambient) * max(dot(n, frame.light.xyz), 0.0)) + draw.emissive.rgb;
     var out: FsOut;
     out.colour = vec4<f32>(srgb_encode(lit) * alpha, alpha);
     // NDC → pixels: x_px = (ndc.x + 1) / 2 · width (Vulkan NDC +y is down, as rows).

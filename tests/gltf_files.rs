@@ -349,3 +349,141 @@ fn gltf_resources_from_a_reader_load_like_the_glb() {
         .to_string();
     assert!(err.contains("other.bin is not in the store"), "{err}");
 }
+
+fn sample_dir(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf_samples").join(rel)
+}
+
+/// Positions' (min, max) over every mesh of `scene`, in object space.
+fn position_range(scene: &Scene) -> ([f32; 3], [f32; 3]) {
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for v in scene.meshes.iter().flat_map(|m| &m.vertices) {
+        for k in 0..3 {
+            lo[k] = lo[k].min(v.position[k]);
+            hi[k] = hi[k].max(v.position[k]);
+        }
+    }
+    (lo, hi)
+}
+
+/// Positions and triangles equal; normals checked against the geometry instead
+/// (`outward_cube_normals`): the sample's fallback buffer holds its normals still
+/// octahedral-encoded (x, y, and z = 1 before the filter), as read (−0.71, 0, 0.71)
+/// on the x = 0 face.
+fn assert_same_geometry(a: &Scene, b: &Scene) {
+    assert_eq!(a.meshes.len(), b.meshes.len());
+    for (x, y) in a.meshes.iter().zip(&b.meshes) {
+        let p = |m: &blind_augment::scene::Mesh| m.vertices.iter().map(|v| v.position).collect::<Vec<_>>();
+        assert_eq!(p(x), p(y));
+        // meshoptimizer's index codec keeps each triangle and its winding but may
+        // start it at another vertex: compare triangles rotated to their least index.
+        let tris = |m: &blind_augment::scene::Mesh| -> Vec<[u32; 3]> {
+            m.indices
+                .chunks_exact(3)
+                .map(|t| {
+                    let r = (0..3).min_by_key(|&i| t[i]).unwrap();
+                    [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
+                })
+                .collect()
+        };
+        assert_eq!(tris(x), tris(y));
+    }
+}
+
+/// The sample's normals against its geometry, to 1/127 (the filter's 8-bit
+/// output): every normal unit and on the front side of each triangle that uses
+/// its vertex (glTF winding: counter-clockwise seen from the front); the first
+/// mesh, a cube quantized to 0…16383, has the outward axis of each face (n = −x on
+/// the x = 0 face, +x on x = 16383, …).
+fn outward_cube_normals(scene: &Scene) {
+    for m in &scene.meshes {
+        for t in m.indices.chunks_exact(3) {
+            let p = |i: u32| glam::Vec3::from(m.vertices[i as usize].position);
+            let face = (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])).normalize();
+            for &i in t {
+                let n = glam::Vec3::from(m.vertices[i as usize].normal);
+                assert!((n.length() - 1.0).abs() < 1.0 / 127.0, "normal {n} not unit");
+                assert!(n.dot(face) > 0.0, "normal {n} behind its triangle {t:?} (face normal {face})");
+            }
+        }
+    }
+    for v in &scene.meshes[0].vertices {
+        let n = v.normal;
+        let k = (0..3).max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs())).unwrap();
+        for j in 0..3 {
+            let want = if j == k { n[k].signum() } else { 0.0 };
+            assert!((n[j] - want).abs() < 1.0 / 127.0, "normal {n:?} at {:?}", v.position);
+        }
+        assert_eq!(v.position[k], if n[k] > 0.0 { 16383.0 } else { 0.0 }, "normal {n:?} at {:?}", v.position);
+    }
+}
+
+/// EXT_meshopt_compression (gltf-pipeline's test file, made by gltfpack: positions
+/// in u16, octahedral-filtered normals in i8, triangle indices): the decoded
+/// positions and indices equal the file's own uncompressed fallback buffer's, the
+/// normals point out of the cube faces, and the file still loads with the fallback
+/// buffer gone (as a file that requires the extension ships). The positions span
+/// the accessor's declared min/max (0…16383), which the encoder wrote.
+#[test]
+fn meshopt_views_decode_to_the_files_own_fallback() {
+    let dir = sample_dir("meshopt-fallback");
+    let text = std::fs::read(dir.join("meshopt-fallback.gltf")).unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&text).unwrap();
+    let read = |rel: &str| std::fs::read(dir.join(rel)).map_err(|e| format!("{rel}: {e}"));
+    let decoded = Scene::from_bytes_with(&text, "meshopt-fallback.gltf", &read).expect("decodes");
+    // The same document reading the fallback: the extension stripped from the views.
+    let mut plain = json.clone();
+    for v in plain["bufferViews"].as_array_mut().unwrap() {
+        v.as_object_mut().unwrap().remove("extensions");
+    }
+    let fallback = Scene::from_bytes_with(&serde_json::to_vec(&plain).unwrap(), "fallback.gltf", &read).expect("plain");
+    assert_same_geometry(&fallback, &decoded);
+    outward_cube_normals(&decoded);
+    assert_eq!(decoded.meshes.iter().map(|m| m.indices.len() / 3).sum::<usize>(), 60);
+    // Without the fallback buffer (no uri), and the extension required.
+    let mut bare = json.clone();
+    bare["buffers"][1].as_object_mut().unwrap().remove("uri");
+    bare["extensionsRequired"] = serde_json::json!(["KHR_mesh_quantization", "EXT_meshopt_compression"]);
+    let alone = Scene::from_bytes_with(&serde_json::to_vec(&bare).unwrap(), "bare.gltf", &read).expect("no fallback");
+    assert_same(&decoded, &alone);
+    assert_eq!(position_range(&alone), ([0.0; 3], [16383.0; 3]));
+    // A damaged stream is refused naming the view, never a panic.
+    let mut bytes = std::fs::read(dir.join("meshopt-fallback.bin")).unwrap();
+    bytes[0] ^= 0xff;
+    let broken = |rel: &str| if rel == "meshopt-fallback.bin" { Ok(bytes.clone()) } else { read(rel) };
+    let err = Scene::from_bytes_with(&serde_json::to_vec(&bare).unwrap(), "broken.gltf", &broken)
+        .expect_err("damaged header")
+        .to_string();
+    assert!(err.contains("broken.gltf") && err.contains("buffer view 0"), "{err}");
+}
+
+/// KHR_meshopt_compression (the ratified name; same codecs) from gltf-pipeline,
+/// required and without a fallback, and EXT_meshopt_compression in a `.glb`
+/// written by glTF-Transform: both load, their geometry equals what the
+/// uncompressed data gives (the EXT sample's fallback positions and indices, normals
+/// out of the faces; the Box's declared bounds).
+#[test]
+fn meshopt_files_from_two_packers_load() {
+    let dir = sample_dir("meshopt-no-fallback-khr");
+    let khr = Scene::load(&dir.join("meshopt-no-fallback.gltf")).expect("KHR_meshopt_compression");
+    let ext_dir = sample_dir("meshopt-fallback");
+    let read = |rel: &str| std::fs::read(ext_dir.join(rel)).map_err(|e| format!("{rel}: {e}"));
+    let mut plain: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(ext_dir.join("meshopt-fallback.gltf")).unwrap()).unwrap();
+    for v in plain["bufferViews"].as_array_mut().unwrap() {
+        v.as_object_mut().unwrap().remove("extensions");
+    }
+    let fallback = Scene::from_bytes_with(&serde_json::to_vec(&plain).unwrap(), "fallback.gltf", &read).expect("plain");
+    assert_same_geometry(&fallback, &khr);
+    outward_cube_normals(&khr);
+
+    let bytes = std::fs::read(sample_dir("BoxMeshopt/BoxMeshopt.glb")).unwrap();
+    let (json, _) = split(&bytes);
+    let boxed = Scene::from_glb(&bytes, "BoxMeshopt.glb").expect("glTF-Transform's meshopt box");
+    check_drawable(&boxed, &"BoxMeshopt.glb");
+    let pos =
+        &json["accessors"][json["meshes"][0]["primitives"][0]["attributes"]["POSITION"].as_u64().unwrap() as usize];
+    let f = |k: &str| -> [f32; 3] { std::array::from_fn(|i| pos[k][i].as_f64().unwrap() as f32) };
+    assert!(pos.get("normalized").is_none_or(|n| n == false), "raw positions expected: {pos}");
+    assert_eq!(position_range(&boxed), (f("min"), f("max")));
+}

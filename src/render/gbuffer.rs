@@ -7,7 +7,7 @@ use crate::gpu::{
     Buffer, GpuContext, GpuError, GraphicsDesc, GraphicsPipeline, Image, MultiviewTarget, Texture, VertexAttribute,
 };
 use crate::model::Rect;
-use crate::scene::{Pose, Scene, Vertex};
+use crate::scene::{AlphaMode, Pose, Scene, Vertex};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
@@ -33,14 +33,27 @@ const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 416);
 const _: () = assert!(std::mem::offset_of!(FrameUniforms, light) == 384);
 
 /// Push constants of `gbuffer.wgsl` (`Draw`): 128 bytes, the guaranteed minimum
-/// `maxPushConstantsSize` (Vulkan spec, Required Limits).
+/// `maxPushConstantsSize` (Vulkan spec, Required Limits). Transforms are affine
+/// (glTF node matrices decompose into TRS, §5.25), so each is its top three rows.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct DrawPush {
-    world_from_object: [f32; 16],
-    prev_world_from_object: [f32; 16],
+    world_from_object: [[f32; 4]; 3],
+    prev_world_from_object: [[f32; 4]; 3],
+    /// x: alpha cutoff (MASK), y: alpha mode (0 opaque, 1 mask, 2 blend),
+    /// z: 1 if double-sided.
+    material: [f32; 4],
+    /// rgb: emissive (linear).
+    emissive: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<DrawPush>() == 128);
+const _: () = assert!(std::mem::offset_of!(DrawPush, material) == 96);
+
+/// The top three rows of an affine matrix (row-major), as `Draw` holds them.
+fn affine_rows(m: &Mat4) -> [[f32; 4]; 3] {
+    let r = m.transpose().to_cols_array_2d();
+    [r[0], r[1], r[2]]
+}
 
 /// A pinhole eye: intrinsics in eye-buffer pixels and its pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,6 +101,8 @@ pub struct GBufferFrame {
 
 struct GpuMesh<'a> {
     material: usize,
+    /// `DrawPush::material` and `emissive` of its material.
+    material_push: [[f32; 4]; 2],
     vertices: Buffer<'a>,
     indices: Buffer<'a>,
     count: u32,
@@ -182,7 +197,15 @@ impl<'a> GBufferPass<'a> {
                     )?);
                 }
             }
+            let mat = scene.materials.get(m.material).cloned().unwrap_or_else(crate::scene::Material::fallback);
+            let (cutoff, mode) = match mat.alpha {
+                AlphaMode::Opaque => (0.0, 0.0),
+                AlphaMode::Mask { cutoff } => (cutoff, 1.0),
+                AlphaMode::Blend => (0.0, 2.0),
+            };
+            let e = mat.emissive.map(|c| c.clamp(0.0, 1.0e4));
             meshes.push(GpuMesh {
+                material_push: [[cutoff, mode, mat.double_sided as u8 as f32, 0.0], [e[0], e[1], e[2], 0.0]],
                 deformed,
                 vertex_count: m.vertices.len(),
                 material: m.material,
@@ -274,8 +297,18 @@ impl<'a> GBufferPass<'a> {
             else {
                 continue;
             };
-            let push =
-                DrawPush { world_from_object: now.to_cols_array(), prev_world_from_object: prev.to_cols_array() };
+            if !is_affine(now) || !is_affine(prev) {
+                return Err(GpuError::Input {
+                    input: "g-buffer frame",
+                    problem: format!("mesh {mi}: a projective world_from_object (glTF transforms are affine)"),
+                });
+            }
+            let push = DrawPush {
+                world_from_object: affine_rows(now),
+                prev_world_from_object: affine_rows(prev),
+                material: m.material_push[0],
+                emissive: m.material_push[1],
+            };
             match (
                 m.deformed.get(slot),
                 deformed_of(&frame.pose, mi, m.vertex_count),
@@ -311,6 +344,12 @@ impl<'a> GBufferPass<'a> {
         self.target.record_end(cmd);
         Ok(())
     }
+}
+
+/// Whether `m`'s bottom row is (0, 0, 0, 1) to f32 rounding.
+fn is_affine(m: &Mat4) -> bool {
+    let r = m.row(3);
+    r.x.abs() < 1e-6 && r.y.abs() < 1e-6 && r.z.abs() < 1e-6 && (r.w - 1.0).abs() < 1e-6
 }
 
 /// Mesh `mi`'s deformed vertices in `pose`, when it has as many as the mesh.

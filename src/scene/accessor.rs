@@ -17,6 +17,9 @@ pub(super) struct Data<'a> {
     pub root: &'a json::Root,
     /// Each buffer's bytes, or why they could not be had (raised where read).
     pub buffers: &'a [Result<Vec<u8>, String>],
+    /// Buffer views stored compressed (EXT_meshopt_compression), decoded: read
+    /// in place of their (fallback or absent) uncompressed bytes.
+    pub decoded: &'a std::collections::HashMap<usize, Vec<u8>>,
 }
 
 fn component_size(c: ComponentType) -> usize {
@@ -89,6 +92,9 @@ impl Data<'_> {
     /// The bytes of buffer view `ix` and its stride, checked against its buffer.
     fn view(&self, ix: usize, what: &str) -> Result<(&[u8], Option<usize>), String> {
         let view = self.root.buffer_views.get(ix).ok_or_else(|| format!("{what}: buffer view {ix} does not exist"))?;
+        if let Some(bytes) = self.decoded.get(&ix) {
+            return Ok((bytes, view.byte_stride.map(|s| s.0)));
+        }
         let buffer = view.buffer.value();
         let data = match self.buffers.get(buffer) {
             Some(Ok(d)) => d,

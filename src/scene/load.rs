@@ -8,8 +8,8 @@
 
 use super::accessor::Data;
 use super::{
-    invalid, Channel, Deform, Material, Mesh, MorphTarget, Node, Property, Scene, SceneError, Skin, TextureData, Trs,
-    Vertex, WeightChannel,
+    invalid, AlphaMode, Channel, Deform, Material, Mesh, MorphTarget, Node, Property, Scene, SceneError, Skin,
+    TextureData, Trs, Vertex, WeightChannel,
 };
 use glam::{Mat4, Quat, Vec2, Vec3};
 use gltf::json;
@@ -21,14 +21,14 @@ use std::sync::Arc;
 
 /// Extensions a file may list in `extensionsRequired` and still be drawn as its
 /// author meant: quantized attributes are read by `accessor` (any component type,
-/// normalized or not) and texture transforms are applied to the UVs at load.
-pub const SUPPORTED_REQUIRED: &[&str] = &["KHR_mesh_quantization", "KHR_texture_transform"];
+/// normalized or not), texture transforms are applied to the UVs at load, and
+/// meshopt-compressed buffer views are decoded at load (`meshopt`).
+pub const SUPPORTED_REQUIRED: &[&str] =
+    &["KHR_mesh_quantization", "KHR_texture_transform", "EXT_meshopt_compression", "KHR_meshopt_compression"];
 
 /// Compressed-data extensions and what each would need; refused by name when required.
 const COMPRESSION: &[(&str, &str)] = &[
     ("KHR_draco_mesh_compression", "Draco-compressed meshes"),
-    ("EXT_meshopt_compression", "meshoptimizer-compressed buffers"),
-    ("KHR_meshopt_compression", "meshoptimizer-compressed buffers"),
     ("KHR_texture_basisu", "KTX2 / Basis Universal textures"),
     ("EXT_texture_webp", "WebP textures"),
     ("EXT_texture_avif", "AVIF textures"),
@@ -191,6 +191,9 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     }
     let mut notes = Vec::new();
     normalise(&mut value, &mut notes);
+    // The JSON as read: buffer-view extensions (meshopt) are read from it, the
+    // typed document keeps only what the glTF crate models.
+    let raw_json = value.clone();
     let mut root: json::Root =
         serde_json::from_value(value).map_err(|e| invalid(name, format!("not glTF 2.0 JSON: {e}")))?;
     if !root.asset.version.starts_with("2.") {
@@ -258,7 +261,8 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             }
         }));
     }
-    let data = Data { root: &root, buffers: &buffers };
+    let decoded = super::meshopt::decode_views(&raw_json, &buffers).map_err(|e| invalid(name, e))?;
+    let data = Data { root: &root, buffers: &buffers, decoded: &decoded };
     let err = |e: String| invalid(name, e);
 
     // Nodes and their hierarchy: one parent each, no cycles (glTF 2.0 §3.5.3: the
@@ -337,6 +341,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     let mut textures: Vec<Arc<TextureData>> = Vec::new();
     let mut image_texture: HashMap<usize, usize> = HashMap::new();
     let mut material_uv: Vec<UvSet> = Vec::new();
+    let mut emissive_textures = 0;
     for (i, m) in root.materials.iter().enumerate() {
         let pbr = &m.pbr_metallic_roughness;
         let base_colour = pbr.base_color_factor.0;
@@ -363,11 +368,35 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             });
             uv = UvSet::from_info(info, name, i)?;
         }
-        materials.push(Material { base_colour, texture });
+        // glTF 2.0 §3.9.4: alphaCutoff applies in MASK mode only, default 0.5.
+        let alpha = match m.alpha_mode {
+            Checked::Valid(json::material::AlphaMode::Opaque) => AlphaMode::Opaque,
+            Checked::Valid(json::material::AlphaMode::Mask) => {
+                let cutoff = m.alpha_cutoff.map_or(0.5, |c| c.0);
+                if !cutoff.is_finite() || cutoff < 0.0 {
+                    return Err(invalid(name, format!("material {i}: alphaCutoff {cutoff} is not a number ≥ 0")));
+                }
+                AlphaMode::Mask { cutoff }
+            }
+            Checked::Valid(json::material::AlphaMode::Blend) => AlphaMode::Blend,
+            Checked::Invalid => return Err(invalid(name, format!("material {i}: invalid alphaMode"))),
+        };
+        let emissive = m.emissive_factor.0;
+        if emissive.iter().any(|c| !c.is_finite()) {
+            return Err(invalid(name, format!("material {i}: non-finite emissiveFactor")));
+        }
+        if m.emissive_texture.is_some() {
+            emissive_textures += 1;
+        }
+        materials.push(Material { base_colour, texture, alpha, double_sided: m.double_sided, emissive });
         material_uv.push(uv);
     }
     let default_material = materials.len();
-    materials.push(Material { base_colour: [0.8, 0.8, 0.8, 1.0], texture: None });
+    if emissive_textures > 0 {
+        notes
+            .push(format!("{emissive_textures} emissive textures not read: their materials emit their emissiveFactor"));
+    }
+    materials.push(Material::fallback());
     material_uv.push(UvSet::default());
 
     // Skins (glTF 2.0 §5.28): joints and inverse bind matrices (identity when

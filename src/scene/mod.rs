@@ -9,6 +9,7 @@
 
 mod accessor;
 mod load;
+mod meshopt;
 
 pub use load::SUPPORTED_REQUIRED;
 
@@ -133,6 +134,39 @@ pub struct Material {
     pub base_colour: [f32; 4],
     /// Index into `Scene::textures` (sRGB RGBA8).
     pub texture: Option<usize>,
+    pub alpha: AlphaMode,
+    /// Back faces drawn (lit with the flipped normal); else culled (glTF 2.0 §3.9.6).
+    pub double_sided: bool,
+    /// Linear RGB added to the lit colour (glTF emissiveFactor; an emissive
+    /// texture is not read).
+    pub emissive: [f32; 3],
+}
+
+impl Material {
+    /// glTF's default material (§3.9.1): white, opaque, single-sided; drawn grey
+    /// here so unlit geometry stays visible over passthrough.
+    pub fn fallback() -> Self {
+        Self {
+            base_colour: [0.8, 0.8, 0.8, 1.0],
+            texture: None,
+            alpha: AlphaMode::Opaque,
+            double_sided: false,
+            emissive: [0.0; 3],
+        }
+    }
+}
+
+/// How a material's alpha covers (glTF 2.0 §3.9.4, `alphaMode`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlphaMode {
+    /// Alpha ignored: fully opaque.
+    Opaque,
+    /// Drawn where alpha ≥ the cutoff, fully opaque there; nothing elsewhere.
+    Mask { cutoff: f32 },
+    /// Alpha is coverage: the composite blends the surface into the passthrough
+    /// by it. The G-buffer keeps the nearest surface (no sorting of layered
+    /// transparent surfaces).
+    Blend,
 }
 
 #[derive(Clone, Debug)]

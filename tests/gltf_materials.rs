@@ -1,0 +1,132 @@
+//! The material properties the matched effects see, through the G-buffer on
+//! lavapipe: alpha modes (glTF 2.0 §3.9.4: OPAQUE ignores alpha, MASK draws fully
+//! opaque where alpha ≥ the cutoff and nothing elsewhere, BLEND's alpha is the
+//! coverage the composite blends by), single- and double-sided faces (§3.9.6),
+//! and the emissive factor.
+
+mod common;
+
+use base64::Engine;
+use blind_augment::gpu::FrameRing;
+use blind_augment::render::{Eye, GBufferFrame, GBufferPass};
+use blind_augment::scene::{AlphaMode, Scene};
+use glam::{Mat4, Vec3};
+use serde_json::json;
+
+const W: u32 = 64;
+const H: u32 = 48;
+
+/// A 1 m quad in the z = 0 plane with one material; `facing_camera` winds it
+/// counter-clockwise seen from +z (glTF's front face, §3.7.2.1), else clockwise.
+fn quad(material: serde_json::Value, facing_camera: bool) -> Vec<u8> {
+    let p: [[f32; 3]; 4] = [[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.5, 0.5, 0.0], [-0.5, 0.5, 0.0]];
+    let idx: [u16; 6] = if facing_camera { [0, 1, 2, 0, 2, 3] } else { [0, 2, 1, 0, 3, 2] };
+    let mut bin: Vec<u8> = bytemuck::cast_slice(&p).to_vec();
+    bin.extend_from_slice(bytemuck::cast_slice(&idx));
+    let uri =
+        format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin));
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [material],
+        "buffers": [{"uri": uri, "byteLength": bin.len()}],
+        "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 12}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-0.5, -0.5, 0.0], "max": [0.5, 0.5, 0.0]},
+            {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}
+        ]
+    });
+    serde_json::to_vec(&doc).expect("json")
+}
+
+/// The centre pixel's (premultiplied colour, coverage written to the motion
+/// target's w) with the quad 2 m ahead, both eyes; `None` if the pixel differs
+/// between the eyes (it should not: the quad spans the centre of both).
+fn centre(ctx: &blind_augment::gpu::GpuContext, scene: &Scene) -> ([f32; 4], f32) {
+    let pass = GBufferPass::new(ctx, scene, W, H, 1).expect("pass");
+    let mut ring = FrameRing::new(ctx, 1, 256).expect("ring");
+    let eye = Eye {
+        focal_px: 40.0,
+        centre_px: [W as f32 / 2.0, H as f32 / 2.0],
+        view_from_world: Mat4::from_translation(Vec3::new(0.0, 0.0, 2.0)).inverse(),
+    };
+    let frame = GBufferFrame {
+        eyes: [eye, eye],
+        prev_eyes: [eye, eye],
+        pose: scene.pose_at(0.0, Mat4::IDENTITY),
+        prev_pose: scene.pose_at(0.0, Mat4::IDENTITY),
+        light_dir: Vec3::Z,
+        ambient: 1.0,
+    };
+    let (slot, cmd) = ring.begin().expect("begin");
+    pass.record(cmd, slot, &frame).expect("record");
+    ring.submit(slot).expect("submit");
+    ring.wait_all().expect("wait");
+    let f16 = |b: Vec<u8>| -> Vec<f32> {
+        b.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect()
+    };
+    let colour = f16(pass.colour().download().expect("colour"));
+    let motion = f16(pass.motion().download().expect("motion"));
+    let at = 4 * ((H / 2) * W + W / 2) as usize;
+    let n = (W * H) as usize * 4;
+    assert_eq!(colour[at..at + 4], colour[n + at..n + at + 4], "eyes differ");
+    ([colour[at], colour[at + 1], colour[at + 2], colour[at + 3]], motion[at + 3])
+}
+
+fn load(material: serde_json::Value, facing_camera: bool) -> Scene {
+    Scene::from_glb(&quad(material, facing_camera), "quad.gltf").expect("quad loads")
+}
+
+/// Alpha 0.3 under each mode. Tolerance 2e-3: f16 storage of values ≤ 1 (step ≤ 4.9e-4)
+/// and 8-bit texels of the baked base colour (0.3 → 77/255 = 0.302).
+#[test]
+fn alpha_modes_cover_as_the_spec_says() {
+    let Some(ctx) = common::gpu_context("alpha_modes_cover_as_the_spec_says") else { return };
+    let grey = |mode: &str, cutoff: Option<f32>| {
+        let mut m = json!({"pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 0.3]}, "alphaMode": mode});
+        if let Some(c) = cutoff {
+            m["alphaCutoff"] = json!(c);
+        }
+        m
+    };
+    let opaque = load(grey("OPAQUE", None), true);
+    assert_eq!(opaque.materials[0].alpha, AlphaMode::Opaque);
+    let (c, cover) = centre(&ctx, &opaque);
+    assert!((c[3] - 1.0).abs() < 2e-3 && cover == 1.0, "OPAQUE ignores alpha: {c:?}, cover {cover}");
+
+    let (c, cover) = centre(&ctx, &load(grey("MASK", None), true));
+    assert!(c[3] == 0.0 && cover == 0.0, "MASK at the default cutoff 0.5 hides alpha 0.3: {c:?}, cover {cover}");
+    let (c, cover) = centre(&ctx, &load(grey("MASK", Some(0.2)), true));
+    assert!((c[3] - 1.0).abs() < 2e-3 && cover == 1.0, "MASK at cutoff 0.2 draws alpha 0.3 opaque: {c:?}");
+
+    let (c, cover) = centre(&ctx, &load(grey("BLEND", None), true));
+    assert!((c[3] - 0.302).abs() < 2e-3 && cover == 1.0, "BLEND's alpha is its coverage: {c:?}");
+    // Premultiplied: white lit at ambient 1 is white, times alpha.
+    assert!((c[0] - c[3]).abs() < 2e-3, "premultiplied colour {c:?}");
+    let msgs = ctx.take_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// A single-sided quad seen from behind is not drawn; double-sided it is.
+#[test]
+fn back_faces_drawn_only_when_double_sided() {
+    let Some(ctx) = common::gpu_context("back_faces_drawn_only_when_double_sided") else { return };
+    let (_, cover) = centre(&ctx, &load(json!({}), true));
+    assert_eq!(cover, 1.0, "a single-sided quad facing the camera is drawn");
+    let (_, cover) = centre(&ctx, &load(json!({}), false));
+    assert_eq!(cover, 0.0, "a single-sided quad facing away is culled");
+    let (_, cover) = centre(&ctx, &load(json!({"doubleSided": true}), false));
+    assert_eq!(cover, 1.0, "a double-sided quad facing away is drawn");
+}
+
+/// Emission adds to the lit colour: black base colour, emissive (0.5, 0, 0) →
+/// sRGB-encoded red 0.7354, green and blue 0. Tolerance 2e-3 (f16 storage).
+#[test]
+fn emissive_factor_adds_light() {
+    let Some(ctx) = common::gpu_context("emissive_factor_adds_light") else { return };
+    let m =
+        json!({"pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]}, "emissiveFactor": [0.5, 0.0, 0.0]});
+    let (c, _) = centre(&ctx, &load(m, true));
+    assert!((c[0] - 0.7354).abs() < 2e-3 && c[1].abs() < 2e-3 && c[2].abs() < 2e-3, "{c:?}");
+}
