@@ -508,8 +508,7 @@ impl<'a> GraphicsPipeline<'a> {
         &self,
         cmd: vk::CommandBuffer,
         material: usize,
-        vertices: &Buffer<'_>,
-        second: Option<(&Buffer<'_>, u64)>,
+        vertices: &[(&Buffer<'_>, u64)],
         indices: &Buffer<'_>,
         index_count: u32,
         push: &[u8],
@@ -529,10 +528,10 @@ impl<'a> GraphicsPipeline<'a> {
                     push,
                 );
             }
-            d.cmd_bind_vertex_buffers(cmd, 0, &[vertices.buffer], &[0]);
-            if let Some((b, offset)) = second {
-                d.cmd_bind_vertex_buffers(cmd, 1, &[b.buffer], &[offset]);
-            }
+            // Binding i reads vertices[i] from its byte offset.
+            let buffers: Vec<vk::Buffer> = vertices.iter().map(|(b, _)| b.buffer).collect();
+            let offsets: Vec<u64> = vertices.iter().map(|(_, o)| *o).collect();
+            d.cmd_bind_vertex_buffers(cmd, 0, &buffers, &offsets);
             d.cmd_bind_index_buffer(cmd, indices.buffer, 0, vk::IndexType::UINT32);
             d.cmd_draw_indexed(cmd, index_count, 1, 0, 0, 0);
         }

@@ -323,8 +323,7 @@ impl<'a> GBufferPass<'a> {
                     self.pipeline.record_draw(
                         cmd,
                         m.material,
-                        buf,
-                        Some((buf, half)),
+                        &[(buf, 0), (buf, half)],
                         &m.indices,
                         m.count,
                         bytemuck::bytes_of(&push),
@@ -333,8 +332,7 @@ impl<'a> GBufferPass<'a> {
                 _ => self.pipeline.record_draw(
                     cmd,
                     m.material,
-                    &m.vertices,
-                    Some((&m.vertices, 0)),
+                    &[(&m.vertices, 0), (&m.vertices, 0)],
                     &m.indices,
                     m.count,
                     bytemuck::bytes_of(&push),

@@ -503,7 +503,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             });
             let deform = read_deform(&data, prim, n, &root.meshes[mi], &skins, positions.len(), &what)
                 .map_err(|e| invalid(name, e))?;
-            unskinned |= n.skin.is_some() && deform.as_ref().is_none_or(|d| d.skin.is_none());
+            unskinned |= n.skin.is_some() && deform.as_ref().map_or(true, |d| d.skin.is_none());
             meshes.push(Mesh { node: ni, material, vertices, indices, bounds: (lo, hi), deform: deform.map(Box::new) });
         }
     }

@@ -165,8 +165,8 @@ pub fn render_sequence(
             light_dir: blind_augment::render::gbuffer::SCENE_LIGHT_DIR,
             ambient: blind_augment::render::gbuffer::SCENE_AMBIENT,
         };
-        let now = frame.pose.world_corners(&scene);
-        let before = frame.prev_pose.world_corners(&scene);
+        let now = frame.pose.world_corners(scene);
+        let before = frame.prev_pose.world_corners(scene);
         let input = FrameInput { gbuffer: &frame, corners_now: &now, corners_prev: &before };
         let mut images = [Rgb::new(1, 1, [0.0; 3]), Rgb::new(1, 1, [0.0; 3])];
         for (i, matched) in [false, true].into_iter().enumerate() {
