@@ -75,11 +75,17 @@ struct Setup {
 /// The toy at 2 m, scaled so its projected bounds cover `coverage` of eye 0; the
 /// head moving 0.6 m/s sideways and the toy animating.
 fn setup(scene: &Scene, r: &StereoRenderer<'_>, f: f32, coverage: f64) -> (Setup, f64) {
+    setup_from(scene, r, f, coverage, Mat4::IDENTITY)
+}
+
+/// `setup` with `base` applied to the scene before it is scaled and placed.
+fn setup_from(scene: &Scene, r: &StereoRenderer<'_>, f: f32, coverage: f64, base: Mat4) -> (Setup, f64) {
     let (w, h) = r.size();
     let t = 0.7f32;
     let dt = 1.0 / 45.0;
     let build = |scale: f32| {
-        let place = Mat4::from_translation(Vec3::new(0.0, 0.0, -OBJECT_DEPTH_M)) * Mat4::from_scale(Vec3::splat(scale));
+        let place =
+            Mat4::from_translation(Vec3::new(0.0, 0.0, -OBJECT_DEPTH_M)) * Mat4::from_scale(Vec3::splat(scale)) * base;
         Setup {
             frame: GBufferFrame {
                 eyes: eyes(0.6 * t, f, w, h),
@@ -173,6 +179,11 @@ fn main() {
         worker_on_off(&ctx, &scene);
         return;
     }
+    // FRAME_BENCH_SCENES=1: only the glTF scale rows (FRAME_BENCH_GLTF: more files).
+    if std::env::var("FRAME_BENCH_SCENES").is_ok_and(|v| v == "1") {
+        scene_rows(&ctx, &snap);
+        return;
+    }
     // FRAME_BENCH_KERNEL=1: only the DoF kernel-shape rows (Gaussian vs disc).
     if std::env::var("FRAME_BENCH_KERNEL").is_ok_and(|v| v == "1") {
         kernel_rows(&ctx, &scene);
@@ -205,6 +216,7 @@ fn main() {
         }
     }
     if !quick {
+        scene_rows(&ctx, &snap);
         near_focus_rows(&ctx, &scene);
         kernel_rows(&ctx, &scene);
         settings_table(&ctx, &scene, &snap);
@@ -504,4 +516,118 @@ fn error_in(a: &[[f32; 4]], b: &[[f32; 4]], rect: Rect, w: usize) -> (f64, f64) 
     let k = ((errs.len() - 1) as f64 * 0.99) as usize;
     let p99 = *errs.select_nth_unstable_by(k, |x, y| x.total_cmp(y)).1;
     (mae, p99)
+}
+
+/// `n` unit cubes, each its own node, mesh and primitive (one draw each), on a
+/// grid: the many-primitive scene a CAD export or a kit-bashed room gives.
+fn many_primitives(n: usize) -> Scene {
+    use base64::Engine as _;
+    let (p, idx) = {
+        let mut p: Vec<[f32; 3]> = Vec::new();
+        let mut idx: Vec<u16> = Vec::new();
+        // 6 faces × 4 vertices (flat normals come from the loader), CCW outward.
+        let faces: [([f32; 3], [f32; 3], [f32; 3]); 6] = [
+            ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+            ([-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]),
+            ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]),
+            ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+            ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+            ([0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]),
+        ];
+        for (k, (nrm, u, v)) in faces.iter().enumerate() {
+            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                p.push(std::array::from_fn(|i| 0.5 * (nrm[i] + a * u[i] + b * v[i])));
+            }
+            let o = (4 * k) as u16;
+            idx.extend_from_slice(&[o, o + 1, o + 2, o, o + 2, o + 3]);
+        }
+        (p, idx)
+    };
+    let mut bin: Vec<u8> = bytemuck::cast_slice(&p).to_vec();
+    bin.extend_from_slice(bytemuck::cast_slice(&idx));
+    let uri =
+        format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin));
+    let side = (n as f64).cbrt().ceil() as usize;
+    let nodes: Vec<serde_json::Value> = (0..n)
+        .map(|i| {
+            let (x, y, z) = (i % side, (i / side) % side, i / (side * side));
+            serde_json::json!({"mesh": i, "translation": [2.0 * x as f32, 2.0 * y as f32, 2.0 * z as f32]})
+        })
+        .collect();
+    let meshes: Vec<serde_json::Value> = (0..n)
+        .map(|_| serde_json::json!({"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}))
+        .collect();
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": (0..n).collect::<Vec<_>>()}],
+        "nodes": nodes, "meshes": meshes,
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.7, 0.5, 0.3, 1.0]}}],
+        "buffers": [{"uri": uri, "byteLength": bin.len()}],
+        "bufferViews": [{"buffer": 0, "byteLength": 288}, {"buffer": 0, "byteOffset": 288, "byteLength": 72}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 24, "type": "VEC3", "min": [-0.5, -0.5, -0.5], "max": [0.5, 0.5, 0.5]},
+            {"bufferView": 1, "componentType": 5123, "count": 36, "type": "SCALAR"}
+        ]
+    });
+    Scene::from_glb(&serde_json::to_vec(&doc).expect("json"), "many_primitives.gltf").expect("generated scene")
+}
+
+/// glTF scenes at scale, at the Quest 3 eye (1680×1760) with the object covering
+/// ~30% of it: load time, the CPU time of a frame's two poses (`Scene::pose_at`,
+/// now and one frame ago: node matrices, skinning, morphing), and the GPU's
+/// G-buffer and matched-frame time. Scenes: the bundled toy, 500 single-primitive
+/// cubes, and each file in FRAME_BENCH_GLTF (paths separated by `:`; e.g. a large
+/// textured model and a skinned one from a git mirror).
+fn scene_rows(ctx: &GpuContext, snap: &Snapshot) {
+    use std::time::Instant;
+    let mut scenes: Vec<(String, Box<dyn Fn() -> Scene>)> = vec![
+        ("assets/toy.glb".into(), Box::new(|| Scene::from_glb(TOY, "toy.glb").expect("toy"))),
+        ("500 cubes, one primitive each (generated)".into(), Box::new(|| many_primitives(500))),
+    ];
+    for path in std::env::var("FRAME_BENCH_GLTF").unwrap_or_default().split(':').filter(|p| !p.is_empty()) {
+        let path = std::path::PathBuf::from(path);
+        scenes.push((
+            path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned()),
+            Box::new(move || Scene::load(&path).expect("FRAME_BENCH_GLTF file loads")),
+        ));
+    }
+    println!("\n### glTF scenes at scale (1680×1760, ~30% coverage)\n");
+    println!("| scene | primitives | triangles | deforming vertices | texels | load ms | two poses ms (CPU) | G-buffer ms | matched frame ms |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let (w, h) = (1680u32, 1760u32);
+    for (name, make) in &scenes {
+        let start = Instant::now();
+        let scene = make();
+        let load_ms = start.elapsed().as_secs_f64() * 1e3;
+        let tris: usize = scene.meshes.iter().map(|m| m.indices.len() / 3).sum();
+        let deforming: usize = scene.meshes.iter().filter(|m| m.deform.is_some()).map(|m| m.vertices.len()).sum();
+        let texels: u64 = scene.textures.iter().map(|t| t.width as u64 * t.height as u64).sum();
+        // Unit size, centred: every scene placed alike.
+        let c = scene.world_corners(0.0, Mat4::IDENTITY);
+        let (lo, hi) =
+            c.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(a, b), p| (a.min(*p), b.max(*p)));
+        let base = Mat4::from_scale(Vec3::splat(1.0 / (hi - lo).max_element().max(1e-6)))
+            * Mat4::from_translation(-(lo + hi) * 0.5);
+        let mut poses = vec![];
+        for k in 0..21 {
+            let t = 0.7 + k as f64 / 45.0;
+            let start = Instant::now();
+            let a = scene.pose_at(t, base);
+            let b = scene.pose_at(t - 1.0 / 45.0, base);
+            poses.push(start.elapsed().as_secs_f64() * 1e3);
+            std::hint::black_box((a, b));
+        }
+        poses.sort_by(f64::total_cmp);
+        let (mut r, f) = profiled_renderer(ctx, &scene, w, h);
+        let (s, _) = setup_from(&scene, &r, f, 0.3, base);
+        let m = profile(&mut r, snap, &s, true);
+        println!(
+            "| {name} | {} | {tris} | {deforming} | {texels} | {} | {} | {} | {} |",
+            scene.meshes.len(),
+            ms(load_ms),
+            ms(poses[poses.len() / 2]),
+            ms(m.gbuffer_ms),
+            ms(total(&m)),
+        );
+    }
 }

@@ -802,12 +802,26 @@ fn reach_bound_m(
                 }
                 if let Some(skin) = d.skin.and_then(|s| skins.get(s)) {
                     // A skinned vertex is a convex blend of joint transforms of the
-                    // morphed vertex: |J·IBM·p| ≤ s_J·(‖IBM₃ₓ₃‖_F·r + |IBM_t|) + t_J.
+                    // morphed vertex: |J·IBM·p| ≤ s_J·(‖IBM₃ₓ₃‖_F·r + |IBM_t|) + t_J,
+                    // over the joints its vertices weight (a joint no vertex uses
+                    // never moves one, whatever its matrix).
+                    let mut used = vec![false; skin.joints.len()];
+                    for (js, ws) in d.joints.iter().zip(&d.weights) {
+                        for k in 0..4 {
+                            if ws[k] > 0.0 {
+                                if let Some(u) = used.get_mut(js[k] as usize) {
+                                    *u = true;
+                                }
+                            }
+                        }
+                    }
                     return skin
                         .joints
                         .iter()
                         .zip(&skin.inverse_bind)
-                        .map(|(&j, ibm)| {
+                        .zip(&used)
+                        .filter(|(_, &u)| u)
+                        .map(|((&j, ibm), _)| {
                             let (s, t) = chain(j);
                             let m3 = glam::Mat3::from_mat4(*ibm);
                             let frob =

@@ -169,3 +169,60 @@ fn cubic_spline_translation_follows_the_hermite_formula() {
         assert!((x - want).abs() < 1e-6, "t {t}: {x}, Hermite gives {want}");
     }
 }
+
+/// A skinned triangle whose skin has two joints; joint `bad` has an inverse bind
+/// matrix translating by 1e18 m (as tinygltf's `unassigned-skeleton.gltf` has for
+/// a joint no vertex weights). Every vertex is weighted to joint `used`.
+fn skinned_triangle(used: u16, bad: usize) -> Vec<u8> {
+    let mut bin: Vec<u8> = Vec::new();
+    for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        bin.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    for _ in 0..3 {
+        bin.extend([used, 0, 0, 0].iter().flat_map(|j| j.to_le_bytes()));
+    }
+    for _ in 0..3 {
+        bin.extend([1.0f32, 0.0, 0.0, 0.0].iter().flat_map(|w| w.to_le_bytes()));
+    }
+    for k in 0..2 {
+        let mut m = Mat4::IDENTITY.to_cols_array();
+        if k == bad {
+            m[12] = 1e18;
+        }
+        bin.extend(m.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    let b64 = base64::engine::general_purpose::STANDARD.encode(&bin);
+    let doc = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0, 1, 2]}],
+        "nodes": [{"mesh": 0, "skin": 0}, {}, {}],
+        "skins": [{"joints": [1, 2], "inverseBindMatrices": 3}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "JOINTS_0": 1, "WEIGHTS_0": 2}}]}],
+        "buffers": [{"byteLength": bin.len(), "uri": format!("data:application/octet-stream;base64,{b64}")}],
+        "bufferViews": [
+            {"buffer": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 24},
+            {"buffer": 0, "byteOffset": 60, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 108, "byteLength": 128}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+            {"bufferView": 1, "componentType": 5123, "count": 3, "type": "VEC4"},
+            {"bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC4"},
+            {"bufferView": 3, "componentType": 5126, "count": 2, "type": "MAT4"}
+        ]
+    });
+    serde_json::to_vec(&doc).unwrap()
+}
+
+/// The reach check covers the joints a skin's vertices use, and only those: a
+/// wild matrix on an unused joint moves no vertex; on the used one it is refused.
+#[test]
+fn skin_reach_counts_only_the_joints_vertices_use() {
+    let scene = parse(&skinned_triangle(0, 1), "unused.gltf", Resources::Embedded).expect("unused wild joint");
+    let pose = scene.pose_at(0.0, Mat4::IDENTITY);
+    assert!(pose.is_finite());
+    assert_eq!(pose.deformed[0].as_ref().unwrap()[1].position, [1.0, 0.0, 0.0]);
+    let err = parse(&skinned_triangle(0, 0), "used.gltf", Resources::Embedded).expect_err("used wild joint");
+    assert!(err.to_string().contains("from the origin"), "{err}");
+}

@@ -14,19 +14,24 @@ pub struct SceneArgs {
 }
 
 /// One line per file, tab-separated: the path, `ok` or `refused`, then what is
-/// drawn (meshes, triangles, textures, animation length) and the notes, or the reason.
+/// drawn (meshes and how many deform, triangles, textures, animation channels and
+/// length) and the notes, or the reason.
 pub fn run(args: SceneArgs) -> Result<()> {
     let mut refused = 0;
     for path in &args.files {
         match Scene::load(path) {
             Ok(s) => {
                 let triangles: usize = s.meshes.iter().map(|m| m.indices.len() / 3).sum();
+                let skinned = s.meshes.iter().filter(|m| m.deform.as_ref().is_some_and(|d| d.skin.is_some())).count();
+                let morphed =
+                    s.meshes.iter().filter(|m| m.deform.as_ref().is_some_and(|d| !d.targets.is_empty())).count();
                 let mut line = format!(
-                    "{}\tok\t{} meshes, {triangles} triangles, {} textures, {} animation channels ({:.2} s)",
+                    "{}\tok\t{} meshes ({skinned} skinned, {morphed} morphed), {triangles} triangles, {} textures, {} \
+                     animation channels ({:.2} s)",
                     path.display(),
                     s.meshes.len(),
                     s.textures.len(),
-                    s.channels.len(),
+                    s.channels.len() + s.weight_channels.len(),
                     s.duration_s
                 );
                 for n in &s.notes {
