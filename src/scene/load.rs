@@ -276,7 +276,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             }
             None => Trs {
                 translation: Vec3::from(n.translation.unwrap_or([0.0; 3])),
-                rotation: Quat::from_array(n.rotation.map_or([0.0, 0.0, 0.0, 1.0], |q| q.0)).normalize(),
+                rotation: unit_quat(n.rotation.map_or([0.0, 0.0, 0.0, 1.0], |q| q.0)).unwrap_or(Quat::NAN),
                 scale: Vec3::from(n.scale.unwrap_or([1.0; 3])),
             },
         };
@@ -560,10 +560,11 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             }
             if property == Property::Rotation {
                 // A zero quaternion has no rotation to normalise to (NaN downstream).
-                if values.iter().any(|q| Quat::from_array(*q).length() < 1e-6) {
-                    return Err(invalid(name, format!("{what}: a zero rotation quaternion")));
+                for q in values.iter_mut() {
+                    *q = unit_quat(*q)
+                        .ok_or_else(|| invalid(name, format!("{what}: a zero rotation quaternion")))?
+                        .to_array();
                 }
-                values.iter_mut().for_each(|q| *q = Quat::from_array(*q).normalize().to_array());
             }
             if times_s.is_empty() || values.len() != times_s.len() || times_s.windows(2).any(|w| w[1] < w[0]) {
                 return Err(invalid(
@@ -597,6 +598,19 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
         ));
     }
     Ok(Scene { nodes, meshes, materials, textures, channels, skins, weight_channels, duration_s, notes })
+}
+
+/// `q` scaled to unit length, or `None` for a zero (or non-finite) quaternion. It
+/// is divided by its largest component first: a component above ~1.8e19 squares
+/// past f32's range, and a plain normalisation then yields zeros (a rotation that
+/// collapses the node, and NaN once interpolated).
+fn unit_quat(q: [f32; 4]) -> Option<Quat> {
+    let m = q.iter().fold(0.0f32, |m, c| m.max(c.abs()));
+    if !(m.is_finite() && m > 0.0) {
+        return None;
+    }
+    let u = Quat::from_array(q.map(|c| c / m));
+    (u.length() >= 1e-6).then(|| u.normalize()).filter(|u| u.is_finite())
 }
 
 /// A primitive's skin and morph targets (`None` when it has neither): JOINTS_0 /

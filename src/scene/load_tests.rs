@@ -117,7 +117,7 @@ fn required_extensions_not_implemented_are_refused_by_name() {
             "KHR_draco_mesh_compression",
             "requires KHR_draco_mesh_compression (Draco-compressed meshes), which this build does not decode",
         ),
-        ("EXT_meshopt_compression", "which this build does not decode"),
+        ("EXT_texture_webp", "requires EXT_texture_webp (WebP textures), which this build does not decode"),
         ("KHR_texture_basisu", "KTX2"),
         ("KHR_materials_foo", "requires KHR_materials_foo, which this build does not implement"),
     ] {
