@@ -23,7 +23,8 @@ struct Frame {
 struct Draw {
     world_from_object: array<vec4<f32>, 3>,
     prev_world_from_object: array<vec4<f32>, 3>,
-    // x: alpha cutoff (MASK), y: mode (0 OPAQUE, 1 MASK, 2 BLEND), z: 1 if double-sided.
+    // x: alpha cutoff (MASK), y: mode (0 OPAQUE, 1 MASK, 2 BLEND), z: 1 if double-sided,
+    // w: 1 if unlit (KHR_materials_unlit).
     material: vec4<f32>,
     // rgb: emissive factor (linear).
     emissive: vec4<f32>,
@@ -112,7 +113,12 @@ fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> FsOut {
         discard;
     }
     let ambient = frame.light.w;
-    let lit = texel.rgb * (ambient + (1.0 - ambient) * max(dot(n, frame.light.xyz), 0.0)) + draw.emissive.rgb;
+    var shade = ambient + (1.0 - ambient) * max(dot(n, frame.light.xyz), 0.0);
+    // KHR_materials_unlit: the base colour as authored, whatever the light.
+    if (draw.material.w > 0.5) {
+        shade = 1.0;
+    }
+    let lit = texel.rgb * shade + draw.emissive.rgb;
     var out: FsOut;
     out.colour = vec4<f32>(srgb_encode(lit) * alpha, alpha);
     // NDC → pixels: x_px = (ndc.x + 1) / 2 · width (Vulkan NDC +y is down, as rows).

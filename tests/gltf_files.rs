@@ -38,7 +38,7 @@ fn validator_errors(path: &Path) -> u64 {
 const LIMITATIONS: &[&str] = &[
     "no triangles to draw",
     "which this build does not",
-    "(PNG and JPEG are decoded)",
+    "(PNG, JPEG and WebP are decoded)",
     "is a URL",
     "has no data in the file",
 ];
@@ -616,4 +616,31 @@ fn mutated_skins_morphs_and_meshopt_never_panic() {
     }
     println!("{} mutants: {refused} refused with a reason, {loaded} loaded with finite poses", cases.len());
     assert!(refused > 0 && loaded > 0, "{refused} refused, {loaded} loaded");
+}
+
+/// EXT_texture_webp (gltf-pipeline's test box): the file requiring it loads with
+/// its WebP texture decoded, and the file offering a PNG fallback samples the WebP
+/// (the extension's README: a client that decodes WebP uses it). The WebP is the
+/// PNG re-encoded lossily: same size, and the mean absolute difference over RGB is
+/// below 4/255 (lossy WebP at its default quality keeps PSNR above ~35 dB, a mean
+/// error of a few levels; a wrong or garbled decode differs by tens of levels).
+#[test]
+fn webp_textures_decode() {
+    let dir = sample_dir("webp-box");
+    let required = Scene::load(&dir.join("box-textured-separate.gltf")).expect("EXT_texture_webp required");
+    let fallback = Scene::load(&dir.join("box-textured-with-fallback.gltf")).expect("EXT_texture_webp used");
+    let png = image::open(dir.join("cesium logo.png")).expect("png").to_rgba8();
+    for scene in [&required, &fallback] {
+        assert_eq!(scene.textures.len(), 1);
+        let t = &scene.textures[scene.materials[0].texture.expect("textured")];
+        assert_eq!((t.width, t.height), png.dimensions());
+        let diff: f64 = t
+            .rgba
+            .chunks_exact(4)
+            .zip(png.as_raw().chunks_exact(4))
+            .map(|(a, b)| (0..3).map(|k| (a[k] as f64 - b[k] as f64).abs()).sum::<f64>())
+            .sum::<f64>()
+            / (3 * t.rgba.len() / 4) as f64;
+        assert!(diff < 4.0, "mean |WebP − PNG| = {diff:.2} levels");
+    }
 }

@@ -2,7 +2,9 @@
 //! lavapipe: alpha modes (glTF 2.0 §3.9.4: OPAQUE ignores alpha, MASK draws fully
 //! opaque where alpha ≥ the cutoff and nothing elsewhere, BLEND's alpha is the
 //! coverage the composite blends by), single- and double-sided faces (§3.9.6),
-//! and the emissive factor.
+//! and the emissive factor; the material extensions read: KHR_materials_unlit,
+//! KHR_materials_emissive_strength, KHR_materials_pbrSpecularGlossiness (its
+//! diffuse as the base colour), and KHR_lights_punctual required but ignored.
 
 mod common;
 
@@ -19,13 +21,18 @@ const H: u32 = 48;
 /// A 1 m quad in the z = 0 plane with one material; `facing_camera` winds it
 /// counter-clockwise seen from +z (glTF's front face, §3.7.2.1), else clockwise.
 fn quad(material: serde_json::Value, facing_camera: bool) -> Vec<u8> {
+    quad_requiring(material, facing_camera, &[])
+}
+
+/// `quad` with these extensions listed as used and required.
+fn quad_requiring(material: serde_json::Value, facing_camera: bool, required: &[&str]) -> Vec<u8> {
     let p: [[f32; 3]; 4] = [[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.5, 0.5, 0.0], [-0.5, 0.5, 0.0]];
     let idx: [u16; 6] = if facing_camera { [0, 1, 2, 0, 2, 3] } else { [0, 2, 1, 0, 3, 2] };
     let mut bin: Vec<u8> = bytemuck::cast_slice(&p).to_vec();
     bin.extend_from_slice(bytemuck::cast_slice(&idx));
     let uri =
         format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin));
-    let doc = json!({
+    let mut doc = json!({
         "asset": {"version": "2.0"},
         "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
@@ -37,6 +44,10 @@ fn quad(material: serde_json::Value, facing_camera: bool) -> Vec<u8> {
             {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}
         ]
     });
+    if !required.is_empty() {
+        doc["extensionsUsed"] = json!(required);
+        doc["extensionsRequired"] = json!(required);
+    }
     serde_json::to_vec(&doc).expect("json")
 }
 
@@ -44,6 +55,11 @@ fn quad(material: serde_json::Value, facing_camera: bool) -> Vec<u8> {
 /// target's w) with the quad 2 m ahead, both eyes; `None` if the pixel differs
 /// between the eyes (it should not: the quad spans the centre of both).
 fn centre(ctx: &blind_augment::gpu::GpuContext, scene: &Scene) -> ([f32; 4], f32) {
+    centre_lit(ctx, scene, Vec3::Z, 1.0)
+}
+
+/// `centre` with the key light from `light_dir` and this ambient share.
+fn centre_lit(ctx: &blind_augment::gpu::GpuContext, scene: &Scene, light_dir: Vec3, ambient: f32) -> ([f32; 4], f32) {
     let pass = GBufferPass::new(ctx, scene, W, H, 1).expect("pass");
     let mut ring = FrameRing::new(ctx, 1, 256).expect("ring");
     let eye = Eye {
@@ -56,8 +72,8 @@ fn centre(ctx: &blind_augment::gpu::GpuContext, scene: &Scene) -> ([f32; 4], f32
         prev_eyes: [eye, eye],
         pose: scene.pose_at(0.0, Mat4::IDENTITY),
         prev_pose: scene.pose_at(0.0, Mat4::IDENTITY),
-        light_dir: Vec3::Z,
-        ambient: 1.0,
+        light_dir,
+        ambient,
     };
     let (slot, cmd) = ring.begin().expect("begin");
     pass.record(cmd, slot, &frame).expect("record");
@@ -129,4 +145,62 @@ fn emissive_factor_adds_light() {
         json!({"pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]}, "emissiveFactor": [0.5, 0.0, 0.0]});
     let (c, _) = centre(&ctx, &load(m, true));
     assert!((c[0] - 0.7354).abs() < 2e-3 && c[1].abs() < 2e-3 && c[2].abs() < 2e-3, "{c:?}");
+}
+
+/// KHR_materials_unlit: the base colour as it is, whatever the light. Grey 0.5
+/// lit edge-on with no ambient is black; unlit it is sRGB 0.7354. Tolerance
+/// 2e-3 (f16 storage, 8-bit texels of the baked base colour: 0.5 → 128/255).
+#[test]
+fn unlit_materials_ignore_the_light() {
+    let Some(ctx) = common::gpu_context("unlit_materials_ignore_the_light") else { return };
+    let grey = json!({"pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0]}});
+    let (lit, _) = centre_lit(&ctx, &load(grey.clone(), true), Vec3::X, 0.0);
+    assert!(lit[0] < 2e-3, "lit edge-on without ambient is black: {lit:?}");
+    let mut unlit = grey;
+    unlit["extensions"] = json!({"KHR_materials_unlit": {}});
+    let scene = Scene::from_glb(&quad_requiring(unlit, true, &["KHR_materials_unlit"]), "unlit.gltf")
+        .expect("a file requiring KHR_materials_unlit loads");
+    assert!(scene.materials[0].unlit);
+    let (c, _) = centre_lit(&ctx, &scene, Vec3::X, 0.0);
+    // 128/255 = 0.50196 encodes to 0.7372.
+    assert!((c[0] - 0.7372).abs() < 2e-3 && (c[2] - 0.7372).abs() < 2e-3, "unlit grey: {c:?}");
+}
+
+/// KHR_materials_emissive_strength scales the emissive factor: (0.1, 0, 0) × 5
+/// emits 0.5 → sRGB red 0.7354 (tolerance 2e-3, f16 storage).
+#[test]
+fn emissive_strength_scales_emission() {
+    let Some(ctx) = common::gpu_context("emissive_strength_scales_emission") else { return };
+    let m = json!({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]},
+        "emissiveFactor": [0.1, 0.0, 0.0],
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 5.0}}
+    });
+    let (c, _) = centre(&ctx, &load(m, true));
+    assert!((c[0] - 0.7354).abs() < 2e-3 && c[1].abs() < 2e-3, "{c:?}");
+    let bad = json!({"extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": -1.0}}});
+    let Err(err) = Scene::from_glb(&quad(bad, true), "bad.gltf") else { panic!("a negative strength is refused") };
+    assert!(err.to_string().contains("emissiveStrength"), "{err}");
+}
+
+/// KHR_materials_pbrSpecularGlossiness (archived, still exported): its diffuse
+/// factor is drawn as the base colour. Diffuse red 0.5 at ambient 1 → sRGB
+/// 0.7372 (8-bit texel 128/255; tolerance 2e-3).
+#[test]
+fn specular_glossiness_diffuse_is_the_base_colour() {
+    let Some(ctx) = common::gpu_context("specular_glossiness_diffuse_is_the_base_colour") else { return };
+    let m = json!({"extensions": {"KHR_materials_pbrSpecularGlossiness": {"diffuseFactor": [0.5, 0.0, 0.0, 1.0]}}});
+    let scene = Scene::from_glb(&quad_requiring(m, true, &["KHR_materials_pbrSpecularGlossiness"]), "sg.gltf")
+        .expect("a file requiring KHR_materials_pbrSpecularGlossiness loads");
+    let (c, _) = centre(&ctx, &scene);
+    assert!((c[0] - 0.7372).abs() < 2e-3 && c[1].abs() < 2e-3, "{c:?}");
+}
+
+/// KHR_lights_punctual required: the lights are ignored with a note (the
+/// G-buffer is lit by its key light), the geometry drawn.
+#[test]
+fn required_punctual_lights_are_ignored_with_a_note() {
+    let scene = Scene::from_glb(&quad_requiring(json!({}), true, &["KHR_lights_punctual"]), "lights.gltf")
+        .expect("a file requiring KHR_lights_punctual loads");
+    assert!(scene.notes.iter().any(|n| n.contains("lights ignored")), "{:?}", scene.notes);
 }

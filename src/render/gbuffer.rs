@@ -41,7 +41,7 @@ struct DrawPush {
     world_from_object: [[f32; 4]; 3],
     prev_world_from_object: [[f32; 4]; 3],
     /// x: alpha cutoff (MASK), y: alpha mode (0 opaque, 1 mask, 2 blend),
-    /// z: 1 if double-sided.
+    /// z: 1 if double-sided, w: 1 if unlit.
     material: [f32; 4],
     /// rgb: emissive (linear).
     emissive: [f32; 4],
@@ -205,7 +205,10 @@ impl<'a> GBufferPass<'a> {
             };
             let e = mat.emissive.map(|c| c.clamp(0.0, 1.0e4));
             meshes.push(GpuMesh {
-                material_push: [[cutoff, mode, mat.double_sided as u8 as f32, 0.0], [e[0], e[1], e[2], 0.0]],
+                material_push: [
+                    [cutoff, mode, mat.double_sided as u8 as f32, mat.unlit as u8 as f32],
+                    [e[0], e[1], e[2], 0.0],
+                ],
                 deformed,
                 vertex_count: m.vertices.len(),
                 material: m.material,

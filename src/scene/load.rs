@@ -21,16 +21,29 @@ use std::sync::Arc;
 
 /// Extensions a file may list in `extensionsRequired` and still be drawn as its
 /// author meant: quantized attributes are read by `accessor` (any component type,
-/// normalized or not), texture transforms are applied to the UVs at load, and
-/// meshopt-compressed buffer views are decoded at load (`meshopt`).
-pub const SUPPORTED_REQUIRED: &[&str] =
-    &["KHR_mesh_quantization", "KHR_texture_transform", "EXT_meshopt_compression", "KHR_meshopt_compression"];
+/// normalized or not), texture transforms are applied to the UVs at load,
+/// meshopt-compressed buffer views are decoded at load (`meshopt`), WebP images
+/// are decoded (the `image` crate), unlit materials skip the key light, emissive
+/// strength scales the emission, a specular-glossiness material's diffuse is its
+/// base colour (the G-buffer shades every surface with one diffuse key light, so
+/// neither workflow's specular term is drawn), and punctual lights are ignored
+/// with a note, as the G-buffer's key light stands for the room's.
+pub const SUPPORTED_REQUIRED: &[&str] = &[
+    "KHR_mesh_quantization",
+    "KHR_texture_transform",
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
+    "EXT_texture_webp",
+    "KHR_materials_unlit",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_pbrSpecularGlossiness",
+    "KHR_lights_punctual",
+];
 
 /// Compressed-data extensions and what each would need; refused by name when required.
 const COMPRESSION: &[(&str, &str)] = &[
     ("KHR_draco_mesh_compression", "Draco-compressed meshes"),
     ("KHR_texture_basisu", "KTX2 / Basis Universal textures"),
-    ("EXT_texture_webp", "WebP textures"),
     ("EXT_texture_avif", "AVIF textures"),
     ("MSFT_texture_dds", "DDS textures"),
 ];
@@ -179,15 +192,24 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     let (json_bytes, bin) = if bytes.starts_with(GLB_MAGIC) { split_glb(bytes, name)? } else { (bytes, None) };
     let mut value: serde_json::Value =
         serde_json::from_slice(json_bytes).map_err(|e| invalid(name, format!("not glTF 2.0 JSON: {e}")))?;
-    if let Some(v) = value.get("asset").and_then(|a| a.get("version")).and_then(|v| v.as_str()) {
-        if !v.starts_with("2.") {
-            return Err(invalid(
-                name,
-                format!("glTF {v}; only glTF 2.x is read (convert it, e.g. with gltf-pipeline)"),
-            ));
+    // glTF 1.0 files (and 0.8 ones) keep their objects in maps keyed by name and
+    // often write asset.version as a number: name the version rather than the
+    // first type mismatch the 2.0 schema would report.
+    let keyed = ["meshes", "accessors", "nodes", "materials", "buffers", "bufferViews"]
+        .iter()
+        .any(|k| value.get(k).is_some_and(|m| m.is_object()));
+    let convert = "only glTF 2.x is read (convert it, e.g. with gltf-pipeline)";
+    match value.get("asset").and_then(|a| a.get("version")) {
+        Some(serde_json::Value::String(v)) if v.starts_with("2.") => {}
+        Some(serde_json::Value::String(v)) if v.is_empty() => {
+            return Err(invalid(name, "asset.version is empty; a glTF 2.0 file says \"2.0\""));
         }
-    } else if value.get("asset").is_none() && value.get("meshes").is_some_and(|m| m.is_object()) {
-        return Err(invalid(name, "glTF 1.0 (objects keyed by name); only glTF 2.x is read"));
+        Some(serde_json::Value::String(v)) => return Err(invalid(name, format!("glTF {v}; {convert}"))),
+        Some(serde_json::Value::Number(v)) => {
+            return Err(invalid(name, format!("glTF {v} (asset.version written as a number); {convert}")));
+        }
+        _ if keyed => return Err(invalid(name, format!("glTF 1.0 (objects keyed by name); {convert}"))),
+        _ => {}
     }
     let mut notes = Vec::new();
     normalise(&mut value, &mut notes);
@@ -344,7 +366,30 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     let mut emissive_textures = 0;
     for (i, m) in root.materials.iter().enumerate() {
         let pbr = &m.pbr_metallic_roughness;
-        let base_colour = pbr.base_color_factor.0;
+        let ext = &raw_json["materials"][i]["extensions"];
+        // KHR_materials_pbrSpecularGlossiness (archived): diffuseFactor and
+        // diffuseTexture take the place of the base colour (the extension's
+        // README: "diffuse ... defines the reflected diffuse color").
+        let spec_gloss = &ext["KHR_materials_pbrSpecularGlossiness"];
+        let mut base_colour = pbr.base_color_factor.0;
+        let mut base_texture = pbr.base_color_texture.clone();
+        if spec_gloss.is_object() {
+            base_colour = match spec_gloss.get("diffuseFactor") {
+                None => [1.0; 4],
+                Some(f) => serde_json::from_value(f.clone()).map_err(|e| {
+                    invalid(name, format!("material {i}: KHR_materials_pbrSpecularGlossiness diffuseFactor: {e}"))
+                })?,
+            };
+            base_texture = match spec_gloss.get("diffuseTexture") {
+                None => None,
+                Some(t) => Some(serde_json::from_value(t.clone()).map_err(|e| {
+                    invalid(name, format!("material {i}: KHR_materials_pbrSpecularGlossiness diffuseTexture: {e}"))
+                })?),
+            };
+            if base_texture.as_ref().is_some_and(|t: &json::texture::Info| t.index.value() >= root.textures.len()) {
+                return Err(invalid(name, format!("material {i}: diffuseTexture names no texture")));
+            }
+        }
         if base_colour.iter().any(|c| !c.is_finite()) {
             return Err(invalid(name, format!("material {i}: non-finite baseColorFactor")));
         }
@@ -352,11 +397,11 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
         let mut uv = UvSet::default();
         // A texture without a source (`allow_empty_texture`: an extension such as
         // KHR_texture_basisu supplies it) is drawn without its texture.
-        let source = pbr.base_color_texture.as_ref().map(|info| root.textures[info.index.value()].source.value());
+        let source = base_texture.as_ref().map(|info| texture_source(&root, &raw_json, info.index.value()));
         if source.is_some_and(|s| s >= root.images.len()) {
-            notes.push(format!("material {i}: base-colour texture without a PNG/JPEG source; drawn untextured"));
+            notes.push(format!("material {i}: base-colour texture without a PNG/JPEG/WebP source; drawn untextured"));
         }
-        if let Some((info, tex)) = pbr.base_color_texture.as_ref().zip(source.filter(|&s| s < root.images.len())) {
+        if let Some((info, tex)) = base_texture.as_ref().zip(source.filter(|&s| s < root.images.len())) {
             texture = Some(match image_texture.get(&tex) {
                 Some(&t) => t,
                 None => {
@@ -381,14 +426,26 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             Checked::Valid(json::material::AlphaMode::Blend) => AlphaMode::Blend,
             Checked::Invalid => return Err(invalid(name, format!("material {i}: invalid alphaMode"))),
         };
-        let emissive = m.emissive_factor.0;
+        // KHR_materials_emissive_strength: emissiveFactor × emissiveStrength
+        // (default 1, must be ≥ 0).
+        let strength = match ext["KHR_materials_emissive_strength"].get("emissiveStrength") {
+            None => 1.0,
+            Some(v) => match v.as_f64() {
+                Some(x) if x.is_finite() && x >= 0.0 => x as f32,
+                _ => {
+                    return Err(invalid(name, format!("material {i}: emissiveStrength {v} is not a number ≥ 0")));
+                }
+            },
+        };
+        let emissive = m.emissive_factor.0.map(|c| c * strength);
         if emissive.iter().any(|c| !c.is_finite()) {
             return Err(invalid(name, format!("material {i}: non-finite emissiveFactor")));
         }
+        let unlit = ext.get("KHR_materials_unlit").is_some();
         if m.emissive_texture.is_some() {
             emissive_textures += 1;
         }
-        materials.push(Material { base_colour, texture, alpha, double_sided: m.double_sided, emissive });
+        materials.push(Material { base_colour, texture, alpha, double_sided: m.double_sided, emissive, unlit });
         material_uv.push(uv);
     }
     let default_material = materials.len();
@@ -945,6 +1002,18 @@ fn triangles(mode: json::mesh::Mode, order: &[u32]) -> Vec<u32> {
     }
 }
 
+/// The image a texture samples: its EXT_texture_webp source where it has one
+/// (the extension's README: a client that decodes WebP uses it, the core
+/// `source` being the fallback), else the core source. An index past the images
+/// (no source) is returned as is for the caller to refuse or skip.
+fn texture_source(root: &json::Root, raw: &serde_json::Value, texture: usize) -> usize {
+    let webp = raw["textures"][texture]["extensions"]["EXT_texture_webp"]["source"].as_u64();
+    match webp {
+        Some(w) if (w as usize) < root.images.len() => w as usize,
+        _ => root.textures[texture].source.value(),
+    }
+}
+
 fn decode_image(
     root: &json::Root,
     data: &Data<'_>,
@@ -960,7 +1029,7 @@ fn decode_image(
         (None, None) => return Err(invalid(name, format!("{what} has neither bufferView nor uri"))),
     };
     let decoded = image::load_from_memory(&bytes)
-        .map_err(|e| invalid(name, format!("{what}: {e} (PNG and JPEG are decoded)")))?
+        .map_err(|e| invalid(name, format!("{what}: {e} (PNG, JPEG and WebP are decoded)")))?
         .to_rgba8();
     Ok(TextureData { width: decoded.width(), height: decoded.height(), rgba: decoded.into_raw() })
 }

@@ -117,7 +117,7 @@ fn required_extensions_not_implemented_are_refused_by_name() {
             "KHR_draco_mesh_compression",
             "requires KHR_draco_mesh_compression (Draco-compressed meshes), which this build does not decode",
         ),
-        ("EXT_texture_webp", "requires EXT_texture_webp (WebP textures), which this build does not decode"),
+        ("EXT_texture_avif", "requires EXT_texture_avif (AVIF textures), which this build does not decode"),
         ("KHR_texture_basisu", "KTX2"),
         ("KHR_materials_foo", "requires KHR_materials_foo, which this build does not implement"),
     ] {
@@ -225,4 +225,21 @@ fn skin_reach_counts_only_the_joints_vertices_use() {
     assert_eq!(pose.deformed[0].as_ref().unwrap()[1].position, [1.0, 0.0, 0.0]);
     let err = parse(&skinned_triangle(0, 0), "used.gltf", Resources::Embedded).expect_err("used wild joint");
     assert!(err.to_string().contains("from the origin"), "{err}");
+}
+
+/// glTF 1.0-era files are named as such, whatever their asset.version looks like
+/// (a number in collada2gltf's output, absent, or empty), not reported by the
+/// first type mismatch of the 2.0 schema ("invalid type: map, expected a sequence").
+#[test]
+fn old_and_versionless_files_are_named() {
+    for (doc, says) in [
+        (serde_json::json!({"asset": {"version": 1}, "meshes": {}}), "glTF 1 (asset.version written as a number)"),
+        (serde_json::json!({"asset": {"version": 0.8}}), "glTF 0.8"),
+        (serde_json::json!({"asset": {"version": "1.0"}}), "glTF 1.0; only glTF 2.x"),
+        (serde_json::json!({"asset": {}, "meshes": {"box": {}}}), "glTF 1.0 (objects keyed by name)"),
+        (serde_json::json!({"asset": {"version": ""}}), "asset.version is empty"),
+    ] {
+        let err = parse(&serde_json::to_vec(&doc).unwrap(), "old.gltf", Resources::Embedded).expect_err("refused");
+        assert!(err.to_string().contains(says), "{doc}: {err}");
+    }
 }

@@ -140,6 +140,8 @@ pub struct Material {
     /// Linear RGB added to the lit colour (glTF emissiveFactor; an emissive
     /// texture is not read).
     pub emissive: [f32; 3],
+    /// KHR_materials_unlit: drawn as its base colour, without the key light.
+    pub unlit: bool,
 }
 
 impl Material {
@@ -152,6 +154,7 @@ impl Material {
             alpha: AlphaMode::Opaque,
             double_sided: false,
             emissive: [0.0; 3],
+            unlit: false,
         }
     }
 }

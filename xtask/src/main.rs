@@ -144,8 +144,14 @@ fn main() -> Result<()> {
         Some("install") => apk::install(&root(), args.iter().any(|a| a == "--release")),
         Some("train-models") => models::train(&root()),
         Some("gltf-corpus") => match args.get(1) {
-            Some(dir) => gltf_corpus::run(&root(), &target_dir(), Path::new(dir)),
-            None => bail!("usage: cargo xtask gltf-corpus MIRRORS (bare git mirrors as owner+name/repo)"),
+            Some(dir) => {
+                let validator = args.iter().position(|a| a == "--validator").and_then(|i| args.get(i + 1));
+                gltf_corpus::run(&root(), &target_dir(), Path::new(dir), validator.map(Path::new))
+            }
+            None => bail!(
+                "usage: cargo xtask gltf-corpus MIRRORS [--validator NODE_MODULES] (bare git mirrors as \
+                 owner+name/repo; NODE_MODULES: where `npm install gltf-validator` was run)"
+            ),
         },
         Some("bench-quality") => match args.get(1).filter(|a| !a.starts_with("--")) {
             Some(dir) => scenes::run(
@@ -156,7 +162,7 @@ fn main() -> Result<()> {
             ),
             None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] [--noise-only] (bare git mirrors as owner+name/repo)"),
         },
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS | bench-quality MIRRORS [--quick] [--noise-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS [--validator DIR] | bench-quality MIRRORS [--quick] [--noise-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
 

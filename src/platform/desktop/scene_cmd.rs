@@ -9,14 +9,23 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct SceneArgs {
     /// glTF 2.0 files (`.glb`, `.gltf`).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "extensions")]
     files: Vec<PathBuf>,
+    /// Print the extensions a file may list in `extensionsRequired` and still be
+    /// drawn by this build, one per line.
+    #[arg(long)]
+    extensions: bool,
 }
 
 /// One line per file, tab-separated: the path, `ok` or `refused`, then what is
 /// drawn (meshes and how many deform, triangles, textures, animation channels and
 /// length) and the notes, or the reason.
 pub fn run(args: SceneArgs) -> Result<()> {
+    if args.extensions {
+        for e in blind_augment::scene::SUPPORTED_REQUIRED {
+            println!("{e}");
+        }
+    }
     let mut refused = 0;
     for path in &args.files {
         match Scene::load(path) {
