@@ -476,3 +476,91 @@ fn xr_command_prints_fallback_warnings() {
     let (ok, quiet) = run(Some("error"));
     assert!(ok && !quiet.contains("no passthrough"), "RUST_LOG=error still shows warnings:\n{quiet}");
 }
+
+/// Controller toggles through OpenXR actions (spec chapter 11), under the core
+/// validation layer: on Touch controllers, A switches matched ↔ naive, B the
+/// noise, X the motion blur, Y the DoF. Scripted presses (one frame each) act
+/// once, on the press, in the order made; a naive frame applies nothing, and
+/// coming back restores the per-effect switches; an effect the model lacks
+/// (this model has no noise) is never applied whatever the switch says. The
+/// runtime logs each boolean action's change (pressed, then released).
+#[test]
+fn controller_presses_toggle_matched_and_each_effect() {
+    use blind_augment::render::Enabled;
+    use blind_augment::xr::Toggle;
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let env = [(
+        "BA_XR_SCRIPT",
+        "press:/user/hand/right/input/a/click@20,press:/user/hand/left/input/y/click@30,\
+         press:/user/hand/right/input/a/click@40,press:/user/hand/left/input/x/click@50,\
+         press:/user/hand/right/input/b/click@60",
+    )];
+    let Some(run) = run_xr("controls", &env, 80, true, &models) else { return };
+    assert_clean(&run, true);
+    let s = &run.summary;
+    assert!(s.controls, "the bindings were accepted and the set attached");
+    let kinds: Vec<Toggle> = s.toggles.iter().map(|(_, t)| *t).collect();
+    assert_eq!(kinds, [Toggle::Matched, Toggle::Dof, Toggle::Matched, Toggle::MotionBlur, Toggle::Noise]);
+    let on = |noise, motion_blur, dof| Enabled { noise, motion_blur, dof };
+    let mut seen: Vec<Enabled> = run.records.iter().map(|r| r.enabled).collect();
+    seen.dedup();
+    assert_eq!(
+        seen,
+        [
+            on(true, true, true),
+            on(false, false, false),
+            on(true, true, false),
+            on(true, false, false),
+            on(false, false, false)
+        ],
+        "the toggles in the order pressed"
+    );
+    for r in &run.records {
+        // The model has MB and DoF, no noise: applied = allowed ∧ present.
+        assert_eq!(r.applied, on(false, r.enabled.motion_blur, r.enabled.dof), "frame {}", r.index);
+    }
+    // Each press is one frame long: pressed, then released, as the runtime saw it.
+    let changes: Vec<bool> = run
+        .report
+        .iter()
+        .filter(|v| v["event"] == "input")
+        .flat_map(|v| v["changes"].as_array().cloned().unwrap_or_default())
+        .map(|c| c["state"] == true)
+        .collect();
+    assert_eq!(
+        changes,
+        [true, false].repeat(5),
+        "{:?}",
+        run.report.iter().filter(|v| v["event"] == "input").collect::<Vec<_>>()
+    );
+    assert!(run
+        .report
+        .iter()
+        .any(|v| v["event"] == "attach" && v["profile"] == "/interaction_profiles/oculus/touch_controller"));
+}
+
+/// A runtime whose controllers only answer to the Khronos simple controller
+/// profile picks the app's simple-controller bindings: select toggles matched ↔
+/// naive; Touch's buttons do not exist there. With no controllers at all the app
+/// runs matched, presses doing nothing.
+#[test]
+fn simple_controller_toggles_matched_and_no_controller_keeps_effects() {
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let env = [
+        ("BA_XR_CONTROLLER", "simple"),
+        ("BA_XR_SCRIPT", "press:/user/hand/right/input/select/click@20,press:/user/hand/right/input/a/click@30"),
+    ];
+    let Some(run) = run_xr("controls_simple", &env, 40, true, &models) else { return };
+    assert_clean(&run, true);
+    assert_eq!(run.summary.toggles.len(), 1, "{:?}", run.summary.toggles);
+    assert!(!run.records.last().expect("frames").enabled.dof, "naive after select");
+    assert!(run
+        .report
+        .iter()
+        .any(|v| v["event"] == "attach" && v["profile"] == "/interaction_profiles/khr/simple_controller"));
+
+    let env = [("BA_XR_CONTROLLER", "none"), ("BA_XR_SCRIPT", "press:/user/hand/right/input/a/click@20")];
+    let Some(run) = run_xr("controls_none", &env, 30, true, &models) else { return };
+    assert!(run.summary.toggles.is_empty());
+    assert!(run.records.iter().all(|r| r.enabled.dof && r.enabled.motion_blur));
+}

@@ -18,7 +18,7 @@ pub use layer::{FrameEffects, LayerEffects, LayerSettings};
 pub use motion_blur::MotionBlurPass;
 pub use params::EffectParams;
 pub use spacewarp::{SpaceWarpPass, SpaceWarpTarget};
-pub use stereo::{ExternalTarget, FrameInput, StereoRenderer};
+pub use stereo::{Enabled, ExternalTarget, FrameInput, StereoRenderer};
 
 /// SPIR-V of the uniform-block probe used by the hot-swap test.
 pub const PARAMS_PROBE_SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/params_probe.spv"));

@@ -17,6 +17,23 @@ use glam::Vec3;
 
 pub const FRAMES_IN_FLIGHT: usize = 2;
 
+/// Which of the matched effects a frame may apply: all for a matched frame, none
+/// for a naive one, or any mix (the headset's per-effect toggles). An effect the
+/// camera model lacks stays off whatever this says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Enabled {
+    pub noise: bool,
+    pub motion_blur: bool,
+    pub dof: bool,
+}
+
+impl Enabled {
+    /// Every effect (`true`) or none (`false`).
+    pub fn matched(on: bool) -> Self {
+        Self { noise: on, motion_blur: on, dof: on }
+    }
+}
+
 /// An image outside the renderer that receives each frame's composite (the
 /// OpenXR swapchain image array: same size, two layers, RGBA8), and the layout it
 /// is kept in.
@@ -249,7 +266,7 @@ impl<'a> StereoRenderer<'a> {
         input: &FrameInput<'_>,
         matched: bool,
     ) -> Result<FrameEffects, GpuError> {
-        self.render_to(snapshot, input, matched, None, None)
+        self.render_to(snapshot, input, Enabled::matched(matched), None, None)
     }
 
     /// The render frame interval (s) motion vectors are measured over: the
@@ -283,7 +300,7 @@ impl<'a> StereoRenderer<'a> {
         &mut self,
         snapshot: &Snapshot,
         input: &FrameInput<'_>,
-        matched: bool,
+        enabled: Enabled,
         target: Option<ExternalTarget>,
         space_warp: Option<SpaceWarpTarget>,
     ) -> Result<FrameEffects, GpuError> {
@@ -291,11 +308,9 @@ impl<'a> StereoRenderer<'a> {
         let g = input.gbuffer;
         let depth = self.content_depth_m(&g.eyes, &g.prev_eyes, input.corners_now, input.corners_prev);
         let mut fx = FrameEffects::from_model(model, self.eye_pixels_per_radian, depth, &self.settings);
-        if !matched {
-            fx.dof = false;
-            fx.motion_blur = false;
-            fx.noise = false;
-        }
+        fx.dof &= enabled.dof;
+        fx.motion_blur &= enabled.motion_blur;
+        fx.noise &= enabled.noise;
         fx.frame = self.frame;
         self.frame = self.frame.wrapping_add(1);
         fx.rects =

@@ -20,6 +20,7 @@
 #![allow(unsafe_code)]
 
 mod env_depth;
+mod input;
 mod instance;
 mod layers;
 mod lifecycle;
@@ -34,12 +35,13 @@ pub use views::{eye_from_view, View, ViewError};
 use crate::analysis::timing::ClockSample;
 use crate::gpu::{GpuContext, GpuError, GpuOptions};
 use crate::model::{CameraModel, DepthOfField, DepthUnits, Diagnostics, DofCurve, MotionBlur};
-use crate::render::{ExternalTarget, FrameInput, GBufferFrame, LayerSettings, StereoRenderer};
+use crate::render::{Enabled, ExternalTarget, FrameInput, GBufferFrame, LayerSettings, StereoRenderer};
 use crate::scene::Scene;
 use crate::worker::ModelChannel;
 use ash::vk;
 use ash::vk::Handle as _;
 use glam::{Mat4, Quat, Vec3};
+pub use input::{Toggle, Toggles};
 use instance::{chained_system_properties, create_instance, sample_clocks};
 use openxr as xr;
 use spacewarp::space_warp_swapchains;
@@ -120,6 +122,10 @@ pub struct FrameRecord {
     pub time_origin_ns: i64,
     /// The camera-model generation the whole frame used.
     pub model_generation: u64,
+    /// The effects the controller toggles allowed this frame (`input.rs`).
+    pub enabled: Enabled,
+    /// The effects the frame applied: those allowed that the camera model has.
+    pub applied: Enabled,
     /// CPU time of the frame outside xrWaitFrame (s).
     pub cpu_s: f64,
     /// Time blocked in xrWaitFrame (s).
@@ -177,6 +183,10 @@ pub struct XrSummary {
     pub end: EndReason,
     /// Vulkan validation messages (empty when clean).
     pub vulkan_messages: Vec<String>,
+    /// The runtime accepted the controller bindings and the action set is attached.
+    pub controls: bool,
+    /// Controller presses acted on, with the rendered frame they took effect in.
+    pub toggles: Vec<(u64, Toggle)>,
 }
 
 /// The display rate the Quest app asks for: Meta's Passthrough Best Practices
@@ -526,7 +536,19 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         states: vec![],
         end: EndReason::Exited,
         vulkan_messages: vec![],
+        controls: false,
+        toggles: vec![],
     };
+    // Controller toggles; input is optional: without it the app runs matched.
+    let controls = match input::Controls::new(&instance).and_then(|c| c.attach(&session).map(|()| c)) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            log::warn!("OpenXR: controller input unavailable ({e}); effects stay on");
+            None
+        }
+    };
+    summary.controls = controls.is_some();
+    let mut toggles = Toggles::default();
     let mut event_buffer = xr::EventDataBuffer::new();
     let mut exit_requested = false;
     let mut prev: Option<(i64, [crate::render::Eye; 2])> = None;
@@ -617,6 +639,20 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         let wait_s = wait_start.elapsed().as_secs_f64();
         let cpu_start = Instant::now();
         frame_stream.begin().map_err(call("xrBeginFrame"))?;
+        // Input once per frame (spec 11.5: xrSyncActions updates every action's
+        // state; an unfocused session gets XR_SESSION_NOT_FOCUSED and no presses).
+        if let Some(c) = &controls {
+            match c.poll(&session) {
+                Ok(pressed) => {
+                    for t in pressed {
+                        toggles.apply(t);
+                        summary.toggles.push((summary.frames_rendered, t));
+                        log::info!("input: {t:?} → {:?}", toggles.enabled());
+                    }
+                }
+                Err(e) => log::warn!("OpenXR: input sync failed ({e})"),
+            }
+        }
         let display_ns = state.predicted_display_time.as_nanos();
         let period_ns = state.predicted_display_period.as_nanos();
         let origin_ns = *time_origin_ns.get_or_insert(display_ns);
@@ -702,13 +738,15 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             Some(sw) => Some(sw.acquire()?),
             None => None,
         };
-        let rendered = renderer.render_to(&snapshot, &input, true, Some(target), warp_target);
+        let enabled = toggles.enabled();
+        let rendered = renderer.render_to(&snapshot, &input, enabled, Some(target), warp_target);
         // Release even after a failed render: no swapchain may stay acquired.
         swapchain.release_image().map_err(call("xrReleaseSwapchainImage"))?;
         if let Some(sw) = space_warp.as_mut() {
             sw.release()?;
         }
-        rendered?;
+        let fx = rendered?;
+        let applied = Enabled { noise: fx.noise, motion_blur: fx.motion_blur, dof: fx.dof };
 
         let submission = layers::Submission {
             space: &space,
@@ -738,6 +776,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             predicted_display_period_ns: period_ns,
             time_origin_ns: origin_ns,
             model_generation: snapshot.generation,
+            enabled,
+            applied,
             cpu_s,
             wait_s,
             views: views.views,

@@ -84,6 +84,7 @@ pub const VARS: &[&str] = &[
     "BA_XR_ENV_DEPTH_DENIALS",
     "BA_XR_PROFILE",
     "BA_XR_TIME_ORIGIN_S",
+    "BA_XR_CONTROLLER",
     "BA_TEST_APP_HZ",
 ];
 

@@ -1,26 +1,128 @@
-//! The input system (OpenXR spec 11) of a headset with no controllers attached:
-//! action sets, actions and bindings are accepted and kept, every action state is
-//! inactive, no source is bound, action spaces are never located, haptics have
-//! nothing to drive. Every core function must resolve through
-//! xrGetInstanceProcAddr (spec 3.2), and the app's OpenXR bindings load them all.
+//! The input system (OpenXR 1.0 spec chapter 11, "Input and Haptics") of a
+//! headset with one pair of controllers: action sets and actions are kept with
+//! their names and types, suggested bindings are checked against the interaction
+//! profile's component paths (spec 6.4, "Interaction Profile Paths": Oculus Touch
+//! and the Khronos simple controller), and after xrAttachSessionActionSets the
+//! runtime picks the profile its controllers match among those the app suggested
+//! (Touch first, then the simple controller, as a runtime may remap) and queues
+//! XrEventDataInteractionProfileChanged. Buttons are pressed by the script
+//! (`press:PATH@N`: true in the xrSyncActions calls made while frame N is being
+//! produced, false otherwise), so boolean actions report `currentState`,
+//! `changedSinceLastSync` and `lastChangeTime` as the spec defines them; an
+//! unfocused session syncs nothing (XR_SESSION_NOT_FOCUSED, every action
+//! inactive). Float, vector and pose actions stay inactive (no analog input is
+//! scripted) and action spaces are never located. Every core function must
+//! resolve through xrGetInstanceProcAddr (spec 3.2).
 
 use crate::{two_call, with_instance, with_runtime};
 use openxr_sys as xr;
+use std::collections::HashMap;
 use std::ffi::c_char;
 use xr::Handle as _;
+
+pub(crate) const TOUCH: &str = "/interaction_profiles/oculus/touch_controller";
+pub(crate) const SIMPLE: &str = "/interaction_profiles/khr/simple_controller";
+
+/// Component paths (after `/user/hand/{left,right}/`) of each profile, spec 6.4.
+fn supports(profile: &str, binding: &str) -> bool {
+    let (hand, component) = match (binding.strip_prefix("/user/hand/left/"), binding.strip_prefix("/user/hand/right/"))
+    {
+        (Some(c), _) => ("left", c),
+        (_, Some(c)) => ("right", c),
+        _ => return false,
+    };
+    match profile {
+        SIMPLE => ["input/select/click", "input/menu/click", "input/grip/pose", "input/aim/pose", "output/haptic"]
+            .contains(&component),
+        TOUCH => {
+            let both = [
+                "input/squeeze/value",
+                "input/trigger/value",
+                "input/trigger/touch",
+                "input/thumbstick",
+                "input/thumbstick/x",
+                "input/thumbstick/y",
+                "input/thumbstick/click",
+                "input/thumbstick/touch",
+                "input/thumbrest/touch",
+                "input/grip/pose",
+                "input/aim/pose",
+                "output/haptic",
+            ];
+            let left = ["input/x/click", "input/x/touch", "input/y/click", "input/y/touch", "input/menu/click"];
+            let right = ["input/a/click", "input/a/touch", "input/b/click", "input/b/touch", "input/system/click"];
+            both.contains(&component)
+                || if hand == "left" { left.contains(&component) } else { right.contains(&component) }
+        }
+        _ => false,
+    }
+}
+
+pub(crate) struct Action {
+    set: u64,
+    name: String,
+    ty: xr::ActionType,
+    /// Boolean state at the last sync: (current, changed since the sync before, last change time, active).
+    state: (bool, bool, i64, bool),
+}
+
+/// The instance's action sets, actions and bindings (Runtime::input).
+#[derive(Default)]
+pub(crate) struct Input {
+    sets: HashMap<u64, String>,
+    actions: HashMap<u64, Action>,
+    /// Profile path → the (action, binding path) pairs last suggested for it
+    /// (a later suggestion for the same profile replaces the earlier, spec 11.4).
+    bindings: HashMap<String, Vec<(u64, String)>>,
+    /// Sets attached to the session (spec: at most once per session).
+    attached: Vec<u64>,
+    /// The interaction profile chosen at attach time, if the app suggested one
+    /// the controllers match.
+    pub profile: Option<String>,
+}
+
+impl Input {
+    /// The session ended: nothing attached, no profile, every action inactive.
+    pub(crate) fn end_session(&mut self) {
+        self.attached.clear();
+        self.profile = None;
+        for a in self.actions.values_mut() {
+            a.state = (false, false, 0, false);
+        }
+    }
+}
 
 fn session_ok(rt: &crate::Runtime, session: xr::Session) -> bool {
     rt.session.as_ref().is_some_and(|s| s.handle == session.into_raw())
 }
 
+/// A NUL-terminated fixed-size name field as a String.
+fn name_of(chars: &[c_char]) -> String {
+    let bytes: Vec<u8> = chars.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    String::from_utf8_lossy(&bytes).into_owned()
+}
+
+fn path_string(rt: &crate::Runtime, path: xr::Path) -> Option<String> {
+    (path.into_raw() as usize).checked_sub(1).and_then(|i| rt.paths.get(i)).cloned()
+}
+
 pub(crate) unsafe extern "system" fn create_action_set(
     instance: xr::Instance,
-    _info: *const xr::ActionSetCreateInfo,
+    info: *const xr::ActionSetCreateInfo,
     out: *mut xr::ActionSet,
 ) -> xr::Result {
     with_instance(instance, |rt| {
+        if info.is_null() || out.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's create info.
+        let name = name_of(unsafe { &(*info).action_set_name });
+        if name.is_empty() || rt.input.sets.values().any(|n| *n == name) {
+            return xr::Result::ERROR_NAME_INVALID;
+        }
         let h = rt.handle();
         rt.actions.insert(h);
+        rt.input.sets.insert(h, name);
         // SAFETY: caller's output.
         unsafe { *out = xr::ActionSet::from_raw(h) };
         xr::Result::SUCCESS
@@ -30,6 +132,8 @@ pub(crate) unsafe extern "system" fn create_action_set(
 pub(crate) unsafe extern "system" fn destroy_action_set(set: xr::ActionSet) -> xr::Result {
     with_runtime(|rt| {
         if rt.actions.remove(&set.into_raw()) {
+            rt.input.sets.remove(&set.into_raw());
+            rt.input.actions.retain(|_, a| a.set != set.into_raw());
             xr::Result::SUCCESS
         } else {
             xr::Result::ERROR_HANDLE_INVALID
@@ -39,15 +143,28 @@ pub(crate) unsafe extern "system" fn destroy_action_set(set: xr::ActionSet) -> x
 
 pub(crate) unsafe extern "system" fn create_action(
     set: xr::ActionSet,
-    _info: *const xr::ActionCreateInfo,
+    info: *const xr::ActionCreateInfo,
     out: *mut xr::Action,
 ) -> xr::Result {
     with_runtime(|rt| {
-        if !rt.actions.contains(&set.into_raw()) {
+        if !rt.input.sets.contains_key(&set.into_raw()) {
             return xr::Result::ERROR_HANDLE_INVALID;
+        }
+        if info.is_null() || out.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // Spec 11.3: an action set's actions cannot change once it is attached.
+        if rt.input.attached.contains(&set.into_raw()) {
+            return xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED;
+        }
+        // SAFETY: the caller's create info.
+        let (name, ty) = unsafe { (name_of(&(*info).action_name), (*info).action_type) };
+        if name.is_empty() || rt.input.actions.values().any(|a| a.set == set.into_raw() && a.name == name) {
+            return xr::Result::ERROR_NAME_INVALID;
         }
         let h = rt.handle();
         rt.actions.insert(h);
+        rt.input.actions.insert(h, Action { set: set.into_raw(), name, ty, state: (false, false, 0, false) });
         // SAFETY: caller's output.
         unsafe { *out = xr::Action::from_raw(h) };
         xr::Result::SUCCESS
@@ -57,6 +174,7 @@ pub(crate) unsafe extern "system" fn create_action(
 pub(crate) unsafe extern "system" fn destroy_action(action: xr::Action) -> xr::Result {
     with_runtime(|rt| {
         if rt.actions.remove(&action.into_raw()) {
+            rt.input.actions.remove(&action.into_raw());
             xr::Result::SUCCESS
         } else {
             xr::Result::ERROR_HANDLE_INVALID
@@ -66,43 +184,207 @@ pub(crate) unsafe extern "system" fn destroy_action(action: xr::Action) -> xr::R
 
 pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
     instance: xr::Instance,
-    _bindings: *const xr::InteractionProfileSuggestedBinding,
+    suggested: *const xr::InteractionProfileSuggestedBinding,
 ) -> xr::Result {
-    with_instance(instance, |_| xr::Result::SUCCESS)
+    with_instance(instance, |rt| {
+        if suggested.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's struct and its array of count_suggested_bindings.
+        let (profile, list) = unsafe {
+            let s = &*suggested;
+            if s.suggested_bindings.is_null() || s.count_suggested_bindings == 0 {
+                return xr::Result::ERROR_VALIDATION_FAILURE;
+            }
+            (
+                s.interaction_profile,
+                std::slice::from_raw_parts(s.suggested_bindings, s.count_suggested_bindings as usize),
+            )
+        };
+        let Some(profile) = path_string(rt, profile) else { return xr::Result::ERROR_PATH_INVALID };
+        if profile != TOUCH && profile != SIMPLE {
+            rt.log(serde_json::json!({"event": "bindings_refused", "profile": profile}));
+            return xr::Result::ERROR_PATH_UNSUPPORTED;
+        }
+        let mut pairs = Vec::with_capacity(list.len());
+        for b in list {
+            let Some(path) = path_string(rt, b.binding) else { return xr::Result::ERROR_PATH_INVALID };
+            if !supports(&profile, &path) {
+                rt.log(serde_json::json!({"event": "bindings_refused", "profile": profile, "binding": path}));
+                return xr::Result::ERROR_PATH_UNSUPPORTED;
+            }
+            let Some(action) = rt.input.actions.get(&b.action.into_raw()) else {
+                return xr::Result::ERROR_HANDLE_INVALID;
+            };
+            // Spec 11.4: suggestions for an attached set's actions are an error.
+            if rt.input.attached.contains(&action.set) {
+                return xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED;
+            }
+            pairs.push((b.action.into_raw(), path));
+        }
+        rt.log(serde_json::json!({"event": "bindings", "profile": profile, "count": pairs.len()}));
+        rt.input.bindings.insert(profile, pairs);
+        xr::Result::SUCCESS
+    })
 }
 
 pub(crate) unsafe extern "system" fn attach_session_action_sets(
     session: xr::Session,
-    _info: *const xr::SessionActionSetsAttachInfo,
+    info: *const xr::SessionActionSetsAttachInfo,
 ) -> xr::Result {
-    with_runtime(|rt| if session_ok(rt, session) { xr::Result::SUCCESS } else { xr::Result::ERROR_HANDLE_INVALID })
+    with_runtime(|rt| {
+        if !session_ok(rt, session) {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        }
+        if !rt.input.attached.is_empty() {
+            return xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED;
+        }
+        if info.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's struct and its array of count_action_sets handles.
+        let sets = unsafe {
+            let i = &*info;
+            if i.action_sets.is_null() || i.count_action_sets == 0 {
+                return xr::Result::ERROR_VALIDATION_FAILURE;
+            }
+            std::slice::from_raw_parts(i.action_sets, i.count_action_sets as usize)
+        };
+        if sets.iter().any(|s| !rt.input.sets.contains_key(&s.into_raw())) {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        }
+        rt.input.attached = sets.iter().map(|s| s.into_raw()).collect();
+        // The controllers (`BA_XR_CONTROLLER`) answer to these profiles, best first.
+        let offered: &[&str] = match rt.config.controller {
+            crate::config::Controller::Touch => &[TOUCH, SIMPLE],
+            crate::config::Controller::Simple => &[SIMPLE],
+            crate::config::Controller::None => &[],
+        };
+        rt.input.profile = offered.iter().find(|p| rt.input.bindings.contains_key(**p)).map(|p| p.to_string());
+        rt.log(serde_json::json!({"event": "attach", "profile": rt.input.profile}));
+        if rt.input.profile.is_some() {
+            rt.events.push_back(crate::Event::ProfileChanged { session: session.into_raw() });
+        }
+        xr::Result::SUCCESS
+    })
 }
 
 pub(crate) unsafe extern "system" fn get_current_interaction_profile(
     session: xr::Session,
-    _user_path: xr::Path,
+    user_path: xr::Path,
     out: *mut xr::InteractionProfileState,
 ) -> xr::Result {
     with_runtime(|rt| {
         if !session_ok(rt, session) {
             return xr::Result::ERROR_HANDLE_INVALID;
         }
-        // SAFETY: caller's output. No controller: no interaction profile.
-        unsafe { (*out).interaction_profile = xr::Path::NULL };
+        if rt.input.attached.is_empty() {
+            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
+        }
+        let hand = path_string(rt, user_path);
+        if !matches!(hand.as_deref(), Some("/user/hand/left" | "/user/hand/right")) {
+            return xr::Result::ERROR_PATH_UNSUPPORTED;
+        }
+        let profile = match rt.input.profile.clone() {
+            Some(p) => crate::intern_path(rt, &p),
+            None => xr::Path::NULL,
+        };
+        // SAFETY: caller's output.
+        unsafe { (*out).interaction_profile = profile };
         xr::Result::SUCCESS
     })
 }
 
 pub(crate) unsafe extern "system" fn sync_actions(
     session: xr::Session,
-    _info: *const xr::ActionsSyncInfo,
+    info: *const xr::ActionsSyncInfo,
 ) -> xr::Result {
     with_runtime(|rt| {
-        if session_ok(rt, session) {
-            xr::Result::SESSION_NOT_FOCUSED
-        } else {
-            xr::Result::ERROR_HANDLE_INVALID
+        if !session_ok(rt, session) {
+            return xr::Result::ERROR_HANDLE_INVALID;
         }
+        if info.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's struct and its array of count_active_action_sets.
+        let active = unsafe {
+            let i = &*info;
+            if i.count_active_action_sets > 0 && i.active_action_sets.is_null() {
+                return xr::Result::ERROR_VALIDATION_FAILURE;
+            }
+            if i.count_active_action_sets == 0 {
+                &[][..]
+            } else {
+                std::slice::from_raw_parts(i.active_action_sets, i.count_active_action_sets as usize)
+            }
+        };
+        if active.iter().any(|a| !rt.input.attached.contains(&a.action_set.into_raw())) {
+            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
+        }
+        let Some(s) = rt.session.as_ref() else { return xr::Result::ERROR_HANDLE_INVALID };
+        let (focused, frame) = (s.state == xr::SessionState::FOCUSED, s.frame.ended);
+        let now = rt.now_ns();
+        let pressed: Vec<String> =
+            rt.config.presses.iter().filter(|(at, _)| *at == frame).map(|(_, p)| p.clone()).collect();
+        let synced: Vec<u64> = active.iter().map(|a| a.action_set.into_raw()).collect();
+        let bound = rt.input.profile.as_ref().and_then(|p| rt.input.bindings.get(p)).cloned().unwrap_or_default();
+        let mut changes = Vec::new();
+        for (h, a) in rt.input.actions.iter_mut() {
+            if !synced.contains(&a.set) {
+                continue;
+            }
+            let paths: Vec<&String> = bound.iter().filter(|(act, _)| act == h).map(|(_, p)| p).collect();
+            // Spec 11.5: not focused, every action is inactive and reads false.
+            let active = focused && !paths.is_empty() && a.ty == xr::ActionType::BOOLEAN_INPUT;
+            let current = active && paths.iter().any(|p| pressed.contains(p));
+            let changed = active && a.state.3 && current != a.state.0;
+            let time = if changed { now } else { a.state.2 };
+            if changed {
+                changes.push(serde_json::json!({"action": a.name, "state": current}));
+            }
+            a.state = (current, changed, time, active);
+        }
+        if !changes.is_empty() {
+            rt.log(serde_json::json!({"event": "input", "frame": frame, "changes": changes}));
+        }
+        if focused {
+            xr::Result::SUCCESS
+        } else {
+            xr::Result::SESSION_NOT_FOCUSED
+        }
+    })
+}
+
+pub(crate) unsafe extern "system" fn get_action_state_boolean(
+    session: xr::Session,
+    info: *const xr::ActionStateGetInfo,
+    state: *mut xr::ActionStateBoolean,
+) -> xr::Result {
+    with_runtime(|rt| {
+        if !session_ok(rt, session) {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        }
+        if info.is_null() || state.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's info.
+        let action = unsafe { (*info).action.into_raw() };
+        let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
+        if a.ty != xr::ActionType::BOOLEAN_INPUT {
+            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
+        }
+        if !rt.input.attached.contains(&a.set) {
+            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
+        }
+        let (current, changed, time, active) = a.state;
+        // SAFETY: caller's output.
+        unsafe {
+            (*state).current_state = current.into();
+            (*state).changed_since_last_sync = changed.into();
+            (*state).last_change_time = xr::Time::from_nanos(time);
+            (*state).is_active = active.into();
+        }
+        xr::Result::SUCCESS
     })
 }
 
@@ -117,14 +399,13 @@ macro_rules! inactive_state {
                 if !session_ok(rt, session) {
                     return xr::Result::ERROR_HANDLE_INVALID;
                 }
-                // SAFETY: caller's output; no source is bound, so it is inactive.
+                // SAFETY: caller's output; no analog input is scripted, so it is inactive.
                 unsafe { (*state).is_active = xr::FALSE };
                 xr::Result::SUCCESS
             })
         }
     };
 }
-inactive_state!(get_action_state_boolean, xr::ActionStateBoolean);
 inactive_state!(get_action_state_float, xr::ActionStateFloat);
 inactive_state!(get_action_state_vector2f, xr::ActionStateVector2f);
 inactive_state!(get_action_state_pose, xr::ActionStatePose);

@@ -7,7 +7,8 @@
 //! images it owns on the application's device, `xrWaitFrame` paced at the display
 //! rate, the session lifecycle with scripted exit/loss, XR_FB_passthrough,
 //! XR_FB_display_refresh_rate, XR_FB_space_warp's throttling, XR_KHR_convert_
-//! timespec_time and XR_META_environment_depth (the depth of a known plane) — and it reports
+//! timespec_time, XR_META_environment_depth (the depth of a known plane) and the
+//! action system with scripted controller presses (input.rs) — and it reports
 //! every frame (JSON lines) and writes chosen frames' layers to PNG.
 //!
 //! It is one process-wide state behind a mutex (the loader allows one runtime per
@@ -47,9 +48,23 @@ pub(crate) const EXT_ENV_DEPTH: &str = "XR_META_environment_depth";
 pub(crate) const SYSTEM_ID: u64 = 1;
 
 pub(crate) enum Event {
-    State { session: u64, state: xr::SessionState, time: i64 },
-    InstanceLoss { time: i64 },
-    RefreshRate { from: f32, to: f32 },
+    State {
+        session: u64,
+        state: xr::SessionState,
+        time: i64,
+    },
+    InstanceLoss {
+        time: i64,
+    },
+    RefreshRate {
+        from: f32,
+        to: f32,
+    },
+    /// XrEventDataInteractionProfileChanged (spec 11.4: after the runtime picks a
+    /// profile for the attached action sets).
+    ProfileChanged {
+        session: u64,
+    },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,8 +90,10 @@ pub(crate) struct Runtime {
     pub swapchains: HashMap<u64, vulkan::Swapchain>,
     pub passthroughs: HashMap<u64, bool>,
     pub passthrough_layers: HashMap<u64, (u64, bool)>,
-    /// Action sets, actions and action spaces (input.rs: no controllers).
+    /// Handles of action sets, actions and action spaces (input.rs).
     pub actions: HashSet<u64>,
+    /// The input system's sets, actions, bindings and states (input.rs).
+    pub input: input::Input,
     pub vk: Option<vulkan::VkState>,
     pub report: Option<std::fs::File>,
     /// XR_META_environment_depth's provider (at most one).
@@ -464,6 +481,7 @@ unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, o
         passthroughs: HashMap::new(),
         passthrough_layers: HashMap::new(),
         actions: HashSet::new(),
+        input: input::Input::default(),
         vk: None,
         report,
         env_depth: None,
@@ -536,17 +554,22 @@ unsafe extern "system" fn string_to_path(instance: xr::Instance, s: *const c_cha
         if !s.starts_with('/') || s.ends_with('/') || s.contains("//") {
             return xr::Result::ERROR_PATH_FORMAT_INVALID;
         }
-        let i = match rt.paths.iter().position(|p| *p == s) {
-            Some(i) => i,
-            None => {
-                rt.paths.push(s);
-                rt.paths.len() - 1
-            }
-        };
         // SAFETY: caller's output.
-        unsafe { *out = xr::Path::from_raw(i as u64 + 1) };
+        unsafe { *out = intern_path(rt, &s) };
         xr::Result::SUCCESS
     })
+}
+
+/// The XrPath of a well-formed path string, registered on first use.
+pub(crate) fn intern_path(rt: &mut Runtime, s: &str) -> xr::Path {
+    let i = match rt.paths.iter().position(|p| p == s) {
+        Some(i) => i,
+        None => {
+            rt.paths.push(s.to_string());
+            rt.paths.len() - 1
+        }
+    };
+    xr::Path::from_raw(i as u64 + 1)
 }
 
 unsafe extern "system" fn path_to_string(

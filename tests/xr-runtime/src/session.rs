@@ -123,6 +123,8 @@ pub(crate) fn teardown_session(rt: &mut Runtime) {
     rt.spaces.clear();
     rt.passthroughs.clear();
     rt.passthrough_layers.clear();
+    // Attachment is per session (spec 11.4); the sets and actions outlive it.
+    rt.input.end_session();
     if let Some(vk) = rt.vk.take() {
         vk.destroy();
     }
@@ -309,6 +311,13 @@ pub(crate) unsafe extern "system" fn poll_event(instance: xr::Instance, out: *mu
                     ty: xr::EventDataInstanceLossPending::TYPE,
                     next: std::ptr::null(),
                     loss_time: xr::Time::from_nanos(time),
+                }
+            }
+            Event::ProfileChanged { session } => {
+                *(out as *mut xr::EventDataInteractionProfileChanged) = xr::EventDataInteractionProfileChanged {
+                    ty: xr::EventDataInteractionProfileChanged::TYPE,
+                    next: std::ptr::null(),
+                    session: xr::Session::from_raw(session),
                 }
             }
             Event::RefreshRate { from, to } => {
