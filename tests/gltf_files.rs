@@ -643,4 +643,9 @@ fn webp_textures_decode() {
             / (3 * t.rgba.len() / 4) as f64;
         assert!(diff < 4.0, "mean |WebP − PNG| = {diff:.2} levels");
     }
+    // The fallback file samples the WebP, not its PNG: its texels are the
+    // required file's, which differ from the PNG's (lossy).
+    let texels = |s: &Scene| s.textures[s.materials[0].texture.expect("textured")].rgba.clone();
+    assert_eq!(texels(&fallback), texels(&required));
+    assert_ne!(texels(&required), png.into_raw(), "the WebP decodes to other texels than the PNG");
 }

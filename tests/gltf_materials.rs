@@ -147,7 +147,8 @@ fn emissive_factor_adds_light() {
     assert!((c[0] - 0.7354).abs() < 2e-3 && c[1].abs() < 2e-3 && c[2].abs() < 2e-3, "{c:?}");
 }
 
-/// KHR_materials_unlit: the base colour as it is, whatever the light. Grey 0.5
+/// KHR_materials_unlit: the base colour as it is, whatever the light, without
+/// the emissive fallback. Grey 0.5
 /// lit edge-on with no ambient is black; unlit it is sRGB 0.7354. Tolerance
 /// 2e-3 (f16 storage, 8-bit texels of the baked base colour: 0.5 → 128/255).
 #[test]
@@ -158,6 +159,9 @@ fn unlit_materials_ignore_the_light() {
     assert!(lit[0] < 2e-3, "lit edge-on without ambient is black: {lit:?}");
     let mut unlit = grey;
     unlit["extensions"] = json!({"KHR_materials_unlit": {}});
+    // An emissive factor is a fallback for viewers without the extension (its
+    // README: colour = the base colour term): not added.
+    unlit["emissiveFactor"] = json!([0.5, 0.0, 0.0]);
     let scene = Scene::from_glb(&quad_requiring(unlit, true, &["KHR_materials_unlit"]), "unlit.gltf")
         .expect("a file requiring KHR_materials_unlit loads");
     assert!(scene.materials[0].unlit);
@@ -178,6 +182,13 @@ fn emissive_strength_scales_emission() {
     });
     let (c, _) = centre(&ctx, &load(m, true));
     assert!((c[0] - 0.7354).abs() < 2e-3 && c[1].abs() < 2e-3, "{c:?}");
+    // A valid strength beyond f32's range loads (the product is held to f32).
+    let huge = json!({
+        "emissiveFactor": [0.0, 1.0, 0.0],
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 1e39}}
+    });
+    let scene = Scene::from_glb(&quad(huge, true), "huge.gltf").expect("a huge strength is valid");
+    assert_eq!(scene.materials[0].emissive, [0.0, f32::MAX, 0.0]);
     let bad = json!({"extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": -1.0}}});
     let Err(err) = Scene::from_glb(&quad(bad, true), "bad.gltf") else { panic!("a negative strength is refused") };
     assert!(err.to_string().contains("emissiveStrength"), "{err}");

@@ -479,8 +479,9 @@ fn xr_command_prints_fallback_warnings() {
 
 /// Controller toggles through OpenXR actions (spec chapter 11), under the core
 /// validation layer: on Touch controllers, A switches matched ↔ naive, B the
-/// noise, X the motion blur, Y the DoF. Scripted presses (one frame each) act
-/// once, on the press, in the order made; a naive frame applies nothing, and
+/// noise, X the motion blur, Y the DoF. Scripted presses act once, on the press,
+/// in the order made — a button held for six frames toggles once, and a press
+/// while the session is not focused (a system menu over the app) does nothing; a naive frame applies nothing, and
 /// coming back restores the per-effect switches; an effect the model lacks
 /// (this model has no noise) is never applied whatever the switch says. The
 /// runtime logs each boolean action's change (pressed, then released).
@@ -493,9 +494,10 @@ fn controller_presses_toggle_matched_and_each_effect() {
         "BA_XR_SCRIPT",
         "press:/user/hand/right/input/a/click@20,press:/user/hand/left/input/y/click@30,\
          press:/user/hand/right/input/a/click@40,press:/user/hand/left/input/x/click@50,\
-         press:/user/hand/right/input/b/click@60",
+         press:/user/hand/right/input/b/click@60..66,\
+         unfocus@70,press:/user/hand/right/input/a/click@72,focus@75",
     )];
-    let Some(run) = run_xr("controls", &env, 80, true, &models) else { return };
+    let Some(run) = run_xr("controls", &env, 90, true, &models) else { return };
     assert_clean(&run, true);
     let s = &run.summary;
     assert!(s.controls, "the bindings were accepted and the set attached");

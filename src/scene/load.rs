@@ -431,17 +431,24 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
         let strength = match ext["KHR_materials_emissive_strength"].get("emissiveStrength") {
             None => 1.0,
             Some(v) => match v.as_f64() {
-                Some(x) if x.is_finite() && x >= 0.0 => x as f32,
+                Some(x) if x.is_finite() && x >= 0.0 => x,
                 _ => {
                     return Err(invalid(name, format!("material {i}: emissiveStrength {v} is not a number ≥ 0")));
                 }
             },
         };
-        let emissive = m.emissive_factor.0.map(|c| c * strength);
-        if emissive.iter().any(|c| !c.is_finite()) {
+        if m.emissive_factor.0.iter().any(|c| !c.is_finite()) {
             return Err(invalid(name, format!("material {i}: non-finite emissiveFactor")));
         }
+        // The product in f64, held to f32's range (a valid huge strength must not
+        // overflow to infinity; the G-buffer clamps emission far below anyway).
+        let mut emissive = m.emissive_factor.0.map(|c| (c as f64 * strength).min(f32::MAX as f64) as f32);
+        // KHR_materials_unlit: colour = the base colour term; the other core
+        // material properties are fallbacks for viewers without the extension.
         let unlit = ext.get("KHR_materials_unlit").is_some();
+        if unlit {
+            emissive = [0.0; 3];
+        }
         if m.emissive_texture.is_some() {
             emissive_textures += 1;
         }

@@ -11,7 +11,7 @@
 //! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, `env_depth` (XR_META_environment_depth), or `none` | refresh_rate,space_warp,convert_timespec (quest3: all) |
 //! | `BA_XR_ENV_DEPTH_DENIALS` | refuse this many environment-depth provider creations (XR_ERROR_NOT_PERMITTED_PASSTHROUGH_FB: the spatial-data permission not yet granted) | 0 |
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
-//! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N`, `pause@N` (the session is stopped and stays IDLE after xrEndSession, as an Android app put in the background: no EXITING), `untracked@N..M` (xrLocateViews for frames N to M − 1 without ORIENTATION_VALID/POSITION_VALID: zero quaternions on even frames, a plausible wrong pose on odd ones), `press:PATH@N` (the controller component PATH, e.g. `/user/hand/right/input/a/click`, reads true in the xrSyncActions calls made while frame N is produced) | none |
+//! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N`, `pause@N` (the session is stopped and stays IDLE after xrEndSession, as an Android app put in the background: no EXITING), `untracked@N..M` (xrLocateViews for frames N to M − 1 without ORIENTATION_VALID/POSITION_VALID: zero quaternions on even frames, a plausible wrong pose on odd ones), `press:PATH@N` (the controller component PATH, e.g. `/user/hand/right/input/a/click`, reads true in the xrSyncActions calls made while frame N is produced; `@N..M`: held for frames N to M − 1) | none |
 //! | `BA_XR_CONTROLLER` | the controllers: `touch` (answer to Oculus Touch bindings, else the simple controller's), `simple` (the Khronos simple controller only) or `none` | touch |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
@@ -80,8 +80,8 @@ pub struct Config {
     pub env_depth_denials: u32,
     pub blend_modes: Vec<openxr_sys::EnvironmentBlendMode>,
     pub script: Vec<(u64, Command)>,
-    /// Scripted button presses: (frame, component path).
-    pub presses: Vec<(u64, String)>,
+    /// Scripted button presses: (first frame, frame after the last, component path).
+    pub presses: Vec<(u64, u64, String)>,
     pub controller: Controller,
     pub png_dir: Option<PathBuf>,
     pub png_frames: Vec<u64>,
@@ -176,8 +176,18 @@ impl Config {
             for item in s.split(',').map(str::trim) {
                 let (what, at) = item.rsplit_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
                 if let Some(path) = what.strip_prefix("press:") {
-                    let at: u64 = at.parse().map_err(|_| format!("BA_XR_SCRIPT: {item:?}: frame is not a number"))?;
-                    presses.push((at, path.to_string()));
+                    // `@N`: frame N only; `@N..M`: held from N to M − 1.
+                    let (from, to) = match at.split_once("..") {
+                        Some((a, b)) => (a.parse::<u64>().ok(), b.parse::<u64>().ok()),
+                        None => (at.parse::<u64>().ok(), at.parse::<u64>().ok().map(|a| a + 1)),
+                    };
+                    let (Some(from), Some(to)) = (from, to) else {
+                        return Err(format!("BA_XR_SCRIPT: {item:?}: expected press:PATH@N or @N..M"));
+                    };
+                    if from >= to {
+                        return Err(format!("BA_XR_SCRIPT: {item:?}: expected N < M"));
+                    }
+                    presses.push((from, to, path.to_string()));
                     continue;
                 }
                 let cmd = match what {

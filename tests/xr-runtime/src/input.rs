@@ -5,9 +5,9 @@
 //! and the Khronos simple controller), and after xrAttachSessionActionSets the
 //! runtime picks the profile its controllers match among those the app suggested
 //! (Touch first, then the simple controller, as a runtime may remap) and queues
-//! XrEventDataInteractionProfileChanged. Buttons are pressed by the script
-//! (`press:PATH@N`: true in the xrSyncActions calls made while frame N is being
-//! produced, false otherwise), so boolean actions report `currentState`,
+//! XrEventDataInteractionProfileChanged at the first sync of the running session.
+//! Buttons are pressed by the script (`press:PATH@N`: true in the xrSyncActions
+//! calls made while frame N is being produced, false otherwise; `@N..M` held), so boolean actions report `currentState`,
 //! `changedSinceLastSync` and `lastChangeTime` as the spec defines them; an
 //! unfocused session syncs nothing (XR_SESSION_NOT_FOCUSED, every action
 //! inactive). Float, vector and pose actions stay inactive (no analog input is
@@ -24,6 +24,9 @@ pub(crate) const TOUCH: &str = "/interaction_profiles/oculus/touch_controller";
 pub(crate) const SIMPLE: &str = "/interaction_profiles/khr/simple_controller";
 
 /// Component paths (after `/user/hand/{left,right}/`) of each profile, spec 6.4.
+/// An identifier without its component (`input/a`, `input/trigger`) is accepted
+/// too: the spec lets the runtime pick the component ("Binding to an input
+/// source without a component").
 fn supports(profile: &str, binding: &str) -> bool {
     let (hand, component) = match (binding.strip_prefix("/user/hand/left/"), binding.strip_prefix("/user/hand/right/"))
     {
@@ -31,11 +34,17 @@ fn supports(profile: &str, binding: &str) -> bool {
         (_, Some(c)) => ("right", c),
         _ => return false,
     };
+    let mut known: Vec<&str> = Vec::new();
     match profile {
-        SIMPLE => ["input/select/click", "input/menu/click", "input/grip/pose", "input/aim/pose", "output/haptic"]
-            .contains(&component),
+        SIMPLE => known.extend([
+            "input/select/click",
+            "input/menu/click",
+            "input/grip/pose",
+            "input/aim/pose",
+            "output/haptic",
+        ]),
         TOUCH => {
-            let both = [
+            known.extend([
                 "input/squeeze/value",
                 "input/trigger/value",
                 "input/trigger/touch",
@@ -48,14 +57,22 @@ fn supports(profile: &str, binding: &str) -> bool {
                 "input/grip/pose",
                 "input/aim/pose",
                 "output/haptic",
-            ];
-            let left = ["input/x/click", "input/x/touch", "input/y/click", "input/y/touch", "input/menu/click"];
-            let right = ["input/a/click", "input/a/touch", "input/b/click", "input/b/touch", "input/system/click"];
-            both.contains(&component)
-                || if hand == "left" { left.contains(&component) } else { right.contains(&component) }
+            ]);
+            if hand == "left" {
+                known.extend(["input/x/click", "input/x/touch", "input/y/click", "input/y/touch", "input/menu/click"]);
+            } else {
+                known.extend([
+                    "input/a/click",
+                    "input/a/touch",
+                    "input/b/click",
+                    "input/b/touch",
+                    "input/system/click",
+                ]);
+            }
         }
-        _ => false,
+        _ => return false,
     }
+    known.iter().any(|k| *k == component || k.strip_prefix(component).is_some_and(|rest| rest.starts_with('/')))
 }
 
 pub(crate) struct Action {
@@ -76,6 +93,13 @@ pub(crate) struct Input {
     bindings: HashMap<String, Vec<(u64, String)>>,
     /// Sets attached to the session (spec: at most once per session).
     attached: Vec<u64>,
+    /// Sets ever attached: their actions and bindings are fixed for good (spec
+    /// 11.3/11.4: XR_ERROR_ACTIONSETS_ALREADY_ATTACHED once a set "has been
+    /// included in a call to xrAttachSessionActionSets").
+    ever_attached: Vec<u64>,
+    /// XrEventDataInteractionProfileChanged is owed: queued at the first sync of a
+    /// running session (the spec queues it for running sessions only).
+    profile_event_pending: bool,
     /// The interaction profile chosen at attach time, if the app suggested one
     /// the controllers match.
     pub profile: Option<String>,
@@ -86,6 +110,7 @@ impl Input {
     pub(crate) fn end_session(&mut self) {
         self.attached.clear();
         self.profile = None;
+        self.profile_event_pending = false;
         for a in self.actions.values_mut() {
             a.state = (false, false, 0, false);
         }
@@ -154,7 +179,7 @@ pub(crate) unsafe extern "system" fn create_action(
             return xr::Result::ERROR_VALIDATION_FAILURE;
         }
         // Spec 11.3: an action set's actions cannot change once it is attached.
-        if rt.input.attached.contains(&set.into_raw()) {
+        if rt.input.ever_attached.contains(&set.into_raw()) {
             return xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED;
         }
         // SAFETY: the caller's create info.
@@ -217,7 +242,7 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
                 return xr::Result::ERROR_HANDLE_INVALID;
             };
             // Spec 11.4: suggestions for an attached set's actions are an error.
-            if rt.input.attached.contains(&action.set) {
+            if rt.input.ever_attached.contains(&action.set) {
                 return xr::Result::ERROR_ACTIONSETS_ALREADY_ATTACHED;
             }
             pairs.push((b.action.into_raw(), path));
@@ -254,6 +279,11 @@ pub(crate) unsafe extern "system" fn attach_session_action_sets(
             return xr::Result::ERROR_HANDLE_INVALID;
         }
         rt.input.attached = sets.iter().map(|s| s.into_raw()).collect();
+        for s in sets {
+            if !rt.input.ever_attached.contains(&s.into_raw()) {
+                rt.input.ever_attached.push(s.into_raw());
+            }
+        }
         // The controllers (`BA_XR_CONTROLLER`) answer to these profiles, best first.
         let offered: &[&str] = match rt.config.controller {
             crate::config::Controller::Touch => &[TOUCH, SIMPLE],
@@ -262,9 +292,7 @@ pub(crate) unsafe extern "system" fn attach_session_action_sets(
         };
         rt.input.profile = offered.iter().find(|p| rt.input.bindings.contains_key(**p)).map(|p| p.to_string());
         rt.log(serde_json::json!({"event": "attach", "profile": rt.input.profile}));
-        if rt.input.profile.is_some() {
-            rt.events.push_back(crate::Event::ProfileChanged { session: session.into_raw() });
-        }
+        rt.input.profile_event_pending = rt.input.profile.is_some();
         xr::Result::SUCCESS
     })
 }
@@ -289,7 +317,10 @@ pub(crate) unsafe extern "system" fn get_current_interaction_profile(
             Some(p) => crate::intern_path(rt, &p),
             None => xr::Path::NULL,
         };
-        // SAFETY: caller's output.
+        if out.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: caller's output, checked non-null.
         unsafe { (*out).interaction_profile = profile };
         xr::Result::SUCCESS
     })
@@ -322,15 +353,27 @@ pub(crate) unsafe extern "system" fn sync_actions(
             return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
         }
         let Some(s) = rt.session.as_ref() else { return xr::Result::ERROR_HANDLE_INVALID };
-        let (focused, frame) = (s.state == xr::SessionState::FOCUSED, s.frame.ended);
+        let (focused, running, frame, handle) =
+            (s.state == xr::SessionState::FOCUSED, s.running, s.frame.ended, s.handle);
+        if running && std::mem::take(&mut rt.input.profile_event_pending) {
+            rt.events.push_back(crate::Event::ProfileChanged { session: handle });
+        }
         let now = rt.now_ns();
-        let pressed: Vec<String> =
-            rt.config.presses.iter().filter(|(at, _)| *at == frame).map(|(_, p)| p.clone()).collect();
+        let pressed: Vec<String> = rt
+            .config
+            .presses
+            .iter()
+            .filter(|(from, to, _)| (*from..*to).contains(&frame))
+            .map(|(_, _, p)| p.clone())
+            .collect();
         let synced: Vec<u64> = active.iter().map(|a| a.action_set.into_raw()).collect();
         let bound = rt.input.profile.as_ref().and_then(|p| rt.input.bindings.get(p)).cloned().unwrap_or_default();
         let mut changes = Vec::new();
         for (h, a) in rt.input.actions.iter_mut() {
+            // Spec (xrSyncActions): only the listed sets are active; the others'
+            // actions read inactive and false until synced again.
             if !synced.contains(&a.set) {
+                a.state = (false, false, a.state.2, false);
                 continue;
             }
             let paths: Vec<&String> = bound.iter().filter(|(act, _)| act == h).map(|(_, p)| p).collect();
@@ -399,7 +442,11 @@ macro_rules! inactive_state {
                 if !session_ok(rt, session) {
                     return xr::Result::ERROR_HANDLE_INVALID;
                 }
-                // SAFETY: caller's output; no analog input is scripted, so it is inactive.
+                if state.is_null() {
+                    return xr::Result::ERROR_VALIDATION_FAILURE;
+                }
+                // SAFETY: caller's output, checked non-null; no analog input is
+                // scripted, so it is inactive.
                 unsafe { (*state).is_active = xr::FALSE };
                 xr::Result::SUCCESS
             })
@@ -451,9 +498,12 @@ pub(crate) unsafe extern "system" fn create_action_space(
         if !session_ok(rt, session) {
             return xr::Result::ERROR_HANDLE_INVALID;
         }
+        if out.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
         let h = rt.handle();
         rt.actions.insert(h);
-        // SAFETY: caller's output. Located as untracked (no controller).
+        // SAFETY: caller's output, checked non-null. Located as untracked.
         unsafe { *out = xr::Space::from_raw(h) };
         xr::Result::SUCCESS
     })
