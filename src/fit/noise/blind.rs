@@ -164,9 +164,11 @@ pub const FAST_ALONE: &str = "fast";
 /// cancels), and from level 1 on the flat samples are chosen one level coarser
 /// instead (band l+1; see `NEIGHBOUR_STRUCTURE_OFFSET`).
 /// Binning by luma means dark bins are measured on dark samples: shadows are never
-/// judged flat or textured by the bright parts' standard. Bins more than 30% above
-/// their level's fitted line are texture and dropped (one-sided). The low-pass is
-/// not identifiable from one frame (it is the image itself) and is left out.
+/// judged flat or textured by the bright parts' standard. The bins' lower envelope
+/// is the noise (`trim_textured`: the line no bin undercuts by more than 30% that
+/// keeps the most bins within a factor 1.2 of its variance); bins outside that band
+/// are texture and dropped. The low-pass is not identifiable from one frame (it is
+/// the image itself) and is left out.
 pub fn fit_fast(
     image: &Rgb,
     neighbour: Option<&crate::fit::Neighbour>,

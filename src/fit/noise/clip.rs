@@ -144,8 +144,9 @@ impl ClipMask {
     /// Whether any clipped pixel may lie within `r` of (x, y) (level-0 pixels):
     /// the box is widened to whole tiles, so the test errs on the safe side.
     ///
-    /// `coarse`: levels 3 and the low-pass, whose footprints are ~100–180 px wide, so
-    /// that one clipped pixel anywhere near would empty them on a small frame;
+    /// `coarse`: for footprints so wide (level 3 and the low-pass: ~100–180 px) that
+    /// one clipped pixel anywhere near would empty them on a small frame (the
+    /// accurate tier passes it from level 3, the blind tier from level 2);
     /// there a footprint may hold up to `MAX_INVALID_FRACTION` clipped pixels (they
     /// carry no noise: the variance is diluted by at most that fraction).
     pub(super) fn touches(&self, x: usize, y: usize, r: usize, coarse: bool) -> bool {
