@@ -26,7 +26,7 @@ struct Draw {
     // x: alpha cutoff (MASK), y: mode (0 OPAQUE, 1 MASK, 2 BLEND), z: 1 if double-sided,
     // w: 1 if unlit (KHR_materials_unlit).
     material: vec4<f32>,
-    // rgb: emissive factor (linear).
+    // rgb: emissive factor (linear), times the emissive map.
     emissive: vec4<f32>,
 }
 
@@ -38,6 +38,8 @@ fn affine(rows: array<vec4<f32>, 3>, p: vec3<f32>) -> vec4<f32> {
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(1) @binding(0) var base_colour: texture_2d<f32>;
 @group(1) @binding(1) var base_sampler: sampler;
+// The emissive map (white when the material has none), sampled like the base colour.
+@group(1) @binding(2) var emissive_map: texture_2d<f32>;
 var<push_constant> draw: Draw;
 
 struct VsOut {
@@ -88,6 +90,7 @@ fn srgb_encode(c: vec3<f32>) -> vec3<f32> {
 @fragment
 fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> FsOut {
     let texel = textureSample(base_colour, base_sampler, in.uv);
+    let emission = draw.emissive.rgb * textureSample(emissive_map, base_sampler, in.uv).rgb;
     // Single-sided materials show their front faces only (glTF 2.0 §3.9.6).
     if (!front && draw.material.z < 0.5) {
         discard;
@@ -118,7 +121,7 @@ fn fs_main(in: VsOut, @builtin(front_facing) front: bool) -> FsOut {
     if (draw.material.w > 0.5) {
         shade = 1.0;
     }
-    let lit = texel.rgb * shade + draw.emissive.rgb;
+    let lit = texel.rgb * shade + emission;
     var out: FsOut;
     out.colour = vec4<f32>(srgb_encode(lit) * alpha, alpha);
     // NDC → pixels: x_px = (ndc.x + 1) / 2 · width (Vulkan NDC +y is down, as rows).

@@ -215,3 +215,42 @@ fn required_punctual_lights_are_ignored_with_a_note() {
         .expect("a file requiring KHR_lights_punctual loads");
     assert!(scene.notes.iter().any(|n| n.contains("lights ignored")), "{:?}", scene.notes);
 }
+
+/// `quad` with one 1×1 PNG image (RGBA `texel`) as texture 0.
+fn quad_with_texture(material: serde_json::Value, texel: [u8; 4]) -> Vec<u8> {
+    let mut png = Vec::new();
+    image::RgbaImage::from_pixel(1, 1, image::Rgba(texel))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .expect("png");
+    let mut doc: serde_json::Value = serde_json::from_slice(&quad(material, true)).expect("json");
+    let uri = format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(&png));
+    doc["images"] = json!([{"uri": uri}]);
+    doc["textures"] = json!([{"source": 0}]);
+    serde_json::to_vec(&doc).expect("json")
+}
+
+/// The emissive map multiplies the emissive factor (glTF 2.0 §3.9.3): factor 0.5
+/// grey × a red map emits red 0.5 → sRGB 0.7354, green and blue 0 (a factor alone
+/// would emit grey). Tolerance 2e-3 (f16 storage). A map on another UV set than
+/// the base colour's is not read, and the file says so.
+#[test]
+fn emissive_texture_multiplies_the_factor() {
+    let Some(ctx) = common::gpu_context("emissive_texture_multiplies_the_factor") else { return };
+    let m = json!({
+        "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]},
+        "emissiveFactor": [0.5, 0.5, 0.5],
+        "emissiveTexture": {"index": 0}
+    });
+    let scene = Scene::from_glb(&quad_with_texture(m, [255, 0, 0, 255]), "emissive.gltf").expect("loads");
+    assert!(scene.materials[0].emissive_texture.is_some());
+    let (c, _) = centre(&ctx, &scene);
+    assert!((c[0] - 0.7354).abs() < 2e-3 && c[1].abs() < 2e-3 && c[2].abs() < 2e-3, "{c:?}");
+    let other = json!({
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+        "emissiveFactor": [1.0, 1.0, 1.0],
+        "emissiveTexture": {"index": 0, "texCoord": 1}
+    });
+    let scene = Scene::from_glb(&quad_with_texture(other, [255, 0, 0, 255]), "other.gltf").expect("loads");
+    assert!(scene.materials[0].emissive_texture.is_none());
+    assert!(scene.notes.iter().any(|n| n.contains("emissive textures on another UV set")), "{:?}", scene.notes);
+}

@@ -302,6 +302,12 @@ impl<'a> GraphicsPipeline<'a> {
                 .descriptor_type(vk::DescriptorType::SAMPLER)
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            // A second texture sampled with the same sampler (the emissive map).
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(2)
+                .descriptor_type(vk::DescriptorType::SAMPLED_IMAGE)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
         ];
         // SAFETY (this block's calls): valid device, create infos alive for each call;
         // partially built objects are destroyed by `Drop` (null handles ignored).
@@ -418,7 +424,7 @@ impl<'a> GraphicsPipeline<'a> {
         let (nf, nm) = (desc.frame_sets.max(1), desc.material_sets.max(1));
         let sizes = [
             vk::DescriptorPoolSize::default().ty(vk::DescriptorType::UNIFORM_BUFFER).descriptor_count(nf),
-            vk::DescriptorPoolSize::default().ty(vk::DescriptorType::SAMPLED_IMAGE).descriptor_count(nm),
+            vk::DescriptorPoolSize::default().ty(vk::DescriptorType::SAMPLED_IMAGE).descriptor_count(2 * nm),
             vk::DescriptorPoolSize::default().ty(vk::DescriptorType::SAMPLER).descriptor_count(nm),
         ];
         // SAFETY: valid device; the pool holds exactly the sets allocated below.
@@ -465,8 +471,9 @@ impl<'a> GraphicsPipeline<'a> {
         Ok(())
     }
 
-    /// Point material set `i` at a texture.
-    pub fn bind_texture(&self, i: usize, texture: &Texture<'_>) -> Result<(), GpuError> {
+    /// Point material set `i` at its two textures (binding 0 with its sampler at
+    /// binding 1; binding 2, sampled with the same sampler).
+    pub fn bind_textures(&self, i: usize, texture: &Texture<'_>, second: &Texture<'_>) -> Result<(), GpuError> {
         let set = *self.material_sets.get(i).ok_or(GpuError::Input {
             input: "material set",
             problem: format!("{i} ≥ {} sets", self.material_sets.len()),
@@ -475,6 +482,9 @@ impl<'a> GraphicsPipeline<'a> {
             .image_view(texture.image.view)
             .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
         let sampler = [vk::DescriptorImageInfo::default().sampler(texture.sampler)];
+        let image2 = [vk::DescriptorImageInfo::default()
+            .image_view(second.image.view)
+            .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
         let writes = [
             vk::WriteDescriptorSet::default()
                 .dst_set(set)
@@ -486,6 +496,11 @@ impl<'a> GraphicsPipeline<'a> {
                 .dst_binding(1)
                 .descriptor_type(vk::DescriptorType::SAMPLER)
                 .image_info(&sampler),
+            vk::WriteDescriptorSet::default()
+                .dst_set(set)
+                .dst_binding(2)
+                .descriptor_type(vk::DescriptorType::SAMPLED_IMAGE)
+                .image_info(&image2),
         ];
         // SAFETY: as in `bind_uniform`.
         unsafe { self.ctx.device.update_descriptor_sets(&writes, &[]) };

@@ -180,8 +180,16 @@ impl<'a> GBufferPass<'a> {
                 }
             }
             let tex = Texture::new(ctx, w, h, &rgba, &format!("material {i}"))?;
-            pipeline.bind_texture(i, &tex)?;
+            // The emissive map (sRGB, glTF: emission = factor × texture); white
+            // without one, so the factor alone emits.
+            let (ew, eh, erg) = match m.emissive_texture.and_then(|t| scene.textures.get(t)) {
+                Some(t) => (t.width, t.height, t.rgba.clone()),
+                None => (1, 1, vec![255u8; 4]),
+            };
+            let emissive = Texture::new(ctx, ew, eh, &erg, &format!("material {i} emissive"))?;
+            pipeline.bind_textures(i, &tex, &emissive)?;
             textures.push(tex);
+            textures.push(emissive);
         }
         let mut meshes = Vec::new();
         for (i, m) in scene.meshes.iter().enumerate() {

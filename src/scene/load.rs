@@ -363,7 +363,7 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
     let mut textures: Vec<Arc<TextureData>> = Vec::new();
     let mut image_texture: HashMap<usize, usize> = HashMap::new();
     let mut material_uv: Vec<UvSet> = Vec::new();
-    let mut emissive_textures = 0;
+    let mut emissive_other_uv = 0;
     for (i, m) in root.materials.iter().enumerate() {
         let pbr = &m.pbr_metallic_roughness;
         let ext = &raw_json["materials"][i]["extensions"];
@@ -402,15 +402,9 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
             notes.push(format!("material {i}: base-colour texture without a PNG/JPEG/WebP source; drawn untextured"));
         }
         if let Some((info, tex)) = base_texture.as_ref().zip(source.filter(|&s| s < root.images.len())) {
-            texture = Some(match image_texture.get(&tex) {
-                Some(&t) => t,
-                None => {
-                    let t = textures.len();
-                    textures.push(Arc::new(decode_image(&root, &data, tex, name, &resources)?));
-                    image_texture.insert(tex, t);
-                    t
-                }
-            });
+            texture = Some(cached_texture(tex, &mut textures, &mut image_texture, || {
+                decode_image(&root, &data, tex, name, &resources)
+            })?);
             uv = UvSet::from_info(info, name, i)?;
         }
         // glTF 2.0 §3.9.4: alphaCutoff applies in MASK mode only, default 0.5.
@@ -449,16 +443,44 @@ pub(super) fn parse(bytes: &[u8], name: &str, resources: Resources<'_>) -> Resul
         if unlit {
             emissive = [0.0; 3];
         }
-        if m.emissive_texture.is_some() {
-            emissive_textures += 1;
+        // The emissive map (glTF 2.0 §3.9.3: emission = emissiveFactor × texture),
+        // read where it can emit at all. The G-buffer carries one UV set per
+        // vertex, the base colour's: a map on another set or transform is noted
+        // and its factor emits alone.
+        let mut emissive_texture = None;
+        if let Some(info) = m.emissive_texture.as_ref().filter(|_| emissive.iter().any(|&c| c > 0.0)) {
+            let tex = texture_source(&root, &raw_json, info.index.value());
+            let set = UvSet::from_info(info, name, i)?;
+            if tex >= root.images.len() {
+                notes.push(format!("material {i}: emissive texture without a PNG/JPEG/WebP source; not read"));
+            } else if texture.is_some() && set != uv {
+                emissive_other_uv += 1;
+            } else {
+                if texture.is_none() {
+                    uv = set;
+                }
+                emissive_texture = Some(cached_texture(tex, &mut textures, &mut image_texture, || {
+                    decode_image(&root, &data, tex, name, &resources)
+                })?);
+            }
         }
-        materials.push(Material { base_colour, texture, alpha, double_sided: m.double_sided, emissive, unlit });
+        materials.push(Material {
+            base_colour,
+            texture,
+            alpha,
+            double_sided: m.double_sided,
+            emissive,
+            emissive_texture,
+            unlit,
+        });
         material_uv.push(uv);
     }
     let default_material = materials.len();
-    if emissive_textures > 0 {
-        notes
-            .push(format!("{emissive_textures} emissive textures not read: their materials emit their emissiveFactor"));
+    if emissive_other_uv > 0 {
+        notes.push(format!(
+            "{emissive_other_uv} emissive textures on another UV set or transform than their base colour's not read: \
+             their materials emit their emissiveFactor"
+        ));
     }
     materials.push(Material::fallback());
     material_uv.push(UvSet::default());
@@ -957,7 +979,7 @@ fn normalise(v: &mut serde_json::Value, notes: &mut Vec<String>) {
 
 /// Which UV set a material's base-colour texture reads and its
 /// KHR_texture_transform, applied to the UVs at load time.
-#[derive(Default)]
+#[derive(Default, PartialEq)]
 struct UvSet {
     tex_coord: u32,
     uv_from_mesh_uv: Option<glam::Affine2>,
@@ -1007,6 +1029,21 @@ fn triangles(mode: json::mesh::Mode, order: &[u32]) -> Vec<u32> {
         }
         _ => order.chunks_exact(3).flatten().copied().collect(),
     }
+}
+
+/// The index in `textures` of image `image`, decoded on first use.
+fn cached_texture(
+    image: usize,
+    textures: &mut Vec<Arc<TextureData>>,
+    cache: &mut HashMap<usize, usize>,
+    decode: impl FnOnce() -> Result<TextureData, SceneError>,
+) -> Result<usize, SceneError> {
+    if let Some(&t) = cache.get(&image) {
+        return Ok(t);
+    }
+    textures.push(Arc::new(decode()?));
+    cache.insert(image, textures.len() - 1);
+    Ok(textures.len() - 1)
 }
 
 /// The image a texture samples: its EXT_texture_webp source where it has one

@@ -137,9 +137,12 @@ pub struct Material {
     pub alpha: AlphaMode,
     /// Back faces drawn (lit with the flipped normal); else culled (glTF 2.0 §3.9.6).
     pub double_sided: bool,
-    /// Linear RGB added to the lit colour (glTF emissiveFactor; an emissive
-    /// texture is not read).
+    /// Linear RGB added to the lit colour (glTF emissiveFactor, times
+    /// KHR_materials_emissive_strength), times `emissive_texture` where set.
     pub emissive: [f32; 3],
+    /// Index into `Scene::textures` (sRGB RGBA8) of the emissive map, sampled at
+    /// the same UVs as the base colour.
+    pub emissive_texture: Option<usize>,
     /// KHR_materials_unlit: drawn as its base colour, without the key light.
     pub unlit: bool,
 }
@@ -154,6 +157,7 @@ impl Material {
             alpha: AlphaMode::Opaque,
             double_sided: false,
             emissive: [0.0; 3],
+            emissive_texture: None,
             unlit: false,
         }
     }
