@@ -28,7 +28,7 @@ pub struct DepthView {
 }
 
 /// Pinhole intrinsics of the (undistorted) passthrough camera, in its pixels.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Intrinsics {
     pub fx: f32,
     pub fy: f32,

@@ -1,9 +1,11 @@
 //! File formats for the CLI: images (PNG/JPEG, 8- and 16-bit), float images (PFM,
 //! `.npy`), depth (PFM, 16-bit PNG, `.npy`) and flow (Middlebury `.flo`, `.npy`
-//! H×W×2, x then y). Every error names the file and what is wrong.
+//! H×W×2, x then y), and recordings of what the calibration worker takes
+//! (`recording`). Every error names the file and what is wrong.
 
 mod float;
 pub mod poses;
+pub mod recording;
 
 pub use float::{read_npy_f32, read_pfm, write_npy, write_npy_rgb, write_pfm_rgb};
 

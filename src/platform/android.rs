@@ -28,6 +28,7 @@ use crate::analysis::headset_depth::HeadsetDepth;
 use crate::analysis::timing::{ClockMap, ClockSample, TimedPose, TimestampSource};
 use crate::android_camera::{CameraManager, PassthroughCamera};
 use crate::image::yuv::{Yuv420, YuvMatrix, YuvRange};
+use crate::io::recording::{RecordLimits, Recording, RecordingInfo};
 use crate::model::CameraModel;
 use crate::render::LayerSettings;
 use crate::scene::Scene;
@@ -175,10 +176,18 @@ struct LiveInputs {
     clocks: Mutex<(VecDeque<ClockSample>, bool)>,
     /// The newest headset depth not yet taken by the camera thread.
     depth: Mutex<Option<Arc<EnvironmentDepth>>>,
+    /// Record-button presses not yet acted on (the camera thread starts or stops
+    /// the recording: the frame loop never touches storage).
+    record_presses: std::sync::atomic::AtomicU32,
 }
 
 impl LiveInputs {
     fn on_frame(&self, r: &FrameRecord) {
+        for t in &r.pressed {
+            if *t == crate::xr::Toggle::Record {
+                self.record_presses.fetch_add(1, Ordering::SeqCst);
+            }
+        }
         // Untracked views are the last tracked ones shown again (FrameRecord::
         // views_tracked): they say nothing about where the head is at this frame's
         // time, and a pose track holding them would pair frames with wrong poses.
@@ -419,6 +428,19 @@ fn calibrate_live(
         Calibrator::new(CalibratorConfig::new(tier, FRAME_INTERVAL_S, choice.intrinsics), Providers::for_tier(tier))
             .map_err(|e| e.to_string())?;
     let worker = Arc::new(Worker::spawn(calibrator, models.clone()).map_err(|e| format!("calibration thread: {e}"))?);
+    let mut recorder = Recorder::new(
+        app.external_data_path().map(|d| d.join("recordings")),
+        RecordingInfo {
+            device: "Meta Quest (Android)".into(),
+            app_version: env!("CARGO_PKG_VERSION").into(),
+            camera_id: choice.id.clone(),
+            stream_size: choice.size,
+            timestamps: format!("{:?} camera timestamps, mapped to XrTime", choice.timestamp_source),
+            frame_interval_s: FRAME_INTERVAL_S,
+            intrinsics: choice.intrinsics,
+            tier: tier.name().into(),
+        },
+    );
     let head_from_camera: Mat4 = choice.head_from_camera.unwrap_or_else(forward_camera);
     // Camera2's YUV_420_888 is JFIF (BT.601, full range) unless a dataspace says
     // otherwise (the HAL's default for camera YUV output).
@@ -507,6 +529,7 @@ fn calibrate_live(
         }
         while !stop.load(Ordering::SeqCst) && !camera.lost() {
             std::thread::sleep(Duration::from_millis(200));
+            recorder.poll(live.record_presses.swap(0, Ordering::SeqCst), &worker);
             if last_report.elapsed() >= Duration::from_secs(10) {
                 last_report = Instant::now();
                 let snapshot = models.latest();
@@ -534,6 +557,8 @@ fn calibrate_live(
     // The handler holds a worker reference: gone with the last camera's reader
     // and this one.
     drop(handler);
+    recorder.poll(0, &worker);
+    recorder.stop(&worker);
     match Arc::try_unwrap(worker) {
         Ok(w) => {
             let s = w.stop();
@@ -549,6 +574,71 @@ fn calibrate_live(
         Err(_) => log::warn!("calibration worker still referenced at exit: not joined"),
     }
     Ok(())
+}
+
+/// Recordings started and stopped by the controller's record button: each a
+/// new folder `recordings/rec-<unix seconds>` in the app's external files
+/// folder (`adb pull`, or `cargo xtask pull-recording`), in `calibrate`'s input
+/// layout (`io::recording`). Runs on the camera thread.
+struct Recorder {
+    root: Option<std::path::PathBuf>,
+    info: RecordingInfo,
+    current: Option<Recording>,
+}
+
+impl Recorder {
+    fn new(root: Option<std::path::PathBuf>, info: RecordingInfo) -> Self {
+        Self { root, info, current: None }
+    }
+
+    /// Act on `presses` record-button presses; end a recording that stopped by
+    /// itself (duration, low storage).
+    fn poll(&mut self, presses: u32, worker: &Worker) {
+        if self.current.as_ref().is_some_and(|r| r.is_finished()) {
+            self.stop(worker);
+        }
+        for _ in 0..presses {
+            if self.current.is_some() {
+                self.stop(worker);
+            } else {
+                self.start(worker);
+            }
+        }
+    }
+
+    fn start(&mut self, worker: &Worker) {
+        let Some(root) = &self.root else {
+            log::warn!("recording: the app has no external files folder");
+            return;
+        };
+        let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let dir = root.join(format!("rec-{secs}"));
+        match Recording::start(&dir, self.info.clone(), RecordLimits::default()) {
+            Ok((rec, tap)) => {
+                worker.set_tap(Some(Box::new(tap)));
+                log::info!("recording into {}", dir.display());
+                self.current = Some(rec);
+            }
+            Err(e) => log::warn!("recording not started: {e}"),
+        }
+    }
+
+    fn stop(&mut self, worker: &Worker) {
+        let Some(rec) = self.current.take() else { return };
+        worker.set_tap(None);
+        let dir = rec.dir().to_path_buf();
+        // The worker drops the tap at its next turn; the writer then finishes.
+        match rec.finish() {
+            Ok(m) => log::info!(
+                "recording {}: {} frames, {} models, stopped: {:?}",
+                dir.display(),
+                m.frames,
+                m.models_published,
+                m.stopped
+            ),
+            Err(e) => log::warn!("recording: {e}"),
+        }
+    }
 }
 
 /// The first model: the one stored by the last run, else the APK's

@@ -8,7 +8,9 @@
 //! how, `accessor` reads the data with every range checked.
 
 mod accessor;
+mod container;
 mod load;
+mod load_deform;
 mod meshopt;
 
 pub use load::SUPPORTED_REQUIRED;

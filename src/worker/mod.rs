@@ -13,4 +13,4 @@ pub use calibrator::{
     CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, Providers, Update, UpdateReason,
 };
 pub use channel::{ModelChannel, Snapshot};
-pub use thread::{Published, Worker, WorkerStats};
+pub use thread::{Published, Tap, Worker, WorkerStats};

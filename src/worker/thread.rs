@@ -7,17 +7,31 @@
 //! the slot's lock for a swap. Poses are never dropped (they are small and the
 //! track needs them all); their queue is bounded at `MAX_QUEUED_POSES`, oldest
 //! first out. Models go out through `ModelChannel::publish` (validated, lock-free
-//! for the reader).
+//! for the reader). A `Tap` (a recording) sees what the worker takes and
+//! publishes, on the worker's thread: it is installed through the slot, so the
+//! frame loop that starts or stops one holds the slot's lock only for a swap.
 
 use super::calibrator::{Calibrator, Event};
 use super::ModelChannel;
 use crate::analysis::timing::TimedPose;
 use crate::analysis::Frame;
+use crate::model::CameraModel;
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 const MAX_QUEUED_POSES: usize = 4096;
+
+/// What sees the worker's input and output on its own thread: a recording
+/// (`io::recording`). Called before each frame is fitted and after each model
+/// is published; a slow tap slows the worker (never the frame loop).
+pub trait Tap: Send {
+    /// A frame the worker took (None: poses arrived alone), with the poses taken
+    /// with it, before it is fitted.
+    fn taken(&mut self, frame: Option<&Frame>, poses: &[TimedPose]);
+    /// A model the worker published, with the frame and time it belongs to.
+    fn published(&mut self, frame: u64, t_s: f64, generation: u64, model: &CameraModel);
+}
 
 #[derive(Default)]
 struct Slot {
@@ -27,6 +41,9 @@ struct Slot {
     dropped: u64,
     busy: bool,
     stop: bool,
+    /// A tap to install (Some(None): remove the current one) at the worker's next
+    /// turn.
+    tap_change: Option<Option<Box<dyn Tap>>>,
 }
 
 struct Shared {
@@ -104,12 +121,13 @@ impl Worker {
                     None
                 }
             };
+            let mut tap: Option<Box<dyn Tap>> = None;
             loop {
-                let (frame, poses) = {
+                let (frame, poses, change) = {
                     let mut slot = lock(&s.slot);
                     slot.busy = false;
                     s.idle.notify_all();
-                    while slot.frame.is_none() && !slot.stop {
+                    while slot.frame.is_none() && !slot.stop && slot.tap_change.is_none() {
                         slot = s.wake.wait(slot).unwrap_or_else(|p| p.into_inner());
                     }
                     if slot.stop {
@@ -118,8 +136,18 @@ impl Worker {
                         break;
                     }
                     slot.busy = true;
-                    (slot.frame.take(), std::mem::take(&mut slot.poses))
+                    (slot.frame.take(), std::mem::take(&mut slot.poses), slot.tap_change.take())
                 };
+                // The old tap is dropped here, on this thread: a recording's writer
+                // learns that its input ended.
+                if let Some(t) = change {
+                    tap = t;
+                }
+                if let Some(t) = tap.as_mut() {
+                    if frame.is_some() || !poses.is_empty() {
+                        t.taken(frame.as_ref(), &poses);
+                    }
+                }
                 match calibrator.push_poses(&poses) {
                     Ok(events) => log_events(&events, &mut stats),
                     Err(e) => {
@@ -139,13 +167,18 @@ impl Worker {
                         for e in &events {
                             if let Event::Published(u) = e {
                                 match channel.publish(u.model.clone()) {
-                                    Ok(generation) => stats.published.push(Published {
-                                        frame: u.frame,
-                                        t_s: u.t_s,
-                                        generation,
-                                        compute_s: u.compute_s,
-                                        at_s: started.elapsed().as_secs_f64(),
-                                    }),
+                                    Ok(generation) => {
+                                        if let Some(t) = tap.as_mut() {
+                                            t.published(u.frame, u.t_s, generation, &u.model);
+                                        }
+                                        stats.published.push(Published {
+                                            frame: u.frame,
+                                            t_s: u.t_s,
+                                            generation,
+                                            compute_s: u.compute_s,
+                                            at_s: started.elapsed().as_secs_f64(),
+                                        })
+                                    }
                                     Err(e) => {
                                         log::error!(
                                             "calibration: model of frame {} refused by validation: {e}",
@@ -191,6 +224,14 @@ impl Worker {
         slot.poses.extend_from_slice(poses);
         let excess = slot.poses.len().saturating_sub(MAX_QUEUED_POSES);
         slot.poses.drain(..excess);
+    }
+
+    /// Install a tap (a recording) or, with None, remove the current one; the
+    /// worker makes the change at its next turn (after the fit in progress) and
+    /// drops the tap it replaces on its own thread. Never waits for the worker.
+    pub fn set_tap(&self, tap: Option<Box<dyn Tap>>) {
+        lock(&self.shared.slot).tap_change = Some(tap);
+        self.shared.wake.notify_one();
     }
 
     /// Whether the worker would take a frame now (none waiting, no fit running):

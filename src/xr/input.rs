@@ -28,10 +28,13 @@ pub enum Toggle {
     Noise,
     MotionBlur,
     Dof,
+    /// Start or stop a recording of what the calibration worker takes (the app
+    /// acts on it: `FrameRecord::pressed`); the effects stay as they are.
+    Record,
 }
 
 /// (toggle, action name, localized name, Touch binding, simple-controller binding).
-const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 4] = [
+const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 5] = [
     (
         Toggle::Matched,
         "toggle_matched",
@@ -42,6 +45,10 @@ const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 4] = [
     (Toggle::Noise, "toggle_noise", "Sensor noise", "/user/hand/right/input/b/click", None),
     (Toggle::MotionBlur, "toggle_motion_blur", "Motion blur", "/user/hand/left/input/x/click", None),
     (Toggle::Dof, "toggle_dof", "Depth of field", "/user/hand/left/input/y/click", None),
+    // The left thumbstick's click: the Touch profile's one remaining button a user
+    // does not press by accident while toggling (the menu button is the system's
+    // on the right hand and the app's on the left, where Meta's apps open menus).
+    (Toggle::Record, "toggle_recording", "Record calibration input", "/user/hand/left/input/thumbstick/click", None),
 ];
 
 /// The toggles' state: which effects the frame may apply.
@@ -73,6 +80,7 @@ impl Toggles {
             Toggle::Noise => self.effects.noise = !self.effects.noise,
             Toggle::MotionBlur => self.effects.motion_blur = !self.effects.motion_blur,
             Toggle::Dof => self.effects.dof = !self.effects.dof,
+            Toggle::Record => {}
         }
     }
 }

@@ -126,6 +126,9 @@ pub struct FrameRecord {
     pub enabled: Enabled,
     /// The effects the frame applied: those allowed that the camera model has.
     pub applied: Enabled,
+    /// Controller presses acted on in this frame (the app starts or stops a
+    /// recording on `Toggle::Record`).
+    pub pressed: Vec<Toggle>,
     /// CPU time of the frame outside xrWaitFrame (s).
     pub cpu_s: f64,
     /// Time blocked in xrWaitFrame (s).
@@ -641,10 +644,12 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         frame_stream.begin().map_err(call("xrBeginFrame"))?;
         // Input once per frame (spec 11.5: xrSyncActions updates every action's
         // state; an unfocused session gets XR_SESSION_NOT_FOCUSED and no presses).
+        let mut pressed_now = Vec::new();
         if let Some(c) = &controls {
             match c.poll(&session) {
                 Ok(pressed) => {
                     for t in pressed {
+                        pressed_now.push(t);
                         toggles.apply(t);
                         summary.toggles.push((summary.frames_rendered, t));
                         log::info!("input: {t:?} → {:?}", toggles.enabled());
@@ -778,6 +783,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             model_generation: snapshot.generation,
             enabled,
             applied,
+            pressed: pressed_now,
             cpu_s,
             wait_s,
             views: views.views,

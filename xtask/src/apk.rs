@@ -361,6 +361,49 @@ fn check(apk: &Path, unstripped: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Where the app keeps its recordings on the headset: its external files folder
+/// (`Context.getExternalFilesDir(null)`), `recordings/rec-<unix seconds>`.
+const RECORDINGS: &str = "/sdcard/Android/data/org.blindaugment.app/files/recordings";
+
+/// The newest `rec-<unix seconds>` in an `ls -1` listing.
+fn newest_recording(listing: &str) -> Option<&str> {
+    listing
+        .lines()
+        .map(str::trim)
+        .filter_map(|l| l.strip_prefix("rec-").and_then(|n| n.parse::<u64>().ok()).map(|n| (n, l)))
+        .max_by_key(|(n, _)| *n)
+        .map(|(_, l)| l)
+}
+
+/// `cargo xtask pull-recording [DEST]`: the newest recording on the connected
+/// headset, pulled with adb into DEST (default `target/recordings/`), and the
+/// `calibrate` command its manifest gives for replaying it.
+pub fn pull_recording(root: &Path, dest: Option<&Path>) -> Result<()> {
+    ensure!(have("adb"), "adb not found (Debian: apt-get install adb), and the headset in developer mode, connected");
+    let listing = run(Command::new("adb").args(["shell", "ls", "-1", RECORDINGS]))
+        .with_context(|| format!("listing {RECORDINGS} on the headset (no recording made yet?)"))?;
+    let Some(name) = newest_recording(&listing) else {
+        bail!("{RECORDINGS} holds no recording (press the left thumbstick in the app to start and stop one)")
+    };
+    let dest = dest.map_or_else(|| root.join("target/recordings"), Path::to_path_buf);
+    std::fs::create_dir_all(&dest).with_context(|| format!("creating {}", dest.display()))?;
+    run(Command::new("adb").arg("pull").arg(format!("{RECORDINGS}/{name}")).arg(&dest))?;
+    let local = dest.join(name);
+    let manifest = std::fs::read_to_string(local.join("manifest.json"))
+        .with_context(|| format!("{}: no manifest.json (a recording still being written?)", local.display()))?;
+    let m: serde_json::Value =
+        serde_json::from_str(&manifest).with_context(|| format!("{}/manifest.json", local.display()))?;
+    eprintln!(
+        "pulled {} ({} frames, stopped: {}); replay: cd {} && {}",
+        local.display(),
+        m["frames"],
+        m["stopped"],
+        local.display(),
+        m["calibrate"].as_str().unwrap_or("blind-augment calibrate …")
+    );
+    Ok(())
+}
+
 /// `cargo xtask install`: adb install -r and start the activity (users with a headset).
 pub fn install(root: &Path, release: bool) -> Result<()> {
     let profile = if release { "release" } else { "debug" };
@@ -376,4 +419,16 @@ pub fn install(root: &Path, release: bool) -> Result<()> {
     run(Command::new("adb").args(["shell", "am", "start", "-n", "org.blindaugment.app/android.app.NativeActivity"]))?;
     eprintln!("started; logs: adb logcat -s blind-augment");
     Ok(())
+}
+
+#[cfg(test)]
+mod recording_tests {
+    use super::newest_recording;
+
+    #[test]
+    fn the_newest_recording_is_the_largest_timestamp() {
+        let ls = "rec-1700000100\nrec-999\nnotes.txt\nrec-1700000099\nrec-x\n";
+        assert_eq!(newest_recording(ls), Some("rec-1700000100"));
+        assert_eq!(newest_recording("other\n"), None);
+    }
 }

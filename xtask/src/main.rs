@@ -142,6 +142,7 @@ fn main() -> Result<()> {
         Some("bench-xr") => xr_bench().map(|_| ()),
         Some("apk") => apk::apk(&root(), args.iter().any(|a| a == "--release")).map(|_| ()),
         Some("install") => apk::install(&root(), args.iter().any(|a| a == "--release")),
+        Some("pull-recording") => apk::pull_recording(&root(), args.get(1).map(Path::new)),
         Some("train-models") => models::train(&root()),
         Some("gltf-corpus") => match args.get(1) {
             Some(dir) => {
@@ -162,7 +163,7 @@ fn main() -> Result<()> {
             ),
             None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] [--noise-only] (bare git mirrors as owner+name/repo)"),
         },
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | train-models | gltf-corpus MIRRORS [--validator DIR] | bench-quality MIRRORS [--quick] [--noise-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | pull-recording [DEST] | train-models | gltf-corpus MIRRORS [--validator DIR] | bench-quality MIRRORS [--quick] [--noise-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
 

@@ -153,8 +153,8 @@ pub const FAST_ALONE: &str = "fast";
 /// Every band-pass level is measured on the frame itself (real noise is shaped by
 /// demosaicing, in-camera denoising, sharpening and compression, so coarse levels do
 /// not follow from level 0 by white-noise ratios — on the vtest clip level 1 holds
-/// 0.45× level 0's std where white noise would hold 0.49×, and level 3 1.6× the white
-/// prediction). At level l, per luma bin (16 bins of the smoothed luma), the flat
+/// 0.45–0.50× level 0's std where white noise holds 0.24× (`UNIT_BAND_STD`), and
+/// level 3 1.6× the white prediction). At level l, per luma bin (16 bins of the smoothed luma), the flat
 /// samples are the `BLIND_FLAT_FRACTION` with the least luma energy two levels
 /// coarser (band l+2: structure that spans the level-l window, and nearly
 /// uncorrelated with level-l noise, so selecting on it does not bias the level-l
@@ -428,6 +428,12 @@ pub(in crate::fit) fn fit_fast_with_luma(
         noise.level_sources =
             super::sources::level_sources(&noise, &measured_levels, &points, &covs, &bin_rel_se, bias, with_neighbour);
     }
+    // Presence was decided on the sampling error alone (`noise::finish`); the
+    // texture term widens only the stated error. Texture in the flattest samples
+    // adds variance, so it can read a noiseless textured frame as noisy (the known
+    // failure: +21% on a real textured photograph) but never hides noise that is
+    // there: a "present" whose stated error exceeds a third is a bias bound, not
+    // doubt about presence.
     if noise.present && neighbour.is_none() {
         let bias = floor(std_mid) as f64;
         let sampling = noise.diagnostics.stderr.unwrap_or(1.0);

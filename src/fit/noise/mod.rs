@@ -203,7 +203,7 @@ fn collect_samples(
     (0..=NOISE_LEVELS)
         .into_par_iter()
         .map(|l| {
-            let win = window(l.min(3) + (l == NOISE_LEVELS) as usize);
+            let win = window(l);
             let stride = (stride0 >> l).max(1);
             let band0 = &bands[0][l];
             let scale = 1usize << l;

@@ -8,7 +8,7 @@
 use super::{CalibrateArgs, SynthVideoArgs};
 use anyhow::{bail, ensure, Context, Result};
 use blind_augment::analysis::{DepthMap, Frame, Intrinsics, Role};
-use blind_augment::io::poses::{format_poses_csv, read_poses_csv, PoseRow};
+use blind_augment::io::poses::{format_poses_csv, read_pose_track_csv, read_poses_csv, PoseRow};
 use blind_augment::io::{self, BitDepth};
 use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_headline, noise_relative_error};
 use blind_augment::model::CameraModel;
@@ -33,6 +33,19 @@ pub fn parse_intrinsics(s: &str, w: usize, h: usize) -> Result<Intrinsics> {
         "--intrinsics `{s}`: need finite values with fx, fy > 0"
     );
     Ok(Intrinsics { fx: v[0], fy: v[1], cx: v[2], cy: v[3], width: w, height: h })
+}
+
+/// Each frame's number: the file names' numbers where every name is one and
+/// they increase in name order (a recording keeps the camera's numbering, with
+/// gaps where the live worker dropped frames: the temporal stages look for
+/// frame-number neighbours), else the position.
+pub fn frame_numbers(frames: &[std::path::PathBuf]) -> Vec<u64> {
+    let parsed: Option<Vec<u64>> =
+        frames.iter().map(|p| p.file_stem().and_then(|s| s.to_str()).and_then(|s| s.parse().ok())).collect();
+    match parsed {
+        Some(n) if n.windows(2).all(|w| w[1] > w[0]) => n,
+        _ => (0..frames.len() as u64).collect(),
+    }
 }
 
 /// One line of `--timeline` / `truth.jsonl`.
@@ -84,6 +97,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         .with_context(|| format!("--tier `{}`: expected fast, balanced or accurate", args.tier))?;
     ensure!(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0, "--fps {}: need 0 < fps ≤ 1000", args.fps);
     let frames = list_frames(&args.frames)?;
+    let numbers = frame_numbers(&frames);
     let (first, _) = io::load_rgb(&frames[0]).with_context(|| format!("frame {}", frames[0].display()))?;
     let (w, h) = (first.width, first.height);
     let poses: Option<Vec<PoseRow>> = match (&args.poses, &args.intrinsics) {
@@ -93,10 +107,15 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         (None, None) => None,
     };
     let intrinsics = args.intrinsics.as_deref().map(|s| parse_intrinsics(s, w, h)).transpose()?;
+    let track = match (&args.pose_track, &poses) {
+        (Some(p), Some(_)) => Some(read_pose_track_csv(p)?),
+        (Some(_), None) => bail!("--pose-track needs --poses (the frames' times) and --intrinsics"),
+        (None, _) => None,
+    };
     if let Some(rows) = &poses {
-        for (i, f) in frames.iter().enumerate() {
+        for (&i, f) in numbers.iter().zip(&frames) {
             ensure!(
-                rows.iter().any(|r| r.frame == i as u64),
+                rows.iter().any(|r| r.frame == i),
                 "frame {i} ({}) has no row in {}",
                 f.display(),
                 args.poses.as_ref().map_or(String::new(), |p| p.display().to_string())
@@ -132,12 +151,12 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let bar = frames_bar(frames.len());
     // Poses run ahead of camera frames on a headset (the camera pipeline's latency):
     // each frame arrives with the poses up to two frames later.
-    const POSE_LEAD: usize = 2;
+    const POSE_LEAD: u64 = 2;
     let mut pushed_rows = 0usize;
     let mut published: Vec<(u64, f64, CameraModel, f64)> = vec![];
     let mut fitted_frames: Vec<f64> = vec![];
     let (mut skipped, mut changes) = (0usize, vec![]);
-    for (i, path) in frames.iter().enumerate() {
+    for (&i, path) in numbers.iter().zip(&frames) {
         bar.set_message(path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default());
         let (image, _) = io::load_rgb(path).with_context(|| format!("frame {}", path.display()))?;
         ensure!(
@@ -149,9 +168,23 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         );
         let t_s = match &poses {
             Some(rows) => {
-                let upto = rows.partition_point(|r| r.frame <= (i + POSE_LEAD) as u64);
+                let t_s = rows.iter().find(|r| r.frame == i).map(|r| r.t_s).unwrap_or(i as f64 / args.fps as f64);
+                // The poses known with this frame: rows up to two frames later, or
+                // the pose track up to two and a half frame intervals later (the
+                // track has no frame numbers; half an interval of margin for
+                // frame-time jitter).
+                let (upto, new): (usize, Vec<_>) = match &track {
+                    Some(track) => {
+                        let limit_ns = ((t_s + (POSE_LEAD as f64 + 0.5) / args.fps as f64) * 1e9).round() as i64;
+                        let upto = track.partition_point(|p| p.t_ns <= limit_ns);
+                        (upto, track[pushed_rows.min(upto)..upto].to_vec())
+                    }
+                    None => {
+                        let upto = rows.partition_point(|r| r.frame <= i + POSE_LEAD);
+                        (upto, rows[pushed_rows.min(upto)..upto].iter().map(|r| r.pose).collect())
+                    }
+                };
                 if upto > pushed_rows {
-                    let new: Vec<_> = rows[pushed_rows..upto].iter().map(|r| r.pose).collect();
                     for e in cal.push_poses(&new)? {
                         if let Event::TrackingLoss { t_s, reason } = e {
                             log::warn!("tracking loss at {t_s:.3} s: {reason}");
@@ -160,7 +193,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
                     }
                     pushed_rows = upto;
                 }
-                rows.iter().find(|r| r.frame == i as u64).map(|r| r.t_s).unwrap_or(i as f64 / args.fps as f64)
+                t_s
             }
             None => i as f64 / args.fps as f64,
         };
@@ -176,7 +209,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             Some(d) => Some(io::load_flow(&sibling(d, path, "flow")?)?),
             None => None,
         };
-        let frame = Frame { index: i as u64, t_s, image, depth, flow };
+        let frame = Frame { index: i, t_s, image, depth, flow };
         let events = cal.push_frame(frame).with_context(|| format!("frame {}", path.display()))?;
         for e in events {
             match e {

@@ -3,6 +3,7 @@
 //! problem (anyhow context).
 
 mod calibrate_cmd;
+mod camera_feed;
 mod demo;
 mod fit_cmd;
 mod render_cmd;
@@ -208,12 +209,45 @@ pub struct XrArgs {
     /// (where installed); any Vulkan validation message fails the run.
     #[arg(long)]
     validation: bool,
+    /// Camera frames for live calibration (`calibrate`'s input layout: a recording
+    /// or `synth-video`'s output), fed to the calibration worker in real time at
+    /// their own times as the headset's camera would; the loop renders with the
+    /// models it publishes and exits when the frames end (unless --frames ends it
+    /// first).
+    #[arg(long)]
+    camera_frames: Option<PathBuf>,
+    /// With --camera-frames: poses.csv (world_from_camera per frame) …
+    #[arg(long, requires = "camera_frames")]
+    poses: Option<PathBuf>,
+    /// … and the frames' pinhole intrinsics fx,fy,cx,cy (px).
+    #[arg(long, requires = "camera_frames")]
+    intrinsics: Option<String>,
+    /// With --camera-frames: depth and flow folders named like the frames.
+    #[command(flatten)]
+    geometry: DepthArgs,
+    /// The camera's frame rate where --poses gives no times (and the nominal frame
+    /// interval).
+    #[arg(long, default_value_t = 30.0)]
+    camera_fps: f32,
+    /// Live calibration tier: fast (the headset's), balanced or accurate.
+    #[arg(long, default_value = "fast")]
+    tier: String,
+    /// Record what the calibration worker takes into this new folder (frames,
+    /// depth, poses, intrinsics, the published models, manifest.json), in
+    /// `calibrate`'s input layout.
+    #[arg(long, requires = "camera_frames")]
+    record: Option<PathBuf>,
+    /// Stop recording after this much video (s).
+    #[arg(long, default_value_t = 10.0)]
+    record_s: f64,
 }
 
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
-    /// Folder of frames (PNG/JPEG/PFM/.npy), in name order; frame i is row `frame = i`
-    /// of --poses.
+    /// Folder of frames (PNG/JPEG/PFM/.npy), in name order. Frame numbers: where
+    /// every file name is a number (`000123.png`, as recordings and synth-video
+    /// write them) that number, gaps kept; else the position in name order. A
+    /// frame numbered n is row `frame = n` of --poses.
     #[arg(long)]
     frames: PathBuf,
     /// --depth and --flow: folders of files named like the frames (depth: PFM,
@@ -228,6 +262,12 @@ pub struct CalibrateArgs {
     /// Pinhole intrinsics in pixels of the frames: fx,fy,cx,cy (with --poses).
     #[arg(long)]
     intrinsics: Option<String>,
+    /// Every pose tracked, `t_s,tx,ty,tz,qx,qy,qz,qw` (a recording's
+    /// pose_track.csv): the calibrator gets these instead of --poses' rows, each
+    /// once the frame 2.5 frame intervals before it is read; --poses still gives
+    /// the frames' times.
+    #[arg(long)]
+    pose_track: Option<PathBuf>,
     /// fast (the frame alone, every frame) | balanced | accurate (video as its own
     /// reference).
     #[arg(long, default_value = "accurate")]

@@ -10,6 +10,9 @@ use blind_augment::scene::Scene;
 use blind_augment::worker::ModelChannel;
 use blind_augment::xr::{self, default_camera, EndReason, XrOptions, XrSummary};
 use glam::{Mat4, Vec3};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use super::camera_feed::CameraFeed;
 
 const TOY: &[u8] = include_bytes!("../../../assets/toy.glb");
 
@@ -82,21 +85,69 @@ pub fn run(args: XrArgs) -> Result<()> {
     };
     anyhow::ensure!(args.object_depth_m > 0.1 && args.object_depth_m.is_finite(), "--object-depth-m must be > 0.1 m");
     let models = ModelChannel::new(model).context("camera model")?;
-    let summary = xr::run(XrOptions {
-        frames: args.frames,
-        validation: args.validation,
-        core_validation: args.validation,
-        scene: &scene,
-        local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -args.object_depth_m)),
-        models: &models,
-        settings: LayerSettings::default(),
-        display_hz: args.display_hz,
-        // The desktop app runs no live calibration: the headset's depth would go unused.
-        env_depth_hz: 0.0,
-        on_frame: None,
-        stop: None,
-        platform: &(),
-    })?;
+    let feed = match &args.camera_frames {
+        Some(dir) => Some(CameraFeed::open(&args, dir, &models)?),
+        None => {
+            anyhow::ensure!(
+                args.geometry.depth.is_none() && args.geometry.flow.is_none(),
+                "--depth and --flow are read with --camera-frames"
+            );
+            None
+        }
+    };
+    // The feed ends the loop when its frames end (`frames_done`); the loop's end
+    // stops the feed (`loop_done`).
+    let (frames_done, loop_done) = (AtomicBool::new(false), AtomicBool::new(false));
+    let (summary, fed) = std::thread::scope(|s| {
+        let feeding = feed.map(|f| s.spawn(|| f.run(&loop_done, &frames_done)));
+        let summary = xr::run(XrOptions {
+            frames: args.frames,
+            validation: args.validation,
+            core_validation: args.validation,
+            scene: &scene,
+            local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -args.object_depth_m)),
+            models: &models,
+            settings: LayerSettings::default(),
+            display_hz: args.display_hz,
+            // The desktop app's calibration takes no headset depth (depth comes
+            // with the frames).
+            env_depth_hz: 0.0,
+            on_frame: None,
+            stop: feeding.as_ref().map(|_| &frames_done),
+            platform: &(),
+        });
+        loop_done.store(true, Ordering::SeqCst);
+        let fed = feeding.map(|h| h.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the camera feed panicked"))));
+        (summary, fed)
+    });
+    let summary = summary?;
+    if let Some(fed) = fed {
+        let f = fed?;
+        let s = &f.stats;
+        println!(
+            "camera frames: {} offered, {} skipped while the worker was busy, {} fitted, {} models published, {} errors; newest model generation {}",
+            f.offered,
+            f.skipped,
+            s.processed,
+            s.published.len(),
+            s.errors.len(),
+            models.latest().generation
+        );
+        if let (Some(m), Some(dir)) = (&f.recording, &args.record) {
+            println!(
+                "recording {}: {} frames ({} with depth), {} poses, {} models, stopped: {:?}{}\n  replay: cd {} && {}",
+                dir.display(),
+                m.frames,
+                m.frames_with_depth,
+                m.poses_received,
+                m.models_published,
+                m.stopped,
+                if m.notes.is_empty() { String::new() } else { format!("; notes: {}", m.notes.join("; ")) },
+                dir.display(),
+                m.calibrate
+            );
+        }
+    }
     println!("{}", format_summary(&summary));
     if !summary.vulkan_messages.is_empty() {
         anyhow::bail!(
