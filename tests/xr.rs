@@ -17,7 +17,7 @@
 mod harness;
 
 use blind_augment::worker::ModelChannel;
-use blind_augment::xr::EndReason;
+use blind_augment::xr::{EndReason, FrameRecord};
 use glam::{Mat4, Vec3};
 use harness::*;
 use openxr::SessionState as S;
@@ -495,14 +495,25 @@ fn controller_presses_toggle_matched_and_each_effect() {
         "press:/user/hand/right/input/a/click@20,press:/user/hand/left/input/y/click@30,\
          press:/user/hand/right/input/a/click@40,press:/user/hand/left/input/x/click@50,\
          press:/user/hand/right/input/b/click@60..66,\
-         unfocus@70,press:/user/hand/right/input/a/click@72,focus@75",
+         unfocus@70,press:/user/hand/right/input/a/click@72,focus@75,\
+         press:/user/hand/left/input/thumbstick/click@80",
     )];
     let Some(run) = run_xr("controls", &env, 90, true, &models) else { return };
     assert_clean(&run, true);
     let s = &run.summary;
     assert!(s.controls, "the bindings were accepted and the set attached");
     let kinds: Vec<Toggle> = s.toggles.iter().map(|(_, t)| *t).collect();
-    assert_eq!(kinds, [Toggle::Matched, Toggle::Dof, Toggle::Matched, Toggle::MotionBlur, Toggle::Noise]);
+    assert_eq!(
+        kinds,
+        [Toggle::Matched, Toggle::Dof, Toggle::Matched, Toggle::MotionBlur, Toggle::Noise, Toggle::Record]
+    );
+    // The record button reaches the app in the frame it was pressed, once, and
+    // leaves the effects as they were.
+    let recorded: Vec<&FrameRecord> = run.records.iter().filter(|r| !r.pressed.is_empty()).collect();
+    assert_eq!(recorded.iter().filter(|r| r.pressed.contains(&Toggle::Record)).count(), 1);
+    let at = recorded.iter().position(|r| r.pressed.contains(&Toggle::Record)).expect("record press");
+    let k = recorded[at].index as usize;
+    assert_eq!(run.records[k].enabled, run.records[k - 1].enabled, "recording toggles no effect");
     let on = |noise, motion_blur, dof| Enabled { noise, motion_blur, dof };
     let mut seen: Vec<Enabled> = run.records.iter().map(|r| r.enabled).collect();
     seen.dedup();
@@ -531,7 +542,7 @@ fn controller_presses_toggle_matched_and_each_effect() {
         .collect();
     assert_eq!(
         changes,
-        [true, false].repeat(5),
+        [true, false].repeat(6),
         "{:?}",
         run.report.iter().filter(|v| v["event"] == "input").collect::<Vec<_>>()
     );

@@ -139,9 +139,11 @@ const EDGE_MIN_GRAD: f32 = 0.03;
 /// (+0.2–0.3 px on noise-free frames).
 const EDGE_TANGENT_TAPS: isize = 2;
 
-/// Most edge samples the fast tier's curve fit takes (see `fit_fast`): 1280×960
-/// frames give ~32 000; 8 192 keep the standard error within 2× of all of them at a
-/// quarter of the cost.
+/// Most edge samples (one per edge) the fast tier's curve fit takes (see
+/// `fit_fast`): a bound on its cost for frames denser than the camera's. Measured
+/// at 1280×960 (edges found by `fit_fast`'s scan): 2 676 edges on a sharp
+/// textured frame (the astronaut photograph mirror-tiled), 1 089–1 113 on
+/// `synth-video` frames, so the cap binds only on larger or denser frames.
 const FAST_MAX_EDGE_SAMPLES: usize = 8192;
 
 /// Least re-blurred gradient magnitude (per px, averaged along the edge like the
@@ -588,7 +590,7 @@ pub fn fit_fast(
 /// Most edge samples a pooled fit takes (`fit_fast_pooled`): one frame's
 /// (`FAST_MAX_EDGE_SAMPLES`), so pooling costs one more curve fit however many
 /// frames the pool holds (at 1280×960: 9.3 ms for the 11 000 samples of ten
-/// frames, ~2.4 ms for one frame's ~4 000 isolated edges).
+/// `synth-video` frames, about 1 100 edges each).
 pub const POOLED_MAX_EDGE_SAMPLES: usize = FAST_MAX_EDGE_SAMPLES;
 
 /// One δ(Z) curve fitted on the edge samples of several blind fits (`fit_fast`'s
