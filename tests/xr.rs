@@ -577,3 +577,29 @@ fn simple_controller_toggles_matched_and_no_controller_keeps_effects() {
     assert!(run.summary.toggles.is_empty());
     assert!(run.records.iter().all(|r| r.enabled.dof && r.enabled.motion_blur));
 }
+
+/// Quest 3's Touch Plus controllers: with XR_META_touch_controller_plus offered the
+/// app enables it and suggests the profile (a path valid only with the extension),
+/// and the runtime binds it; without the extension the app never names the path
+/// and the controllers answer to the Touch bindings, as a Meta runtime maps them.
+#[test]
+fn touch_plus_controllers_bind_with_or_without_their_extension() {
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let press = "press:/user/hand/right/input/a/click@20";
+    for (extensions, profile) in [
+        ("refresh_rate,space_warp,convert_timespec,touch_plus", "/interaction_profiles/meta/touch_controller_plus"),
+        ("refresh_rate,space_warp,convert_timespec", "/interaction_profiles/oculus/touch_controller"),
+    ] {
+        let env = [("BA_XR_CONTROLLER", "touch_plus"), ("BA_XR_EXTENSIONS", extensions), ("BA_XR_SCRIPT", press)];
+        let Some(run) = run_xr("controls_touch_plus", &env, 30, true, &models) else { return };
+        assert_clean(&run, true);
+        assert!(
+            run.report.iter().any(|v| v["event"] == "attach" && v["profile"] == profile),
+            "{extensions}: {:?}",
+            run.report.iter().filter(|v| v["event"] == "attach").collect::<Vec<_>>()
+        );
+        assert!(!run.report.iter().any(|v| v["event"] == "bindings_refused"), "every suggestion accepted");
+        assert_eq!(run.summary.toggles.len(), 1, "A toggles on {profile}");
+        assert!(!run.records.last().expect("frames").enabled.dof, "naive after A");
+    }
+}

@@ -2,11 +2,13 @@
 //! Haptics"): the buttons that switch matched ↔ naive and each effect on its own,
 //! so the comparison the paper's evaluation rests on can be made on the headset.
 //!
-//! One action set with four boolean actions; bindings are suggested for Oculus
-//! Touch (the Quest's controllers; Quest runtimes also map Touch Plus onto this
-//! profile) and the Khronos simple controller (spec 6.4, "Interaction Profile
-//! Paths"), each suggestion on its own so a runtime that does not know a profile
-//! (XR_ERROR_PATH_UNSUPPORTED) leaves the others in place. The set is attached
+//! One action set with five boolean actions (four toggles and the record
+//! button); bindings are suggested for Meta Touch Plus (Quest 3's controllers,
+//! XR_META_touch_controller_plus, when the runtime offers it), Oculus Touch (Quest 2
+//! and Pro; Quest runtimes also map Touch Plus onto this profile) and the Khronos
+//! simple controller (spec 6.4, "Interaction Profile Paths"), each suggestion on its
+//! own so a runtime that does not know a profile (XR_ERROR_PATH_UNSUPPORTED) leaves
+//! the others in place. The set is attached
 //! once to the session; every frame xrSyncActions is called and a button acts on
 //! its press (current state true with `changedSinceLastSync`), as Meta's
 //! XrSamples' input handling does. An unfocused session (XR_SESSION_NOT_FOCUSED,
@@ -19,6 +21,11 @@ use openxr as xr;
 
 const TOUCH: &str = "/interaction_profiles/oculus/touch_controller";
 const SIMPLE: &str = "/interaction_profiles/khr/simple_controller";
+/// Quest 3's controllers (XR_META_touch_controller_plus; the path is valid only
+/// with the extension enabled under OpenXR 1.0). Same buttons as Touch for what
+/// the app binds, so it takes Touch's bindings; suggested on its own so a runtime
+/// that prefers the exact profile finds one.
+const TOUCH_PLUS: &str = "/interaction_profiles/meta/touch_controller_plus";
 
 /// What each action does, its name, and its bindings per profile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,7 +101,7 @@ impl Controls {
     /// Creates the action set and its actions and suggests their bindings.
     /// Fails only if the set or an action cannot be created, or if no profile's
     /// bindings are accepted.
-    pub fn new(instance: &xr::Instance) -> Result<Self, XrError> {
+    pub fn new(instance: &xr::Instance, touch_plus: bool) -> Result<Self, XrError> {
         let set = instance.create_action_set("blind_augment", "Blind augment", 0).map_err(call("xrCreateActionSet"))?;
         let mut actions = Vec::with_capacity(ACTIONS.len());
         for (toggle, name, localized, _, _) in ACTIONS {
@@ -102,11 +109,12 @@ impl Controls {
             actions.push((toggle, action));
         }
         let mut accepted = 0;
-        for profile in [TOUCH, SIMPLE] {
+        let profiles: &[&str] = if touch_plus { &[TOUCH_PLUS, TOUCH, SIMPLE] } else { &[TOUCH, SIMPLE] };
+        for &profile in profiles {
             let path = |p: &str| instance.string_to_path(p).map_err(call("xrStringToPath"));
             let mut bindings = Vec::new();
             for ((_, _, _, touch, simple), (_, action)) in ACTIONS.iter().zip(&actions) {
-                let binding = if profile == TOUCH { Some(*touch) } else { *simple };
+                let binding = if profile == SIMPLE { *simple } else { Some(*touch) };
                 if let Some(b) = binding {
                     bindings.push(xr::Binding::new(action, path(b)?));
                 }

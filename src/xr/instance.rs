@@ -46,6 +46,12 @@ pub(super) fn create_instance(
         ),
         (available.fb_space_warp, &mut want.fb_space_warp, "XR_FB_space_warp", "every display frame is rendered"),
         (
+            available.meta_touch_controller_plus,
+            &mut want.meta_touch_controller_plus,
+            "XR_META_touch_controller_plus",
+            "Quest 3's Touch Plus controllers answer to the Touch bindings",
+        ),
+        (
             available.khr_convert_timespec_time,
             &mut want.khr_convert_timespec_time,
             "XR_KHR_convert_timespec_time",

@@ -409,7 +409,9 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         toggles: vec![],
     };
     // Controller toggles; input is optional: without it the app runs matched.
-    let controls = match input::Controls::new(&instance).and_then(|c| c.attach(&session).map(|()| c)) {
+    let controls = match input::Controls::new(&instance, enabled.meta_touch_controller_plus)
+        .and_then(|c| c.attach(&session).map(|()| c))
+    {
         Ok(c) => Some(c),
         Err(e) => {
             log::warn!("OpenXR: controller input unavailable ({e}); effects stay on");

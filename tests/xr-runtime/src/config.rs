@@ -8,11 +8,11 @@
 //! | `BA_XR_DISPLAY_HZ` | display refresh rate at start | 90 |
 //! | `BA_XR_REFRESH_RATES` | rates XR_FB_display_refresh_rate offers | 72,90,120 |
 //! | `BA_XR_EYE_SIZE` | recommended image rect per eye, `WxH` | 1680x1760 |
-//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, `env_depth` (XR_META_environment_depth), or `none` | refresh_rate,space_warp,convert_timespec (quest3: all) |
+//! | `BA_XR_EXTENSIONS` | optional extensions offered: `passthrough`, `refresh_rate`, `space_warp`, `convert_timespec`, `env_depth` (XR_META_environment_depth), `touch_plus` (XR_META_touch_controller_plus), or `none` | refresh_rate,space_warp,convert_timespec (quest3: all) |
 //! | `BA_XR_ENV_DEPTH_DENIALS` | refuse this many environment-depth provider creations (XR_ERROR_NOT_PERMITTED_PASSTHROUGH_FB: the spatial-data permission not yet granted) | 0 |
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
 //! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N`, `pause@N` (the session is stopped and stays IDLE after xrEndSession, as an Android app put in the background: no EXITING), `untracked@N..M` (xrLocateViews for frames N to M − 1 without ORIENTATION_VALID/POSITION_VALID: zero quaternions on even frames, a plausible wrong pose on odd ones), `press:PATH@N` (the controller component PATH, e.g. `/user/hand/right/input/a/click`, reads true in the xrSyncActions calls made while frame N is produced; `@N..M`: held for frames N to M − 1) | none |
-//! | `BA_XR_CONTROLLER` | the controllers: `touch` (answer to Oculus Touch bindings, else the simple controller's), `simple` (the Khronos simple controller only) or `none` | touch |
+//! | `BA_XR_CONTROLLER` | the controllers: `touch` (answer to Oculus Touch bindings, else the simple controller's), `touch_plus` (Meta Touch Plus bindings, else Touch's, else the simple controller's), `simple` (the Khronos simple controller only) or `none` | touch |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
 //! | `BA_XR_HEAD` | head path: `sway` (±4 cm at 0.5 Hz, ±3° yaw) or `still` | sway |
@@ -55,6 +55,9 @@ pub enum Profile {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Controller {
     Touch,
+    /// Quest 3's Touch Plus: its own profile where the app suggested it, else the
+    /// Touch bindings (a Meta runtime maps them onto Touch Plus controllers).
+    TouchPlus,
     Simple,
     None,
 }
@@ -77,6 +80,9 @@ pub struct Config {
     pub convert_timespec: bool,
     /// XR_META_environment_depth (the depth of a known plane, `env_depth.rs`).
     pub env_depth: bool,
+    /// XR_META_touch_controller_plus (its interaction profile path is valid only
+    /// with the extension enabled).
+    pub touch_plus: bool,
     pub env_depth_denials: u32,
     pub blend_modes: Vec<openxr_sys::EnvironmentBlendMode>,
     pub script: Vec<(u64, Command)>,
@@ -139,14 +145,14 @@ impl Config {
             // (the path Debian's core validation layer accepts: it rejects
             // XrCompositionLayerPassthroughFB).
             if quest3 {
-                "passthrough,refresh_rate,space_warp,convert_timespec,env_depth"
+                "passthrough,refresh_rate,space_warp,convert_timespec,env_depth,touch_plus"
             } else {
                 "refresh_rate,space_warp,convert_timespec"
             }
             .into()
         });
         let mut ext = (false, false, false, false);
-        let mut env_depth = false;
+        let (mut env_depth, mut touch_plus) = (false, false);
         for e in extensions.split(',').map(str::trim) {
             match e {
                 "passthrough" => ext.0 = true,
@@ -154,6 +160,7 @@ impl Config {
                 "space_warp" => ext.2 = true,
                 "convert_timespec" => ext.3 = true,
                 "env_depth" => env_depth = true,
+                "touch_plus" => touch_plus = true,
                 "none" => {}
                 other => return Err(format!("BA_XR_EXTENSIONS: unknown extension {other:?}")),
             }
@@ -240,6 +247,7 @@ impl Config {
         };
         let controller = match var("BA_XR_CONTROLLER").as_deref() {
             None | Some("touch") => Controller::Touch,
+            Some("touch_plus") => Controller::TouchPlus,
             Some("simple") => Controller::Simple,
             Some("none") => Controller::None,
             Some(other) => return Err(format!("BA_XR_CONTROLLER: unknown controller {other:?}")),
@@ -253,6 +261,7 @@ impl Config {
             space_warp: ext.2,
             convert_timespec: ext.3,
             env_depth,
+            touch_plus,
             env_depth_denials,
             blend_modes,
             script,

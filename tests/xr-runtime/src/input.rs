@@ -2,7 +2,8 @@
 //! headset with one pair of controllers: action sets and actions are kept with
 //! their names and types, suggested bindings are checked against the interaction
 //! profile's component paths (spec 6.4, "Interaction Profile Paths": Oculus Touch
-//! and the Khronos simple controller), and after xrAttachSessionActionSets the
+//! and the Khronos simple controller; Meta Touch Plus with XR_META_touch_controller_plus
+//! enabled), and after xrAttachSessionActionSets the
 //! runtime picks the profile its controllers match among those the app suggested
 //! (Touch first, then the simple controller, as a runtime may remap) and queues
 //! XrEventDataInteractionProfileChanged at the first sync of the running session.
@@ -22,6 +23,9 @@ use xr::Handle as _;
 
 pub(crate) const TOUCH: &str = "/interaction_profiles/oculus/touch_controller";
 pub(crate) const SIMPLE: &str = "/interaction_profiles/khr/simple_controller";
+/// XR_META_touch_controller_plus: valid only while that extension is enabled
+/// (the extension's "New Interaction Profile Paths"; OpenXR 1.1 made it core).
+pub(crate) const TOUCH_PLUS: &str = "/interaction_profiles/meta/touch_controller_plus";
 
 /// Component paths (after `/user/hand/{left,right}/`) of each profile, spec 6.4.
 /// An identifier without its component (`input/a`, `input/trigger`) is accepted
@@ -43,7 +47,18 @@ fn supports(profile: &str, binding: &str) -> bool {
             "input/aim/pose",
             "output/haptic",
         ]),
-        TOUCH => {
+        TOUCH | TOUCH_PLUS => {
+            if profile == TOUCH_PLUS {
+                // What Touch Plus adds to Touch's components (the extension's
+                // profile table).
+                known.extend([
+                    "input/thumb_meta/proximity_meta",
+                    "input/trigger/proximity_meta",
+                    "input/trigger/curl_meta",
+                    "input/trigger/slide_meta",
+                    "input/trigger/force",
+                ]);
+            }
             known.extend([
                 "input/squeeze/value",
                 "input/trigger/value",
@@ -227,7 +242,8 @@ pub(crate) unsafe extern "system" fn suggest_interaction_profile_bindings(
             )
         };
         let Some(profile) = path_string(rt, profile) else { return xr::Result::ERROR_PATH_INVALID };
-        if profile != TOUCH && profile != SIMPLE {
+        let known = profile == TOUCH || profile == SIMPLE || (profile == TOUCH_PLUS && rt.has(crate::EXT_TOUCH_PLUS));
+        if !known {
             rt.log(serde_json::json!({"event": "bindings_refused", "profile": profile}));
             return xr::Result::ERROR_PATH_UNSUPPORTED;
         }
@@ -287,6 +303,7 @@ pub(crate) unsafe extern "system" fn attach_session_action_sets(
         // The controllers (`BA_XR_CONTROLLER`) answer to these profiles, best first.
         let offered: &[&str] = match rt.config.controller {
             crate::config::Controller::Touch => &[TOUCH, SIMPLE],
+            crate::config::Controller::TouchPlus => &[TOUCH_PLUS, TOUCH, SIMPLE],
             crate::config::Controller::Simple => &[SIMPLE],
             crate::config::Controller::None => &[],
         };

@@ -43,6 +43,7 @@ pub(crate) const EXT_REFRESH: &str = "XR_FB_display_refresh_rate";
 pub(crate) const EXT_SPACE_WARP: &str = "XR_FB_space_warp";
 pub(crate) const EXT_TIMESPEC: &str = "XR_KHR_convert_timespec_time";
 pub(crate) const EXT_ENV_DEPTH: &str = "XR_META_environment_depth";
+pub(crate) const EXT_TOUCH_PLUS: &str = "XR_META_touch_controller_plus";
 
 /// The one system this runtime has.
 pub(crate) const SYSTEM_ID: u64 = 1;
@@ -214,6 +215,9 @@ fn offered(config: &Config) -> Vec<(&'static str, u32)> {
     }
     if config.env_depth {
         v.push((EXT_ENV_DEPTH, 1));
+    }
+    if config.touch_plus {
+        v.push((EXT_TOUCH_PLUS, 1));
     }
     v
 }
