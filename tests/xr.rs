@@ -603,3 +603,50 @@ fn touch_plus_controllers_bind_with_or_without_their_extension() {
         assert!(!run.records.last().expect("frames").enabled.dof, "naive after A");
     }
 }
+
+/// The next-scene button (right thumbstick click) cycles the user's scenes: the
+/// toy, a glTF sample, a broken file (named and skipped), and the toy again; each
+/// scene is drawn from the frame it is ready in, and the submitted layers differ.
+#[test]
+fn next_scene_cycles_and_skips_a_broken_file() {
+    let models = ModelChannel::new(model(0.4)).expect("model");
+    let dir = tmp("scenes");
+    let box_gltf =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/gltf_samples/webp-box/box-textured-separate.gltf");
+    let broken = dir.join("broken.glb");
+    std::fs::write(&broken, b"glTF not really").expect("write");
+    let scenes = format!("{},{}", box_gltf.display(), broken.display());
+    let click = "/user/hand/right/input/thumbstick/click";
+    let script = format!("press:{click}@10,press:{click}@40");
+    let env = [
+        ("BA_TEST_SCENES", scenes.as_str()),
+        ("BA_XR_SCRIPT", &script),
+        ("BA_XR_PNG_DIR", "{dir}"),
+        ("BA_XR_PNG_FRAMES", "30,65"),
+    ];
+    let Some(run) = run_xr("scenes", &env, 70, true, &models) else { return };
+    assert_clean(&run, true);
+    let s = &run.summary;
+    let order: Vec<usize> = s.scene_changes.iter().map(|c| c.1).collect();
+    assert_eq!(order, [1, 0], "the sample, then (the broken file skipped) the toy: {:?}", s.scene_changes);
+    assert_eq!(s.scene_errors.len(), 1, "{:?}", s.scene_errors);
+    assert!(s.scene_errors[0].contains("broken.glb"), "{:?}", s.scene_errors);
+    for (frame, index) in &s.scene_changes {
+        let r = &run.records[*frame as usize];
+        assert_eq!(r.scene, *index, "frame {frame} draws the scene it changed to");
+        assert_eq!(run.records[*frame as usize - 1].scene, if *index == 1 { 0 } else { 1 });
+    }
+    assert!(run.records.iter().any(|r| r.scene == 1) && run.records.last().expect("frames").scene == 0);
+    // What was submitted: at runtime frame 30 the sample, which the toy's desktop
+    // replay does not match; at 65 the toy again, matched as the spec composes it.
+    let empty_before = frames_of(&run.report).iter().take_while(|f| f["layers"].as_array().unwrap().is_empty()).count();
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("xr/scenes");
+    let toy = desktop_replay(&run.records, &models, 30 - empty_before);
+    let submitted = image::open(dir.join("frame_0030_eye0.png")).expect("runtime PNG").to_rgba8();
+    let n = (EYE.0 * EYE.1) as usize;
+    // Pixels where either shows content (alpha) and the two disagree by more
+    // than 16 levels of alpha: the sample box covers other pixels than the toy.
+    let differ = (0..n).filter(|&i| (submitted.as_raw()[i * 4 + 3] as i32 - toy[i * 4 + 3] as i32).abs() > 16).count();
+    assert!(differ > n / 50, "frame 30 shows the sample, not the toy ({differ} of {n} pixels differ in coverage)");
+    assert_composed_as_the_spec_says(&dir, 65, &desktop_replay(&run.records, &models, 65 - empty_before));
+}

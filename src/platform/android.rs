@@ -752,6 +752,11 @@ fn run(app: &AndroidApp) -> Result<(), String> {
         }
     }
     let scene = bundled_scene(app)?;
+    // The user's scenes, cycled after the bundled one by the next-scene button:
+    // glTF files pushed to the app's external files folder
+    // (`adb push model.glb /sdcard/Android/data/org.blindaugment.app/files/scenes/`).
+    let more_scenes = app.external_data_path().map(|d| xr::scenes_in(&d.join("scenes"))).unwrap_or_default();
+    log::info!("{} scene(s) of the user's to cycle: {:?}", more_scenes.len(), more_scenes);
     let models = ModelChannel::new(first_model(app)?).map_err(|e| e.to_string())?;
     let live = Arc::new(LiveInputs::default());
     // Raw pointers are not Send: carried as addresses into the XR thread.
@@ -775,6 +780,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
                 validation: false,
                 core_validation: false,
                 scene: &scene,
+                more_scenes: &more_scenes,
                 local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -1.5)),
                 models: &models,
                 settings: LayerSettings::default(),

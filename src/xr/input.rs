@@ -2,8 +2,8 @@
 //! Haptics"): the buttons that switch matched ↔ naive and each effect on its own,
 //! so the comparison the paper's evaluation rests on can be made on the headset.
 //!
-//! One action set with five boolean actions (four toggles and the record
-//! button); bindings are suggested for Meta Touch Plus (Quest 3's controllers,
+//! One action set with six boolean actions (four toggles, the record button and
+//! the next scene); bindings are suggested for Meta Touch Plus (Quest 3's controllers,
 //! XR_META_touch_controller_plus, when the runtime offers it), Oculus Touch (Quest 2
 //! and Pro; Quest runtimes also map Touch Plus onto this profile) and the Khronos
 //! simple controller (spec 6.4, "Interaction Profile Paths"), each suggestion on its
@@ -38,10 +38,12 @@ pub enum Toggle {
     /// Start or stop a recording of what the calibration worker takes (the app
     /// acts on it: `FrameRecord::pressed`); the effects stay as they are.
     Record,
+    /// The next of the user's scenes (`scenes::SceneCycle`).
+    NextScene,
 }
 
 /// (toggle, action name, localized name, Touch binding, simple-controller binding).
-const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 5] = [
+const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 6] = [
     (
         Toggle::Matched,
         "toggle_matched",
@@ -56,6 +58,15 @@ const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 5] = [
     // does not press by accident while toggling (the menu button is the system's
     // on the right hand and the app's on the left, where Meta's apps open menus).
     (Toggle::Record, "toggle_recording", "Record calibration input", "/user/hand/left/input/thumbstick/click", None),
+    // The simple controller's menu click: its only other button (the left one is
+    // the app's on Quest; the right one the system's, which the runtime keeps).
+    (
+        Toggle::NextScene,
+        "next_scene",
+        "Next scene",
+        "/user/hand/right/input/thumbstick/click",
+        Some("/user/hand/left/input/menu/click"),
+    ),
 ];
 
 /// The toggles' state: which effects the frame may apply.
@@ -87,7 +98,7 @@ impl Toggles {
             Toggle::Noise => self.effects.noise = !self.effects.noise,
             Toggle::MotionBlur => self.effects.motion_blur = !self.effects.motion_blur,
             Toggle::Dof => self.effects.dof = !self.effects.dof,
-            Toggle::Record => {}
+            Toggle::Record | Toggle::NextScene => {}
         }
     }
 }

@@ -25,6 +25,7 @@ mod instance;
 mod layers;
 mod lifecycle;
 mod record;
+mod scenes;
 mod spacewarp;
 mod views;
 mod vulkan;
@@ -32,6 +33,7 @@ mod vulkan;
 pub use env_depth::{depth_views, EnvironmentDepth, ROWS_BOTTOM_UP};
 pub use lifecycle::{Action, EndReason, Lifecycle};
 pub use record::{FrameGeometry, FrameRecord, XrSummary};
+pub use scenes::scenes_in;
 pub use views::{eye_from_view, View, ViewError};
 
 use crate::analysis::timing::ClockSample;
@@ -92,7 +94,11 @@ pub struct XrOptions<'a> {
     /// when installed (tests do, except where a layer older than an extension the
     /// app uses rejects it).
     pub core_validation: bool,
+    /// The starting scene.
     pub scene: &'a Scene,
+    /// Scenes cycled after it (next-scene button), each loaded when asked for; one
+    /// that fails to load is named and skipped.
+    pub more_scenes: &'a [std::path::PathBuf],
     /// Where the virtual content stands, in the LOCAL reference space.
     pub local_from_scene: Mat4,
     /// Camera models: one snapshot is taken per frame (`ModelChannel::latest`).
@@ -374,12 +380,19 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     // (the compositor blends the layer over the real world); without it, opaque
     // black, so the layer is opaque and its alpha unused.
     let settings = LayerSettings { straight_alpha: true, ..opts.settings };
-    let mut renderer = StereoRenderer::new(&ctx, opts.scene, w, h, settings, None)?;
     let background_px: [u8; 4] = if see_through { [0, 0, 0, 0] } else { [0, 0, 0, 255] };
-    renderer.set_background(&background_px.repeat((w * h * 2) as usize))?;
-    if let Some(sw) = &space_warp {
-        renderer.enable_space_warp(sw.size.0, sw.size.1)?;
-    }
+    let warp_size = space_warp.as_ref().map(|sw| sw.size);
+    // Also what a scene change rebuilds (the G-buffer's meshes, materials and
+    // textures are the scene's).
+    let build_renderer = |scene: &Scene| -> Result<StereoRenderer<'_>, GpuError> {
+        let mut r = StereoRenderer::new(&ctx, scene, w, h, settings, None)?;
+        r.set_background(&background_px.repeat((w * h * 2) as usize))?;
+        if let Some((sw, sh)) = warp_size {
+            r.enable_space_warp(sw, sh)?;
+        }
+        Ok(r)
+    };
+    let mut renderer = build_renderer(opts.scene)?;
     let flags = layers::projection_flags(see_through);
 
     let mut lifecycle = Lifecycle::default();
@@ -407,7 +420,12 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         vulkan_messages: vec![],
         controls: false,
         toggles: vec![],
+        scene_changes: vec![],
+        scene_errors: vec![],
     };
+    let mut cycle = scenes::SceneCycle::new(opts.more_scenes.to_vec());
+    // The scene drawn when it is not the starting one.
+    let mut loaded: Option<Box<Scene>> = None;
     // Controller toggles; input is optional: without it the app runs matched.
     let controls = match input::Controls::new(&instance, enabled.meta_touch_controller_plus)
         .and_then(|c| c.attach(&session).map(|()| c))
@@ -517,6 +535,9 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             match c.poll(&session) {
                 Ok(pressed) => {
                     for t in pressed {
+                        if t == Toggle::NextScene {
+                            cycle.request_next();
+                        }
                         pressed_now.push(t);
                         toggles.apply(t);
                         summary.toggles.push((summary.frames_rendered, t));
@@ -595,10 +616,41 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             }
             None => None,
         };
+        // A scene the user asked for, loaded meanwhile on its own thread: the
+        // renderer is rebuilt on it once the frames in flight are done (pipelines
+        // and uploads: a hitch in this one frame, at the user's request). A scene
+        // the GPU cannot take is named and the starting scene shown instead.
+        if let Some(ready) = cycle.poll() {
+            renderer.finish()?;
+            let (index, next) = match ready {
+                scenes::Ready::Start => (0, None),
+                scenes::Ready::Loaded { index, path, scene } => {
+                    log::info!("scene {index}: {}", path.display());
+                    (index, Some(scene))
+                }
+            };
+            match build_renderer(next.as_deref().unwrap_or(opts.scene)) {
+                Ok(r) => {
+                    renderer = r;
+                    loaded = next;
+                    summary.scene_changes.push((summary.frames_rendered, index));
+                }
+                Err(e) if index > 0 => {
+                    log::warn!("scene {index} cannot be drawn ({e}): back to the starting scene");
+                    cycle.errors.push(format!("scene {index}: {e}"));
+                    renderer = build_renderer(opts.scene)?;
+                    loaded = None;
+                    cycle.reset();
+                    summary.scene_changes.push((summary.frames_rendered, 0));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        let scene: &Scene = loaded.as_deref().unwrap_or(opts.scene);
         // One camera-model snapshot for the whole frame (hot-swap contract).
         let snapshot = opts.models.latest();
         let geometry =
-            FrameGeometry::new(opts.scene, opts.local_from_scene, views.eyes, prev, display_ns, period_ns, origin_ns);
+            FrameGeometry::new(scene, opts.local_from_scene, views.eyes, prev, display_ns, period_ns, origin_ns);
         renderer.set_eye_pixels_per_radian(views.eyes[0].focal_px);
         renderer.set_render_interval_s(geometry.render_interval_s);
         let input = geometry.input();
@@ -652,6 +704,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             enabled,
             applied,
             pressed: pressed_now,
+            scene: cycle.current(),
             cpu_s,
             wait_s,
             views: views.views,
@@ -670,6 +723,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     }
 
     renderer.finish()?;
+    summary.scene_errors = std::mem::take(&mut cycle.errors);
     summary.states = lifecycle.history.clone();
     summary.vulkan_messages = ctx.take_messages();
     // Explicit teardown in the documented order (the drops would do the same).

@@ -27,6 +27,8 @@ pub struct FrameRecord {
     /// Controller presses acted on in this frame (the app starts or stops a
     /// recording on `Toggle::Record`).
     pub pressed: Vec<Toggle>,
+    /// The scene drawn: 0 the starting one, k the k-th of `XrOptions::more_scenes`.
+    pub scene: usize,
     /// CPU time of the frame outside xrWaitFrame (s).
     pub cpu_s: f64,
     /// Time blocked in xrWaitFrame (s).
@@ -88,6 +90,10 @@ pub struct XrSummary {
     pub controls: bool,
     /// Controller presses acted on, with the rendered frame they took effect in.
     pub toggles: Vec<(u64, Toggle)>,
+    /// Scene changes: the first rendered frame showing it and its index.
+    pub scene_changes: Vec<(u64, usize)>,
+    /// Scenes that failed to load (skipped), each with the file and why.
+    pub scene_errors: Vec<String>,
 }
 
 /// What the render core needs for one XR frame besides the snapshot: the

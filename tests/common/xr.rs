@@ -86,6 +86,7 @@ pub const VARS: &[&str] = &[
     "BA_XR_TIME_ORIGIN_S",
     "BA_XR_CONTROLLER",
     "BA_TEST_APP_HZ",
+    "BA_TEST_SCENES",
 ];
 
 pub fn tmp(name: &str) -> PathBuf {
@@ -181,11 +182,16 @@ pub fn run_xr_until(
     });
     let mut records = vec![];
     let mut on_frame = |r: &FrameRecord| records.push(r.clone());
+    // Scenes the next-scene button cycles through after the toy (comma-separated).
+    let more_scenes: Vec<PathBuf> = std::env::var("BA_TEST_SCENES")
+        .map(|v| v.split(',').filter(|p| !p.is_empty()).map(PathBuf::from).collect())
+        .unwrap_or_default();
     let result = xr::run(XrOptions {
         frames,
         validation,
         core_validation,
         scene: &scene,
+        more_scenes: &more_scenes,
         // Close enough to fill a good part of the small eye buffers.
         local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -0.6)),
         models,

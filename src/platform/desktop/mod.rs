@@ -199,6 +199,10 @@ pub struct XrArgs {
     /// glTF 2.0 scene, `.glb` or `.gltf` (default: the bundled assets/toy.glb).
     #[arg(long)]
     scene: Option<PathBuf>,
+    /// A folder of more glTF scenes the next-scene button cycles through after
+    /// the first (each loaded when asked for; one that fails is named and skipped).
+    #[arg(long)]
+    scenes: Option<PathBuf>,
     /// Distance from the start head pose to the object (m).
     #[arg(long, default_value_t = 1.5)]
     object_depth_m: f32,

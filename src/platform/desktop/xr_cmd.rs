@@ -84,6 +84,15 @@ pub fn run(args: XrArgs) -> Result<()> {
         }
     };
     anyhow::ensure!(args.object_depth_m > 0.1 && args.object_depth_m.is_finite(), "--object-depth-m must be > 0.1 m");
+    let more_scenes = match &args.scenes {
+        Some(dir) => {
+            anyhow::ensure!(dir.is_dir(), "--scenes {}: not a folder", dir.display());
+            let v = xr::scenes_in(dir);
+            anyhow::ensure!(!v.is_empty(), "--scenes {}: no .glb or .gltf files", dir.display());
+            v
+        }
+        None => vec![],
+    };
     let models = ModelChannel::new(model).context("camera model")?;
     let feed = match &args.camera_frames {
         Some(dir) => Some(CameraFeed::open(&args, dir, &models)?),
@@ -105,6 +114,7 @@ pub fn run(args: XrArgs) -> Result<()> {
             validation: args.validation,
             core_validation: args.validation,
             scene: &scene,
+            more_scenes: &more_scenes,
             local_from_scene: Mat4::from_translation(Vec3::new(0.0, 0.0, -args.object_depth_m)),
             models: &models,
             settings: LayerSettings::default(),
@@ -149,6 +159,14 @@ pub fn run(args: XrArgs) -> Result<()> {
         }
     }
     println!("{}", format_summary(&summary));
+    for (frame, index) in &summary.scene_changes {
+        let name =
+            if *index == 0 { "the starting scene".to_string() } else { more_scenes[index - 1].display().to_string() };
+        println!("frame {frame}: scene {index} ({name})");
+    }
+    for e in &summary.scene_errors {
+        println!("scene skipped: {e}");
+    }
     if !summary.vulkan_messages.is_empty() {
         anyhow::bail!(
             "Vulkan validation reported {} message(s): {:?}",
