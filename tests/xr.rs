@@ -490,14 +490,18 @@ fn controller_presses_toggle_matched_and_each_effect() {
     use blind_augment::render::Enabled;
     use blind_augment::xr::Toggle;
     let models = ModelChannel::new(model(0.4)).expect("model");
-    let env = [(
-        "BA_XR_SCRIPT",
-        "press:/user/hand/right/input/a/click@20,press:/user/hand/left/input/y/click@30,\
+    let env = [
+        (
+            "BA_XR_SCRIPT",
+            "press:/user/hand/right/input/a/click@20,press:/user/hand/left/input/y/click@30,\
          press:/user/hand/right/input/a/click@40,press:/user/hand/left/input/x/click@50,\
          press:/user/hand/right/input/b/click@60..66,\
          unfocus@70,press:/user/hand/right/input/a/click@72,focus@75,\
          press:/user/hand/left/input/thumbstick/click@80",
-    )];
+        ),
+        ("BA_XR_PNG_DIR", "{dir}"),
+        ("BA_XR_PNG_FRAMES", "15,25,45,55"),
+    ];
     let Some(run) = run_xr("controls", &env, 90, true, &models) else { return };
     assert_clean(&run, true);
     let s = &run.summary;
@@ -550,6 +554,30 @@ fn controller_presses_toggle_matched_and_each_effect() {
         .report
         .iter()
         .any(|v| v["event"] == "attach" && v["profile"] == "/interaction_profiles/oculus/touch_controller"));
+    // What was submitted: matched (15), naive (25), DoF off (45), DoF and MB off
+    // (55). Each frame is the desktop render with those switches, composed as the
+    // spec says; and each switched frame differs from the all-matched render.
+    let empty_before = frames_of(&run.report).iter().take_while(|f| f["layers"].as_array().unwrap().is_empty()).count();
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("xr/controls");
+    for (frame, want) in [
+        (15, on(true, true, true)),
+        (25, on(false, false, false)),
+        (45, on(true, true, false)),
+        (55, on(true, false, false)),
+    ] {
+        let k = frame - empty_before;
+        assert_eq!(run.records[k].enabled, want, "runtime frame {frame}");
+        let replay = desktop_replay(&run.records, &models, k);
+        let blurred = want.dof;
+        assert_composed_with(&dir, frame as u64, &replay, if blurred { 20 } else { 0 });
+        let matched = desktop_replay_with(&run.records, &models, k, Some(on(true, true, true)));
+        let differ = replay.iter().zip(&matched).filter(|(a, b)| a.abs_diff(**b) > 2).count();
+        if want == on(true, true, true) {
+            assert_eq!(differ, 0, "frame {frame}: matched is matched");
+        } else {
+            assert!(differ > 0, "frame {frame}: switching {want:?} changes the render");
+        }
+    }
 }
 
 /// A runtime whose controllers only answer to the Khronos simple controller

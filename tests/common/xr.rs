@@ -239,11 +239,23 @@ pub fn frames_of(report: &[serde_json::Value]) -> Vec<&serde_json::Value> {
     report.iter().filter(|v| v["event"] == "frame").collect()
 }
 
-/// Replay `records` on a desktop Vulkan context (same scene, model and views)
+/// Replay `records` on a desktop Vulkan context (same scene, model, views and
+/// effect toggles)
 /// and return frame `k`'s composite over a transparent background (RGBA8,
 /// eye-major), premultiplied as the desktop stores it: the virtual colour and
 /// coverage the app means, independent of how it submits them.
 pub fn desktop_replay(records: &[FrameRecord], models: &ModelChannel, k: usize) -> Vec<u8> {
+    desktop_replay_with(records, models, k, None)
+}
+
+/// `desktop_replay` with each frame's effects as the record says it applied them
+/// (`FrameRecord::enabled`: the controller toggles), or all as `force` says.
+pub fn desktop_replay_with(
+    records: &[FrameRecord],
+    models: &ModelChannel,
+    k: usize,
+    force: Option<blind_augment::render::Enabled>,
+) -> Vec<u8> {
     let ctx = blind_augment::gpu::GpuContext::new(&Default::default()).expect("Vulkan");
     let scene = Scene::from_glb(TOY, "assets/toy.glb").expect("scene");
     let local_from_scene = Mat4::from_translation(Vec3::new(0.0, 0.0, -0.6));
@@ -268,7 +280,7 @@ pub fn desktop_replay(records: &[FrameRecord], models: &ModelChannel, k: usize) 
             ren
         });
         ren.set_render_interval_s(g.render_interval_s);
-        ren.render(&models.latest(), &g.input(), true).unwrap();
+        ren.render_to(&models.latest(), &g.input(), force.unwrap_or(r.enabled), None, None).unwrap();
         prev = Some((r.predicted_display_time_ns, eyes));
     }
     let out = renderer.as_ref().unwrap().read_output().unwrap();
@@ -305,6 +317,12 @@ pub fn linear_to_srgb(v: f64) -> f64 {
 /// Also: the submitted layer is the render's straight colour (S·α = P within 1.5
 /// levels: both roundings of the same f32 value) with its alpha.
 pub fn assert_composed_as_the_spec_says(dir: &Path, frame: u64, replay: &[u8]) {
+    assert_composed_with(dir, frame, replay, 20)
+}
+
+/// `assert_composed_as_the_spec_says` requiring at least `min_partial` pixels of
+/// partial coverage (a naive frame has none: no blur, no multisampling).
+pub fn assert_composed_with(dir: &Path, frame: u64, replay: &[u8], min_partial: usize) {
     let (w, h) = EYE;
     let n = (w * h * 4) as usize;
     for eye in 0..2 {
@@ -364,6 +382,9 @@ pub fn assert_composed_as_the_spec_says(dir: &Path, frame: u64, replay: &[u8]) {
             }
         }
         // Non-vacuity: blurred edges (partial coverage) were checked.
-        assert!(partial >= 20 && checked > partial, "eye {eye}: {partial} partial of {checked} checked pixels");
+        assert!(
+            partial >= min_partial && checked > partial,
+            "eye {eye}: {partial} partial of {checked} checked pixels"
+        );
     }
 }
