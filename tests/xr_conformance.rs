@@ -143,14 +143,21 @@ fn animation_time_is_exact_at_an_epoch_of_days() {
     for k in 1..run.records.len() {
         let (a, b) = (&run.records[k - 1], &run.records[k]);
         let prev = Some((a.predicted_display_time_ns, eyes));
-        let at_days =
-            FrameGeometry::new(&scene, place, eyes, prev, b.predicted_display_time_ns, period, b.time_origin_ns);
+        let at_days = FrameGeometry::new(
+            &scene,
+            (place, place),
+            eyes,
+            prev,
+            b.predicted_display_time_ns,
+            period,
+            b.time_origin_ns,
+        );
         // The same frame with the epoch moved to 1 s.
         let shift = b.time_origin_ns - 1_000_000_000;
         let prev_s = Some((a.predicted_display_time_ns - shift, eyes));
         let at_secs = FrameGeometry::new(
             &scene,
-            place,
+            (place, place),
             eyes,
             prev_s,
             b.predicted_display_time_ns - shift,

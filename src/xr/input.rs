@@ -103,9 +103,31 @@ impl Toggles {
     }
 }
 
+/// Grab-and-place (`Placement`): the right controller's squeeze holds the object,
+/// its aim pose carries it. Touch and Touch Plus only: the simple controller has
+/// no second button to spare.
+const GRAB_TOUCH: &str = "/user/hand/right/input/squeeze/value";
+/// The aim pose (spec 6.3 "Standard pose identifiers": the ray pointing forward
+/// from the controller), on every profile.
+const AIM: &str = "/user/hand/right/input/aim/pose";
+
+/// What one xrSyncActions read.
+pub struct ControllerState {
+    /// Buttons pressed since the last sync.
+    pub pressed: Vec<Toggle>,
+    /// The grab button is held.
+    pub grab_held: bool,
+    /// The right controller's aim pose in the reference space, when located
+    /// (position and orientation valid).
+    pub space_from_aim: Option<glam::Mat4>,
+}
+
 pub struct Controls {
     set: xr::ActionSet,
     actions: Vec<(Toggle, xr::Action<bool>)>,
+    grab: xr::Action<bool>,
+    aim: xr::Action<xr::Posef>,
+    aim_space: Option<xr::Space>,
 }
 
 impl Controls {
@@ -119,6 +141,8 @@ impl Controls {
             let action = set.create_action::<bool>(name, localized, &[]).map_err(call("xrCreateAction"))?;
             actions.push((toggle, action));
         }
+        let grab = set.create_action::<bool>("grab", "Grab the object", &[]).map_err(call("xrCreateAction"))?;
+        let aim = set.create_action::<xr::Posef>("aim", "Aim", &[]).map_err(call("xrCreateAction"))?;
         let mut accepted = 0;
         let profiles: &[&str] = if touch_plus { &[TOUCH_PLUS, TOUCH, SIMPLE] } else { &[TOUCH, SIMPLE] };
         for &profile in profiles {
@@ -130,6 +154,12 @@ impl Controls {
                     bindings.push(xr::Binding::new(action, path(b)?));
                 }
             }
+            // A boolean action on a float input: the runtime thresholds it (spec
+            // 11.4, "Suggested bindings": boolean to value conversion).
+            if profile != SIMPLE {
+                bindings.push(xr::Binding::new(&grab, path(GRAB_TOUCH)?));
+            }
+            bindings.push(xr::Binding::new(&aim, path(AIM)?));
             match instance.suggest_interaction_profile_bindings(path(profile)?, &bindings) {
                 Ok(()) => accepted += 1,
                 Err(e) => {
@@ -143,16 +173,26 @@ impl Controls {
                 result: xr::sys::Result::ERROR_PATH_UNSUPPORTED,
             });
         }
-        Ok(Self { set, actions })
+        Ok(Self { set, actions, grab, aim, aim_space: None })
     }
 
-    /// Attaches the action set to the session (once per session, spec 11.4).
-    pub fn attach<G>(&self, session: &xr::Session<G>) -> Result<(), XrError> {
-        session.attach_action_sets(&[&self.set]).map_err(call("xrAttachSessionActionSets"))
+    /// Attaches the action set to the session (once per session, spec 11.4) and
+    /// creates the aim pose's action space.
+    pub fn attach<G>(&mut self, session: &xr::Session<G>) -> Result<(), XrError> {
+        session.attach_action_sets(&[&self.set]).map_err(call("xrAttachSessionActionSets"))?;
+        let space = self.aim.create_space(session, xr::Path::NULL, xr::Posef::IDENTITY);
+        self.aim_space = Some(space.map_err(call("xrCreateActionSpace"))?);
+        Ok(())
     }
 
-    /// Syncs the actions and returns the toggles pressed since the last sync.
-    pub fn poll<G>(&self, session: &xr::Session<G>) -> Result<Vec<Toggle>, XrError> {
+    /// Syncs the actions: the toggles pressed since the last sync, the grab
+    /// button, and the aim pose in `base` at `time` (the frame's display time).
+    pub fn poll<G>(
+        &self,
+        session: &xr::Session<G>,
+        base: &xr::Space,
+        time: xr::Time,
+    ) -> Result<ControllerState, XrError> {
         session.sync_actions(&[xr::ActiveActionSet::new(&self.set)]).map_err(call("xrSyncActions"))?;
         let mut pressed = Vec::new();
         for (toggle, action) in &self.actions {
@@ -161,13 +201,101 @@ impl Controls {
                 pressed.push(*toggle);
             }
         }
-        Ok(pressed)
+        let g = self.grab.state(session, xr::Path::NULL).map_err(call("xrGetActionStateBoolean"))?;
+        let mut space_from_aim = None;
+        if let Some(space) = &self.aim_space {
+            if self.aim.is_active(session, xr::Path::NULL).map_err(call("xrGetActionStatePose"))? {
+                let l = space.locate(base, time).map_err(call("xrLocateSpace"))?;
+                let valid = xr::SpaceLocationFlags::POSITION_VALID | xr::SpaceLocationFlags::ORIENTATION_VALID;
+                if l.location_flags.contains(valid) {
+                    space_from_aim = pose_matrix(&l.pose);
+                }
+            }
+        }
+        Ok(ControllerState { pressed, grab_held: g.is_active && g.current_state, space_from_aim })
+    }
+}
+
+/// A located pose as a matrix; None for a non-finite or non-unit orientation (a
+/// runtime's bad value never reaches the renderer).
+fn pose_matrix(p: &xr::Posef) -> Option<glam::Mat4> {
+    let q = glam::Quat::from_xyzw(p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w);
+    let t = glam::Vec3::new(p.position.x, p.position.y, p.position.z);
+    (q.is_finite() && t.is_finite() && (q.length() - 1.0).abs() < 1e-3)
+        .then(|| glam::Mat4::from_rotation_translation(q.normalize(), t))
+}
+
+/// Where the object stands, and the grab that moves it: while the grab button is
+/// held the object keeps its pose relative to the aim ray (picked up where it
+/// is, carried rigidly); released, it stays where it was put, in the reference
+/// space (LOCAL: it keeps its place in the room).
+#[derive(Clone, Copy, Debug)]
+pub struct Placement {
+    pub space_from_scene: glam::Mat4,
+    /// `aim_from_scene` while held.
+    held: Option<glam::Mat4>,
+}
+
+impl Placement {
+    pub fn new(space_from_scene: glam::Mat4) -> Self {
+        Self { space_from_scene, held: None }
+    }
+
+    pub fn holding(&self) -> bool {
+        self.held.is_some()
+    }
+
+    /// One frame's controller state. A grab starts on the first frame the button
+    /// is held with the aim located; an aim lost while held leaves the object
+    /// where it was until it is located again.
+    pub fn update(&mut self, grab_held: bool, space_from_aim: Option<glam::Mat4>) {
+        match (grab_held, space_from_aim, self.held) {
+            (false, _, _) => self.held = None,
+            (true, Some(a), None) => self.held = Some(a.inverse() * self.space_from_scene),
+            (true, Some(a), Some(aim_from_scene)) => {
+                let m = a * aim_from_scene;
+                // Only a finite, invertible placement reaches the renderer.
+                if m.is_finite() && m.determinant().abs() > 1e-12 {
+                    self.space_from_scene = m;
+                }
+            }
+            (true, None, _) => {}
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Picked up where it is, carried rigidly with the aim, left where released.
+    #[test]
+    fn a_grab_carries_the_object_rigidly_and_leaves_it_in_place() {
+        use glam::{Mat4, Quat, Vec3};
+        let start = Mat4::from_translation(Vec3::new(0.0, 0.0, -1.5));
+        let mut p = Placement::new(start);
+        let aim0 = Mat4::from_translation(Vec3::new(0.2, -0.3, -0.2));
+        p.update(false, Some(aim0));
+        assert_eq!(p.space_from_scene, start, "no grab, no move");
+        p.update(true, Some(aim0));
+        assert!(p.holding());
+        assert!(p.space_from_scene.abs_diff_eq(start, 1e-6), "picking up does not move it");
+        // The controller turns 90° to the left about its own origin: the object,
+        // 1.3 m ahead of it, swings to its left.
+        let aim1 = aim0 * Mat4::from_quat(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2));
+        p.update(true, Some(aim1));
+        let at = p.space_from_scene.transform_point3(Vec3::ZERO);
+        assert!(at.abs_diff_eq(Vec3::new(0.2 - 1.3, 0.0, -0.2 + 0.2), 1e-5), "{at}");
+        p.update(true, None);
+        assert!(p.space_from_scene.transform_point3(Vec3::ZERO).abs_diff_eq(at, 1e-6), "aim lost: stays");
+        p.update(false, Some(aim0));
+        assert!(!p.holding());
+        assert!(p.space_from_scene.transform_point3(Vec3::ZERO).abs_diff_eq(at, 1e-6), "released: stays");
+        // A degenerate aim never reaches the renderer.
+        p.update(true, Some(aim0));
+        p.update(true, Some(Mat4::from_scale(Vec3::ZERO)));
+        assert!(p.space_from_scene.transform_point3(Vec3::ZERO).abs_diff_eq(at, 1e-6));
+    }
 
     #[test]
     fn naive_turns_every_effect_off_and_back_as_it_was() {

@@ -12,8 +12,8 @@
 //! rule: a handle is destroyed before its parent, Vulkan objects before the
 //! device the session was created with): the GPU is drained; the renderer (its
 //! Vulkan objects) goes; the environment-depth read-back, swapchain and provider;
-//! the passthrough layer and feature, the swapchain and the
-//! reference space (children of the session); the session; then the Vulkan device
+//! the passthrough layer and feature, the swapchain, the controls' action space
+//! and the reference space (children of the session); the session; then the Vulkan device
 //! and instance (`GpuContext`, created through the XR instance but owned by the
 //! app); the XR instance last. `run` holds them as locals declared in the reverse
 //! of that order, so Rust's drop order (reverse declaration) is the teardown order.
@@ -45,7 +45,7 @@ use crate::worker::ModelChannel;
 use ash::vk;
 use ash::vk::Handle as _;
 use glam::{Mat4, Quat, Vec3};
-pub use input::{Toggle, Toggles};
+pub use input::{Placement, Toggle, Toggles};
 use instance::{chained_system_properties, create_instance, sample_clocks};
 use openxr as xr;
 use spacewarp::space_warp_swapchains;
@@ -424,11 +424,13 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         scene_errors: vec![],
     };
     let mut cycle = scenes::SceneCycle::new(opts.more_scenes.to_vec());
+    // Where the object stands in the reference space: moved by grab-and-place.
+    let mut placement = input::Placement::new(opts.local_from_scene);
     // The scene drawn when it is not the starting one.
     let mut loaded: Option<Box<Scene>> = None;
     // Controller toggles; input is optional: without it the app runs matched.
     let controls = match input::Controls::new(&instance, enabled.meta_touch_controller_plus)
-        .and_then(|c| c.attach(&session).map(|()| c))
+        .and_then(|mut c| c.attach(&session).map(|()| c))
     {
         Ok(c) => Some(c),
         Err(e) => {
@@ -531,10 +533,16 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         // Input once per frame (spec 11.5: xrSyncActions updates every action's
         // state; an unfocused session gets XR_SESSION_NOT_FOCUSED and no presses).
         let mut pressed_now = Vec::new();
+        let prev_space_from_scene = placement.space_from_scene;
         if let Some(c) = &controls {
-            match c.poll(&session) {
-                Ok(pressed) => {
-                    for t in pressed {
+            match c.poll(&session, &space, state.predicted_display_time) {
+                Ok(input) => {
+                    let was_holding = placement.holding();
+                    placement.update(input.grab_held, input.space_from_aim);
+                    if placement.holding() != was_holding {
+                        log::info!("input: object {}", if was_holding { "placed" } else { "grabbed" });
+                    }
+                    for t in input.pressed {
                         if t == Toggle::NextScene {
                             cycle.request_next();
                         }
@@ -649,8 +657,15 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         let scene: &Scene = loaded.as_deref().unwrap_or(opts.scene);
         // One camera-model snapshot for the whole frame (hot-swap contract).
         let snapshot = opts.models.latest();
-        let geometry =
-            FrameGeometry::new(scene, opts.local_from_scene, views.eyes, prev, display_ns, period_ns, origin_ns);
+        let geometry = FrameGeometry::new(
+            scene,
+            (placement.space_from_scene, prev_space_from_scene),
+            views.eyes,
+            prev,
+            display_ns,
+            period_ns,
+            origin_ns,
+        );
         renderer.set_eye_pixels_per_radian(views.eyes[0].focal_px);
         renderer.set_render_interval_s(geometry.render_interval_s);
         let input = geometry.input();
@@ -705,6 +720,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             applied,
             pressed: pressed_now,
             scene: cycle.current(),
+            local_from_scene: placement.space_from_scene,
+            prev_local_from_scene: prev_space_from_scene,
             cpu_s,
             wait_s,
             views: views.views,
@@ -738,6 +755,10 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     drop(passthrough);
     drop(space_warp);
     drop(swapchain);
+    // The action set and the aim's action space: children of the instance and
+    // session (the space holds the session alive: dropped later, the session
+    // would outlive the Vulkan device it was created with).
+    drop(controls);
     drop(space);
     drop(frame_stream);
     drop(frame_waiter);

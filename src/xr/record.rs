@@ -29,6 +29,10 @@ pub struct FrameRecord {
     pub pressed: Vec<Toggle>,
     /// The scene drawn: 0 the starting one, k the k-th of `XrOptions::more_scenes`.
     pub scene: usize,
+    /// Where the object stood (LOCAL from scene) at this frame and at the
+    /// previous one (grab-and-place moves it; the motion vectors span both).
+    pub local_from_scene: Mat4,
+    pub prev_local_from_scene: Mat4,
     /// CPU time of the frame outside xrWaitFrame (s).
     pub cpu_s: f64,
     /// Time blocked in xrWaitFrame (s).
@@ -114,9 +118,11 @@ impl FrameGeometry {
     /// for the first frame (then the eyes stand still over one display period).
     /// `origin_ns`: the XrTime the scene's animation starts from (the session's
     /// first frame).
+    /// `local_from_scene`: where the object stands now and stood at the previous
+    /// frame (equal unless it was moved).
     pub fn new(
         scene: &Scene,
-        local_from_scene: Mat4,
+        local_from_scene: (Mat4, Mat4),
         eyes: [crate::render::Eye; 2],
         prev: Option<(i64, [crate::render::Eye; 2])>,
         display_ns: i64,
@@ -129,7 +135,7 @@ impl FrameGeometry {
         // it would step by 7.8 ms after a day awake, and motion vectors jump.
         let t_s = (display_ns - origin_ns) as f64 * 1e-9;
         let t_prev_s = (prev_t_ns - origin_ns) as f64 * 1e-9;
-        let (pose, prev_pose) = (scene.pose_at(t_s, local_from_scene), scene.pose_at(t_prev_s, local_from_scene));
+        let (pose, prev_pose) = (scene.pose_at(t_s, local_from_scene.0), scene.pose_at(t_prev_s, local_from_scene.1));
         let (corners_now, corners_prev) = (pose.world_corners(scene), prev_pose.world_corners(scene));
         Self {
             gbuffer: GBufferFrame {

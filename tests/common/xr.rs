@@ -258,7 +258,6 @@ pub fn desktop_replay_with(
 ) -> Vec<u8> {
     let ctx = blind_augment::gpu::GpuContext::new(&Default::default()).expect("Vulkan");
     let scene = Scene::from_glb(TOY, "assets/toy.glb").expect("scene");
-    let local_from_scene = Mat4::from_translation(Vec3::new(0.0, 0.0, -0.6));
     let (w, h) = EYE;
     let mut renderer: Option<StereoRenderer<'_>> = None;
     let mut prev = None;
@@ -266,7 +265,7 @@ pub fn desktop_replay_with(
         let eyes = [eye_from_view(&r.views[0], w, h).unwrap().0, eye_from_view(&r.views[1], w, h).unwrap().0];
         let g = FrameGeometry::new(
             &scene,
-            local_from_scene,
+            (r.local_from_scene, r.prev_local_from_scene),
             eyes,
             prev,
             r.predicted_display_time_ns,

@@ -12,6 +12,7 @@
 //! | `BA_XR_ENV_DEPTH_DENIALS` | refuse this many environment-depth provider creations (XR_ERROR_NOT_PERMITTED_PASSTHROUGH_FB: the spatial-data permission not yet granted) | 0 |
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
 //! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N`, `pause@N` (the session is stopped and stays IDLE after xrEndSession, as an Android app put in the background: no EXITING), `untracked@N..M` (xrLocateViews for frames N to M − 1 without ORIENTATION_VALID/POSITION_VALID: zero quaternions on even frames, a plausible wrong pose on odd ones), `press:PATH@N` (the controller component PATH, e.g. `/user/hand/right/input/a/click`, reads true in the xrSyncActions calls made while frame N is produced; `@N..M`: held for frames N to M − 1) | none |
+//! | `BA_XR_SCRIPT` `aim:X;Y;Z;YAW;PITCH@N` | the right controller's grip and aim pose in LOCAL from frame N on (m, degrees; yaw about +Y, pitch about +X); untracked before the first | none |
 //! | `BA_XR_CONTROLLER` | the controllers: `touch` (answer to Oculus Touch bindings, else the simple controller's), `touch_plus` (Meta Touch Plus bindings, else Touch's, else the simple controller's), `simple` (the Khronos simple controller only) or `none` | touch |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
@@ -88,6 +89,9 @@ pub struct Config {
     pub script: Vec<(u64, Command)>,
     /// Scripted button presses: (first frame, frame after the last, component path).
     pub presses: Vec<(u64, u64, String)>,
+    /// Scripted right-controller poses in LOCAL (`aim:X;Y;Z;YAW;PITCH@N`, metres and
+    /// degrees): from frame N on, until the next; before the first, not tracked.
+    pub aims: Vec<(u64, [f32; 5])>,
     pub controller: Controller,
     pub png_dir: Option<PathBuf>,
     pub png_frames: Vec<u64>,
@@ -179,9 +183,21 @@ impl Config {
         }
         let mut script = vec![];
         let mut presses = vec![];
+        let mut aims = vec![];
         if let Some(s) = var("BA_XR_SCRIPT") {
             for item in s.split(',').map(str::trim) {
                 let (what, at) = item.rsplit_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
+                if let Some(values) = what.strip_prefix("aim:") {
+                    let v: Vec<f32> = values.split(';').filter_map(|x| x.trim().parse().ok()).collect();
+                    let frame = at.parse::<u64>().ok();
+                    match (v.as_slice(), frame) {
+                        ([x, y, z, yaw, pitch], Some(n)) if v.iter().all(|x| x.is_finite()) => {
+                            aims.push((n, [*x, *y, *z, *yaw, *pitch]))
+                        }
+                        _ => return Err(format!("BA_XR_SCRIPT: {item:?}: expected aim:X;Y;Z;YAW;PITCH@N")),
+                    }
+                    continue;
+                }
                 if let Some(path) = what.strip_prefix("press:") {
                     // `@N`: frame N only; `@N..M`: held from N to M − 1.
                     let (from, to) = match at.split_once("..") {
@@ -266,6 +282,7 @@ impl Config {
             blend_modes,
             script,
             presses,
+            aims,
             controller,
             png_dir: var("BA_XR_PNG_DIR").map(PathBuf::from),
             png_frames,

@@ -11,8 +11,10 @@
 //! calls made while frame N is being produced, false otherwise; `@N..M` held), so boolean actions report `currentState`,
 //! `changedSinceLastSync` and `lastChangeTime` as the spec defines them; an
 //! unfocused session syncs nothing (XR_SESSION_NOT_FOCUSED, every action
-//! inactive). Float, vector and pose actions stay inactive (no analog input is
-//! scripted) and action spaces are never located. Every core function must
+//! inactive). Pose actions are active where bound and focused, and their action
+//! spaces are located at the scripted right controller pose (`aim:…@N`; not
+//! tracked before the first); float and vector actions stay inactive (no analog
+//! input is scripted). Every core function must
 //! resolve through xrGetInstanceProcAddr (spec 3.2).
 
 use crate::{two_call, with_instance, with_runtime};
@@ -395,8 +397,10 @@ pub(crate) unsafe extern "system" fn sync_actions(
             }
             let paths: Vec<&String> = bound.iter().filter(|(act, _)| act == h).map(|(_, p)| p).collect();
             // Spec 11.5: not focused, every action is inactive and reads false.
-            let active = focused && !paths.is_empty() && a.ty == xr::ActionType::BOOLEAN_INPUT;
-            let current = active && paths.iter().any(|p| pressed.contains(p));
+            let active = focused
+                && !paths.is_empty()
+                && (a.ty == xr::ActionType::BOOLEAN_INPUT || a.ty == xr::ActionType::POSE_INPUT);
+            let current = active && a.ty == xr::ActionType::BOOLEAN_INPUT && paths.iter().any(|p| pressed.contains(p));
             let changed = active && a.state.3 && current != a.state.0;
             let time = if changed { now } else { a.state.2 };
             if changed {
@@ -472,7 +476,30 @@ macro_rules! inactive_state {
 }
 inactive_state!(get_action_state_float, xr::ActionStateFloat);
 inactive_state!(get_action_state_vector2f, xr::ActionStateVector2f);
-inactive_state!(get_action_state_pose, xr::ActionStatePose);
+
+pub(crate) unsafe extern "system" fn get_action_state_pose(
+    session: xr::Session,
+    info: *const xr::ActionStateGetInfo,
+    state: *mut xr::ActionStatePose,
+) -> xr::Result {
+    with_runtime(|rt| {
+        if !session_ok(rt, session) {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        }
+        if info.is_null() || state.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's info.
+        let action = unsafe { (*info).action.into_raw() };
+        let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
+        if a.ty != xr::ActionType::POSE_INPUT {
+            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
+        }
+        // SAFETY: caller's output, checked non-null.
+        unsafe { (*state).is_active = a.state.3.into() };
+        xr::Result::SUCCESS
+    })
+}
 
 pub(crate) unsafe extern "system" fn enumerate_bound_sources_for_action(
     session: xr::Session,
@@ -508,22 +535,46 @@ pub(crate) unsafe extern "system" fn get_input_source_localized_name(
 
 pub(crate) unsafe extern "system" fn create_action_space(
     session: xr::Session,
-    _info: *const xr::ActionSpaceCreateInfo,
+    info: *const xr::ActionSpaceCreateInfo,
     out: *mut xr::Space,
 ) -> xr::Result {
     with_runtime(|rt| {
         if !session_ok(rt, session) {
             return xr::Result::ERROR_HANDLE_INVALID;
         }
-        if out.is_null() {
+        if out.is_null() || info.is_null() {
             return xr::Result::ERROR_VALIDATION_FAILURE;
         }
+        // SAFETY: the caller's struct, checked non-null.
+        let info = unsafe { &*info };
+        let Some(a) = rt.input.actions.get(&info.action.into_raw()) else { return xr::Result::ERROR_HANDLE_INVALID };
+        // Spec (xrCreateActionSpace): only pose actions have spaces.
+        if a.ty != xr::ActionType::POSE_INPUT {
+            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
+        }
         let h = rt.handle();
-        rt.actions.insert(h);
-        // SAFETY: caller's output, checked non-null. Located as untracked.
+        rt.action_spaces.insert(h, (info.action.into_raw(), info.pose_in_action_space));
+        // SAFETY: caller's output, checked non-null.
         unsafe { *out = xr::Space::from_raw(h) };
         xr::Result::SUCCESS
     })
+}
+
+/// The scripted right controller's pose in LOCAL at the frame being produced,
+/// if one is scripted by then.
+pub(crate) fn controller_pose(rt: &crate::Runtime) -> Option<crate::session::Pose> {
+    let frame = rt.session.as_ref()?.frame.ended;
+    let &(_, [x, y, z, yaw, pitch]) = rt.config.aims.iter().filter(|(n, _)| *n <= frame).max_by_key(|(n, _)| *n)?;
+    let (yaw, pitch) = (yaw.to_radians(), pitch.to_radians());
+    let q_yaw = crate::session::Pose { q: [0.0, (yaw / 2.0).sin(), 0.0, (yaw / 2.0).cos()], t: [x, y, z] };
+    let q_pitch = crate::session::Pose { q: [(pitch / 2.0).sin(), 0.0, 0.0, (pitch / 2.0).cos()], t: [0.0; 3] };
+    Some(q_yaw.mul(&q_pitch))
+}
+
+/// Whether action `action` (a pose action) is active: synced, bound in the
+/// chosen profile, the session focused (the state of the last xrSyncActions).
+pub(crate) fn pose_active(rt: &crate::Runtime, action: u64) -> bool {
+    rt.input.actions.get(&action).is_some_and(|a| a.state.3)
 }
 
 pub(crate) unsafe extern "system" fn apply_haptic_feedback(

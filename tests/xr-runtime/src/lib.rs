@@ -93,6 +93,8 @@ pub(crate) struct Runtime {
     pub passthrough_layers: HashMap<u64, (u64, bool)>,
     /// Handles of action sets, actions and action spaces (input.rs).
     pub actions: HashSet<u64>,
+    /// Action spaces: handle → (action, pose in the action's space).
+    pub action_spaces: HashMap<u64, (u64, xr::Posef)>,
     /// The input system's sets, actions, bindings and states (input.rs).
     pub input: input::Input,
     pub vk: Option<vulkan::VkState>,
@@ -485,6 +487,7 @@ unsafe extern "system" fn create_instance(info: *const xr::InstanceCreateInfo, o
         passthroughs: HashMap::new(),
         passthrough_layers: HashMap::new(),
         actions: HashSet::new(),
+        action_spaces: HashMap::new(),
         input: input::Input::default(),
         vk: None,
         report,

@@ -394,7 +394,7 @@ pub(crate) unsafe extern "system" fn get_reference_space_bounds_rect(
 
 pub(crate) unsafe extern "system" fn destroy_space(space: xr::Space) -> xr::Result {
     with_runtime(|rt| {
-        if rt.spaces.remove(&space.into_raw()).is_some() || rt.actions.remove(&space.into_raw()) {
+        if rt.spaces.remove(&space.into_raw()).is_some() || rt.action_spaces.remove(&space.into_raw()).is_some() {
             xr::Result::SUCCESS
         } else {
             xr::Result::ERROR_HANDLE_INVALID
@@ -502,10 +502,35 @@ pub(crate) unsafe extern "system" fn locate_space(
     location: *mut xr::SpaceLocation,
 ) -> xr::Result {
     with_runtime(|rt| {
-        if rt.actions.contains(&space.into_raw()) || rt.actions.contains(&base.into_raw()) {
-            // An action space of a controller that is not there: not located.
-            // SAFETY: caller's output.
+        if location.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        if rt.action_spaces.contains_key(&base.into_raw()) {
+            // Controllers located relative to a controller: not needed by the app.
+            // SAFETY: caller's output, checked non-null.
             unsafe { (*location).location_flags = xr::SpaceLocationFlags::EMPTY };
+            return xr::Result::SUCCESS;
+        }
+        if let Some(&(action, offset)) = rt.action_spaces.get(&space.into_raw()) {
+            let Some(b) = rt.spaces.get(&base.into_raw()) else { return xr::Result::ERROR_HANDLE_INVALID };
+            // Spec: an action space is located where its action is active and the
+            // device tracked; else no valid bits.
+            let pose = crate::input::controller_pose(rt).filter(|_| crate::input::pose_active(rt, action));
+            let Some(local_from_controller) = pose else {
+                // SAFETY: caller's output, checked non-null.
+                unsafe { (*location).location_flags = xr::SpaceLocationFlags::EMPTY };
+                return xr::Result::SUCCESS;
+            };
+            let local_from_b = local_from_space(rt, b.1, &b.2, time.as_nanos());
+            let b_from_a = local_from_b.inverse().mul(&local_from_controller.mul(&Pose::from_xr(&offset)));
+            // SAFETY: caller's output, checked non-null.
+            unsafe {
+                (*location).location_flags = xr::SpaceLocationFlags::ORIENTATION_VALID
+                    | xr::SpaceLocationFlags::POSITION_VALID
+                    | xr::SpaceLocationFlags::ORIENTATION_TRACKED
+                    | xr::SpaceLocationFlags::POSITION_TRACKED;
+                (*location).pose = b_from_a.to_xr();
+            }
             return xr::Result::SUCCESS;
         }
         let (Some(a), Some(b)) = (rt.spaces.get(&space.into_raw()), rt.spaces.get(&base.into_raw())) else {
