@@ -110,6 +110,19 @@ const GRAB_TOUCH: &str = "/user/hand/right/input/squeeze/value";
 /// The aim pose (spec 6.3 "Standard pose identifiers": the ray pointing forward
 /// from the controller), on every profile.
 const AIM: &str = "/user/hand/right/input/aim/pose";
+/// While held: up/down pushes the object along the aim ray or pulls it in,
+/// left/right shrinks or grows it.
+const STICK_TOUCH: &str = "/user/hand/right/input/thumbstick";
+/// Distance change at full deflection (m/s) and scale change (e-folds per second).
+const PUSH_M_PER_S: f32 = 1.0;
+const SCALE_PER_S: f32 = 0.7;
+/// Nearest the object comes along the aim ray (m), and the scale range (× the
+/// scene's own size): a held stick never puts it behind the controller or makes it
+/// vanish or fill the room.
+const MIN_REACH_M: f32 = 0.1;
+const SCALE_RANGE: [f32; 2] = [0.05, 20.0];
+/// Deflections below this read as centred (a resting stick is never exactly 0).
+const STICK_DEADZONE: f32 = 0.15;
 
 /// What one xrSyncActions read.
 pub struct ControllerState {
@@ -120,6 +133,8 @@ pub struct ControllerState {
     /// The right controller's aim pose in the reference space, when located
     /// (position and orientation valid).
     pub space_from_aim: Option<glam::Mat4>,
+    /// The right thumbstick (x right, y up, each in [−1, 1]); centred when inactive.
+    pub stick: [f32; 2],
 }
 
 pub struct Controls {
@@ -128,6 +143,7 @@ pub struct Controls {
     grab: xr::Action<bool>,
     aim: xr::Action<xr::Posef>,
     aim_space: Option<xr::Space>,
+    stick: xr::Action<xr::Vector2f>,
 }
 
 impl Controls {
@@ -143,6 +159,8 @@ impl Controls {
         }
         let grab = set.create_action::<bool>("grab", "Grab the object", &[]).map_err(call("xrCreateAction"))?;
         let aim = set.create_action::<xr::Posef>("aim", "Aim", &[]).map_err(call("xrCreateAction"))?;
+        let stick =
+            set.create_action::<xr::Vector2f>("place", "Push / pull and scale", &[]).map_err(call("xrCreateAction"))?;
         let mut accepted = 0;
         let profiles: &[&str] = if touch_plus { &[TOUCH_PLUS, TOUCH, SIMPLE] } else { &[TOUCH, SIMPLE] };
         for &profile in profiles {
@@ -158,6 +176,7 @@ impl Controls {
             // 11.4, "Suggested bindings": boolean to value conversion).
             if profile != SIMPLE {
                 bindings.push(xr::Binding::new(&grab, path(GRAB_TOUCH)?));
+                bindings.push(xr::Binding::new(&stick, path(STICK_TOUCH)?));
             }
             bindings.push(xr::Binding::new(&aim, path(AIM)?));
             match instance.suggest_interaction_profile_bindings(path(profile)?, &bindings) {
@@ -173,7 +192,7 @@ impl Controls {
                 result: xr::sys::Result::ERROR_PATH_UNSUPPORTED,
             });
         }
-        Ok(Self { set, actions, grab, aim, aim_space: None })
+        Ok(Self { set, actions, grab, aim, aim_space: None, stick })
     }
 
     /// Attaches the action set to the session (once per session, spec 11.4) and
@@ -212,7 +231,9 @@ impl Controls {
                 }
             }
         }
-        Ok(ControllerState { pressed, grab_held: g.is_active && g.current_state, space_from_aim })
+        let v = self.stick.state(session, xr::Path::NULL).map_err(call("xrGetActionStateVector2f"))?;
+        let stick = if v.is_active { [v.current_state.x, v.current_state.y] } else { [0.0; 2] };
+        Ok(ControllerState { pressed, grab_held: g.is_active && g.current_state, space_from_aim, stick })
     }
 }
 
@@ -234,11 +255,38 @@ pub struct Placement {
     pub space_from_scene: glam::Mat4,
     /// `aim_from_scene` while held.
     held: Option<glam::Mat4>,
+    /// The object's scale relative to where it started.
+    scale: f32,
 }
 
 impl Placement {
     pub fn new(space_from_scene: glam::Mat4) -> Self {
-        Self { space_from_scene, held: None }
+        Self { space_from_scene, held: None, scale: 1.0 }
+    }
+
+    pub fn scale(&self) -> f32 {
+        self.scale
+    }
+
+    /// The thumbstick while held, over `dt_s`: y pushes the object along the aim
+    /// ray (−z of the aim) or pulls it in, x grows or shrinks it about its own
+    /// origin. Bounded: never nearer than `MIN_REACH_M`, scale within `SCALE_RANGE`.
+    fn steer(&mut self, aim_from_scene: glam::Mat4, stick: [f32; 2], dt_s: f32) -> glam::Mat4 {
+        let dead = |v: f32| if v.is_finite() && v.abs() >= STICK_DEADZONE { v.clamp(-1.0, 1.0) } else { 0.0 };
+        let (x, y) = (dead(stick[0]), dead(stick[1]));
+        let dt = if dt_s.is_finite() { dt_s.clamp(0.0, 0.1) } else { 0.0 };
+        let mut m = aim_from_scene;
+        if y != 0.0 {
+            let reach = -m.w_axis.z;
+            let to = (reach + y * PUSH_M_PER_S * dt).max(MIN_REACH_M);
+            m = glam::Mat4::from_translation(glam::Vec3::new(0.0, 0.0, reach - to)) * m;
+        }
+        if x != 0.0 {
+            let want = (self.scale * (x * SCALE_PER_S * dt).exp()).clamp(SCALE_RANGE[0], SCALE_RANGE[1]);
+            m *= glam::Mat4::from_scale(glam::Vec3::splat(want / self.scale));
+            self.scale = want;
+        }
+        m
     }
 
     pub fn holding(&self) -> bool {
@@ -248,12 +296,14 @@ impl Placement {
     /// One frame's controller state. A grab starts on the first frame the button
     /// is held with the aim located; an aim lost while held leaves the object
     /// where it was until it is located again.
-    pub fn update(&mut self, grab_held: bool, space_from_aim: Option<glam::Mat4>) {
+    pub fn update(&mut self, grab_held: bool, space_from_aim: Option<glam::Mat4>, stick: [f32; 2], dt_s: f32) {
         match (grab_held, space_from_aim, self.held) {
             (false, _, _) => self.held = None,
             (true, Some(a), None) => self.held = Some(a.inverse() * self.space_from_scene),
             (true, Some(a), Some(aim_from_scene)) => {
-                let m = a * aim_from_scene;
+                let steered = self.steer(aim_from_scene, stick, dt_s);
+                self.held = Some(steered);
+                let m = a * steered;
                 // Only a finite, invertible placement reaches the renderer.
                 if m.is_finite() && m.determinant().abs() > 1e-12 {
                     self.space_from_scene = m;
@@ -275,26 +325,60 @@ mod tests {
         let start = Mat4::from_translation(Vec3::new(0.0, 0.0, -1.5));
         let mut p = Placement::new(start);
         let aim0 = Mat4::from_translation(Vec3::new(0.2, -0.3, -0.2));
-        p.update(false, Some(aim0));
+        p.update(false, Some(aim0), [0.0; 2], 0.01);
         assert_eq!(p.space_from_scene, start, "no grab, no move");
-        p.update(true, Some(aim0));
+        p.update(true, Some(aim0), [0.0; 2], 0.01);
         assert!(p.holding());
         assert!(p.space_from_scene.abs_diff_eq(start, 1e-6), "picking up does not move it");
         // The controller turns 90° to the left about its own origin: the object,
         // 1.3 m ahead of it, swings to its left.
         let aim1 = aim0 * Mat4::from_quat(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2));
-        p.update(true, Some(aim1));
+        p.update(true, Some(aim1), [0.0; 2], 0.01);
         let at = p.space_from_scene.transform_point3(Vec3::ZERO);
         assert!(at.abs_diff_eq(Vec3::new(0.2 - 1.3, 0.0, -0.2 + 0.2), 1e-5), "{at}");
-        p.update(true, None);
+        p.update(true, None, [0.0; 2], 0.01);
         assert!(p.space_from_scene.transform_point3(Vec3::ZERO).abs_diff_eq(at, 1e-6), "aim lost: stays");
-        p.update(false, Some(aim0));
+        p.update(false, Some(aim0), [0.0; 2], 0.01);
         assert!(!p.holding());
         assert!(p.space_from_scene.transform_point3(Vec3::ZERO).abs_diff_eq(at, 1e-6), "released: stays");
         // A degenerate aim never reaches the renderer.
-        p.update(true, Some(aim0));
-        p.update(true, Some(Mat4::from_scale(Vec3::ZERO)));
+        p.update(true, Some(aim0), [0.0; 2], 0.01);
+        p.update(true, Some(Mat4::from_scale(Vec3::ZERO)), [0.0; 2], 0.01);
         assert!(p.space_from_scene.transform_point3(Vec3::ZERO).abs_diff_eq(at, 1e-6));
+    }
+
+    /// The thumbstick while held: pushed 1 s at full deflection, the object goes
+    /// 1 m further along the ray; pulled, it stops at the nearest reach; scaled,
+    /// it stays within the range; a resting stick (dead zone) and NaN do nothing.
+    #[test]
+    fn the_thumbstick_pushes_pulls_and_scales_within_bounds() {
+        use glam::{Mat4, Vec3};
+        let mut p = Placement::new(Mat4::from_translation(Vec3::new(0.0, 0.0, -1.0)));
+        let aim = Mat4::IDENTITY;
+        p.update(true, Some(aim), [0.0; 2], 0.01);
+        for _ in 0..100 {
+            p.update(true, Some(aim), [0.1, f32::NAN], 0.01);
+        }
+        assert!(p.space_from_scene.abs_diff_eq(Mat4::from_translation(Vec3::new(0.0, 0.0, -1.0)), 1e-6));
+        for _ in 0..100 {
+            p.update(true, Some(aim), [0.0, 1.0], 0.01);
+        }
+        let z = p.space_from_scene.w_axis.z;
+        assert!((z + 2.0).abs() < 1e-4, "pushed 1 m: {z}");
+        for _ in 0..1000 {
+            p.update(true, Some(aim), [0.0, -1.0], 0.01);
+        }
+        assert!((p.space_from_scene.w_axis.z + MIN_REACH_M).abs() < 1e-5, "{}", p.space_from_scene.w_axis.z);
+        for _ in 0..10_000 {
+            p.update(true, Some(aim), [1.0, 0.0], 0.01);
+        }
+        assert!((p.scale() - SCALE_RANGE[1]).abs() < 1e-3, "{}", p.scale());
+        let size = p.space_from_scene.x_axis.truncate().length();
+        assert!((size - SCALE_RANGE[1]).abs() < 1e-2, "the matrix carries the scale: {size}");
+        for _ in 0..10_000 {
+            p.update(true, Some(aim), [-1.0, 0.0], 1e9);
+        }
+        assert!((p.scale() - SCALE_RANGE[0]).abs() < 1e-5, "{}", p.scale());
     }
 
     #[test]

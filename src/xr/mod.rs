@@ -538,7 +538,10 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             match c.poll(&session, &space, state.predicted_display_time) {
                 Ok(input) => {
                     let was_holding = placement.holding();
-                    placement.update(input.grab_held, input.space_from_aim);
+                    // Steering speed per display period (the app's: twice the
+                    // display's under space warp).
+                    let dt_s = state.predicted_display_period.as_nanos() as f32 * 1e-9;
+                    placement.update(input.grab_held, input.space_from_aim, input.stick, dt_s);
                     if placement.holding() != was_holding {
                         log::info!("input: object {}", if was_holding { "placed" } else { "grabbed" });
                     }

@@ -13,6 +13,7 @@
 //! | `BA_XR_BLEND_MODES` | environment blend modes: `opaque`, `alpha_blend`, `additive` (`opaque` alone: Quest-like, passthrough only through XR_FB_passthrough) | opaque,alpha_blend |
 //! | `BA_XR_SCRIPT` | session events at frame numbers: `exit@N`, `loss@N`, `instance_loss@N`, `unfocus@N`, `focus@N`, `pause@N` (the session is stopped and stays IDLE after xrEndSession, as an Android app put in the background: no EXITING), `untracked@N..M` (xrLocateViews for frames N to M − 1 without ORIENTATION_VALID/POSITION_VALID: zero quaternions on even frames, a plausible wrong pose on odd ones), `press:PATH@N` (the controller component PATH, e.g. `/user/hand/right/input/a/click`, reads true in the xrSyncActions calls made while frame N is produced; `@N..M`: held for frames N to M − 1) | none |
 //! | `BA_XR_SCRIPT` `aim:X;Y;Z;YAW;PITCH@N` | the right controller's grip and aim pose in LOCAL from frame N on (m, degrees; yaw about +Y, pitch about +X); untracked before the first | none |
+//! | `BA_XR_SCRIPT` `stick:X;Y@N..M` | the right thumbstick deflected (each in [−1, 1]) from frame N to M − 1 | centred |
 //! | `BA_XR_CONTROLLER` | the controllers: `touch` (answer to Oculus Touch bindings, else the simple controller's), `touch_plus` (Meta Touch Plus bindings, else Touch's, else the simple controller's), `simple` (the Khronos simple controller only) or `none` | touch |
 //! | `BA_XR_PNG_DIR`, `BA_XR_PNG_FRAMES` | write the submitted layers of these frames (0-based `xrEndFrame` count) to PNG | none |
 //! | `BA_XR_REPORT` | JSON lines: one per state change and per `xrEndFrame` | none |
@@ -92,6 +93,9 @@ pub struct Config {
     /// Scripted right-controller poses in LOCAL (`aim:X;Y;Z;YAW;PITCH@N`, metres and
     /// degrees): from frame N on, until the next; before the first, not tracked.
     pub aims: Vec<(u64, [f32; 5])>,
+    /// Scripted right thumbstick deflections (`stick:X;Y@N..M`, each in [−1, 1]):
+    /// held from frame N to M − 1, centred otherwise.
+    pub sticks: Vec<(u64, u64, [f32; 2])>,
     pub controller: Controller,
     pub png_dir: Option<PathBuf>,
     pub png_frames: Vec<u64>,
@@ -184,9 +188,22 @@ impl Config {
         let mut script = vec![];
         let mut presses = vec![];
         let mut aims = vec![];
+        let mut sticks = vec![];
         if let Some(s) = var("BA_XR_SCRIPT") {
             for item in s.split(',').map(str::trim) {
                 let (what, at) = item.rsplit_once('@').ok_or(format!("BA_XR_SCRIPT: {item:?} is not COMMAND@FRAME"))?;
+                if let Some(values) = what.strip_prefix("stick:") {
+                    let v: Vec<f32> = values.split(';').filter_map(|x| x.trim().parse().ok()).collect();
+                    let range =
+                        at.split_once("..").and_then(|(a, b)| Some((a.parse::<u64>().ok()?, b.parse::<u64>().ok()?)));
+                    match (v.as_slice(), range) {
+                        ([x, y], Some((from, to))) if from < to && x.abs() <= 1.0 && y.abs() <= 1.0 => {
+                            sticks.push((from, to, [*x, *y]))
+                        }
+                        _ => return Err(format!("BA_XR_SCRIPT: {item:?}: expected stick:X;Y@N..M, |X|, |Y| ≤ 1")),
+                    }
+                    continue;
+                }
                 if let Some(values) = what.strip_prefix("aim:") {
                     let v: Vec<f32> = values.split(';').filter_map(|x| x.trim().parse().ok()).collect();
                     let frame = at.parse::<u64>().ok();
@@ -283,6 +300,7 @@ impl Config {
             script,
             presses,
             aims,
+            sticks,
             controller,
             png_dir: var("BA_XR_PNG_DIR").map(PathBuf::from),
             png_frames,

@@ -13,8 +13,8 @@
 //! unfocused session syncs nothing (XR_SESSION_NOT_FOCUSED, every action
 //! inactive). Pose actions are active where bound and focused, and their action
 //! spaces are located at the scripted right controller pose (`aim:…@N`; not
-//! tracked before the first); float and vector actions stay inactive (no analog
-//! input is scripted). Every core function must
+//! tracked before the first); the right thumbstick's vector action reads the
+//! scripted deflection (`stick:X;Y@N..M`); float actions stay inactive. Every core function must
 //! resolve through xrGetInstanceProcAddr (spec 3.2).
 
 use crate::{two_call, with_instance, with_runtime};
@@ -399,7 +399,10 @@ pub(crate) unsafe extern "system" fn sync_actions(
             // Spec 11.5: not focused, every action is inactive and reads false.
             let active = focused
                 && !paths.is_empty()
-                && (a.ty == xr::ActionType::BOOLEAN_INPUT || a.ty == xr::ActionType::POSE_INPUT);
+                && matches!(
+                    a.ty,
+                    xr::ActionType::BOOLEAN_INPUT | xr::ActionType::POSE_INPUT | xr::ActionType::VECTOR2F_INPUT
+                );
             let current = active && a.ty == xr::ActionType::BOOLEAN_INPUT && paths.iter().any(|p| pressed.contains(p));
             let changed = active && a.state.3 && current != a.state.0;
             let time = if changed { now } else { a.state.2 };
@@ -475,7 +478,42 @@ macro_rules! inactive_state {
     };
 }
 inactive_state!(get_action_state_float, xr::ActionStateFloat);
-inactive_state!(get_action_state_vector2f, xr::ActionStateVector2f);
+
+pub(crate) unsafe extern "system" fn get_action_state_vector2f(
+    session: xr::Session,
+    info: *const xr::ActionStateGetInfo,
+    state: *mut xr::ActionStateVector2f,
+) -> xr::Result {
+    with_runtime(|rt| {
+        if !session_ok(rt, session) {
+            return xr::Result::ERROR_HANDLE_INVALID;
+        }
+        if info.is_null() || state.is_null() {
+            return xr::Result::ERROR_VALIDATION_FAILURE;
+        }
+        // SAFETY: the caller's info.
+        let action = unsafe { (*info).action.into_raw() };
+        let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
+        if a.ty != xr::ActionType::VECTOR2F_INPUT {
+            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
+        }
+        let active = a.state.3;
+        let frame = rt.session.as_ref().map_or(0, |s| s.frame.ended);
+        let v = if active {
+            rt.config.sticks.iter().find(|(from, to, _)| (*from..*to).contains(&frame)).map_or([0.0; 2], |s| s.2)
+        } else {
+            [0.0; 2]
+        };
+        // SAFETY: caller's output, checked non-null.
+        unsafe {
+            (*state).current_state = xr::Vector2f { x: v[0], y: v[1] };
+            (*state).changed_since_last_sync = xr::FALSE;
+            (*state).last_change_time = xr::Time::from_nanos(0);
+            (*state).is_active = active.into();
+        }
+        xr::Result::SUCCESS
+    })
+}
 
 pub(crate) unsafe extern "system" fn get_action_state_pose(
     session: xr::Session,
