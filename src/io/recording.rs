@@ -135,22 +135,34 @@ const QUEUE: usize = 4;
 /// worker replaced or removed the tap, or stopped) ends the recording.
 pub struct RecordingTap {
     tx: SyncSender<Item>,
+    /// The writer has stopped (a limit, storage, an error): nothing more is copied.
+    closed: bool,
+}
+
+impl RecordingTap {
+    fn send(&mut self, item: Item) {
+        // A send fails only once the writer has stopped and dropped its end: the
+        // recording is over and the rest is not wanted.
+        if !self.closed && self.tx.send(item).is_err() {
+            self.closed = true;
+        }
+    }
 }
 
 impl Tap for RecordingTap {
     fn taken(&mut self, frame: Option<&Frame>, poses: &[TimedPose]) {
-        // A send fails only once the writer has stopped (limits, storage): the
-        // recording is over and the rest is not wanted.
-        if !poses.is_empty() {
-            let _ = self.tx.send(Item::Poses(poses.to_vec()));
+        if !poses.is_empty() && !self.closed {
+            self.send(Item::Poses(poses.to_vec()));
         }
-        if let Some(f) = frame {
-            let _ = self.tx.send(Item::Frame(Box::new(f.clone())));
+        if let Some(f) = frame.filter(|_| !self.closed) {
+            self.send(Item::Frame(Box::new(f.clone())));
         }
     }
 
     fn published(&mut self, frame: u64, t_s: f64, _generation: u64, model: &CameraModel) {
-        let _ = self.tx.send(Item::Model { frame, t_s, model: Box::new(model.clone()) });
+        if !self.closed {
+            self.send(Item::Model { frame, t_s, model: Box::new(model.clone()) });
+        }
     }
 }
 
@@ -184,7 +196,7 @@ impl Recording {
             .name("recording".into())
             .spawn(move || writer.run(rx))
             .map_err(|source| RecordingError::Thread { path: dir.to_path_buf(), source })?;
-        Ok((Recording { dir: dir.to_path_buf(), handle: Some(handle) }, RecordingTap { tx }))
+        Ok((Recording { dir: dir.to_path_buf(), handle: Some(handle) }, RecordingTap { tx, closed: false }))
     }
 
     pub fn dir(&self) -> &Path {
@@ -246,12 +258,10 @@ impl Writer {
     }
 
     fn run(mut self, rx: Receiver<Item>) -> Manifest {
-        // Until the tap is dropped; after a stop the queue is drained unread so
-        // the worker never waits on a recording that has ended.
+        // Until the tap is dropped, or a stop: then the receiver goes at once (the
+        // tap's sends fail without waiting) and the files are closed now, not at
+        // the user's next press.
         for item in rx {
-            if self.stopped.is_some() {
-                continue;
-            }
             let r = match item {
                 Item::Poses(p) => {
                     self.poses.extend(p);
@@ -263,6 +273,9 @@ impl Writer {
             if let Err(message) = r {
                 log::warn!("recording {}: {message}: stopped", self.dir.display());
                 self.stopped = Some(StopReason::WriteError { message });
+            }
+            if self.stopped.is_some() {
+                break;
             }
         }
         self.close()
@@ -378,6 +391,11 @@ impl Writer {
                 _ => "metric-m",
             };
             calibrate += &format!(" --depth depth --depth-units {units}");
+            // The headset's depth is not there for every frame: those go without,
+            // as they did live.
+            if self.frames_with_depth < self.frames.len() as u64 {
+                calibrate += " --depth-optional";
+            }
         }
         if let (true, Some(k)) = (poses_csv, &self.info.intrinsics) {
             calibrate += &format!(" --poses poses.csv --intrinsics {},{},{},{}", k.fx, k.fy, k.cx, k.cy);
@@ -560,20 +578,34 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
-    /// The duration limit counts video time from the first recorded frame.
+    /// The duration limit counts video time from the first recorded frame, and
+    /// ends the recording then: the manifest is written without waiting for the
+    /// tap to go, and the tap stops copying frames.
     #[test]
     fn the_duration_limit_ends_the_recording() {
         let d = dir("duration");
         let (rec, mut tap) = Recording::start(&d, info(), RecordLimits { max_s: 0.25, min_free_bytes: 0 }).unwrap();
         for i in 0..6 {
+            tap.taken(Some(&frame(i, i % 2 == 0)), &[]);
+        }
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while !rec.is_finished() && std::time::Instant::now() < until {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert!(rec.is_finished(), "finished while the tap is still installed");
+        assert!(d.join("manifest.json").exists());
+        for i in 6..(3 * QUEUE as u64) {
             tap.taken(Some(&frame(i, false)), &[]);
         }
+        assert!(tap.closed, "the tap learnt that the writer stopped");
         drop(tap);
         let m = rec.finish().unwrap();
         assert_eq!(m.stopped, StopReason::Duration);
         assert_eq!(m.frames, 3, "0, 0.1, 0.2 s are within 0.25 s of the first");
         assert!(!m.poses_csv, "no poses were received");
         assert!(!m.calibrate.contains("--poses"));
+        assert_eq!(m.frames_with_depth, 2);
+        assert!(m.calibrate.contains("--depth depth --depth-units metric-m --depth-optional"), "{}", m.calibrate);
         let bad = Recording::start(&dir("bad"), info(), RecordLimits { max_s: f64::NAN, min_free_bytes: 0 });
         assert!(matches!(bad, Err(RecordingError::Folder { .. })));
         let _ = std::fs::remove_dir_all(&d);

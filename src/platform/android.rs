@@ -462,6 +462,7 @@ fn calibrate_live(
         // that (the first rendered frame brings a sample) frames wait and the head
         // poses stay queued; a camera on an unknown clock calibrates without poses.
         if realtime && assembler.clock().is_none() {
+            assembler.skip();
             return;
         }
         let heads = l.take_heads();
@@ -478,6 +479,9 @@ fn calibrate_live(
         }
         if !w.wants_frame() {
             w.submit_poses(&poses);
+            // Counted, so frame numbers are the camera's (the temporal stages
+            // compare frames by their number distance).
+            assembler.skip();
             return;
         }
         match assembler.assemble(yuv, timestamp_ns, &result) {
@@ -577,7 +581,7 @@ fn calibrate_live(
 }
 
 /// Recordings started and stopped by the controller's record button: each a
-/// new folder `recordings/rec-<unix seconds>` in the app's external files
+/// new folder `recordings/rec-<unix milliseconds>` in the app's external files
 /// folder (`adb pull`, or `cargo xtask pull-recording`), in `calibrate`'s input
 /// layout (`io::recording`). Runs on the camera thread.
 struct Recorder {
@@ -611,8 +615,9 @@ impl Recorder {
             log::warn!("recording: the app has no external files folder");
             return;
         };
-        let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-        let dir = root.join(format!("rec-{secs}"));
+        // Milliseconds: a stop and a new start within one second get two folders.
+        let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis());
+        let dir = root.join(format!("rec-{ms}"));
         match Recording::start(&dir, self.info.clone(), RecordLimits::default()) {
             Ok((rec, tap)) => {
                 worker.set_tap(Some(Box::new(tap)));

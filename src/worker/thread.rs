@@ -21,6 +21,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 const MAX_QUEUED_POSES: usize = 4096;
+/// Poses a new tap starts with: about 1.4 s of a 90 Hz head track.
+const RECENT_POSES: usize = 128;
 
 /// What sees the worker's input and output on its own thread: a recording
 /// (`io::recording`). Called before each frame is fitted and after each model
@@ -122,6 +124,10 @@ impl Worker {
                 }
             };
             let mut tap: Option<Box<dyn Tap>> = None;
+            // The newest poses taken: a new tap gets them first, so frames taken
+            // right after it is installed (a camera frame lags the head poses by
+            // its pipeline's latency) lie within the poses it has.
+            let mut recent: std::collections::VecDeque<TimedPose> = std::collections::VecDeque::new();
             loop {
                 let (frame, poses, change) = {
                     let mut slot = lock(&s.slot);
@@ -142,7 +148,15 @@ impl Worker {
                 // learns that its input ended.
                 if let Some(t) = change {
                     tap = t;
+                    if let Some(t) = tap.as_mut() {
+                        if !recent.is_empty() {
+                            t.taken(None, recent.make_contiguous());
+                        }
+                    }
                 }
+                recent.extend(poses.iter().copied());
+                let excess = recent.len().saturating_sub(RECENT_POSES);
+                recent.drain(..excess);
                 if let Some(t) = tap.as_mut() {
                     if frame.is_some() || !poses.is_empty() {
                         t.taken(frame.as_ref(), &poses);

@@ -144,6 +144,8 @@ pub struct Controls {
     aim: xr::Action<xr::Posef>,
     aim_space: Option<xr::Space>,
     stick: xr::Action<xr::Vector2f>,
+    /// Reading the aim failed once (logged once).
+    aim_failed: std::sync::atomic::AtomicBool,
 }
 
 impl Controls {
@@ -192,7 +194,7 @@ impl Controls {
                 result: xr::sys::Result::ERROR_PATH_UNSUPPORTED,
             });
         }
-        Ok(Self { set, actions, grab, aim, aim_space: None, stick })
+        Ok(Self { set, actions, grab, aim, aim_space: None, stick, aim_failed: Default::default() })
     }
 
     /// Attaches the action set to the session (once per session, spec 11.4) and
@@ -221,18 +223,33 @@ impl Controls {
             }
         }
         let g = self.grab.state(session, xr::Path::NULL).map_err(call("xrGetActionStateBoolean"))?;
+        // The aim is optional: a failure to read it leaves the object unmoved and
+        // never costs the presses read above (they are reported once).
         let mut space_from_aim = None;
         if let Some(space) = &self.aim_space {
-            if self.aim.is_active(session, xr::Path::NULL).map_err(call("xrGetActionStatePose"))? {
-                let l = space.locate(base, time).map_err(call("xrLocateSpace"))?;
-                let valid = xr::SpaceLocationFlags::POSITION_VALID | xr::SpaceLocationFlags::ORIENTATION_VALID;
-                if l.location_flags.contains(valid) {
-                    space_from_aim = pose_matrix(&l.pose);
+            match self
+                .aim
+                .is_active(session, xr::Path::NULL)
+                .and_then(|a| a.then(|| space.locate(base, time)).transpose())
+            {
+                Ok(Some(l)) => {
+                    let valid = xr::SpaceLocationFlags::POSITION_VALID | xr::SpaceLocationFlags::ORIENTATION_VALID;
+                    if l.location_flags.contains(valid) {
+                        space_from_aim = pose_matrix(&l.pose);
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    if !self.aim_failed.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                        log::warn!("OpenXR: the aim pose could not be read ({e}); the object stays where it is");
+                    }
                 }
             }
         }
-        let v = self.stick.state(session, xr::Path::NULL).map_err(call("xrGetActionStateVector2f"))?;
-        let stick = if v.is_active { [v.current_state.x, v.current_state.y] } else { [0.0; 2] };
+        let stick = match self.stick.state(session, xr::Path::NULL) {
+            Ok(v) if v.is_active => [v.current_state.x, v.current_state.y],
+            _ => [0.0; 2],
+        };
         Ok(ControllerState { pressed, grab_held: g.is_active && g.current_state, space_from_aim, stick })
     }
 }

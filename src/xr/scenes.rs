@@ -21,6 +21,8 @@ pub struct SceneCycle {
     /// 0: the starting scene; k: `paths[k - 1]`.
     current: usize,
     pending: Option<(usize, Receiver<Result<Scene, String>>)>,
+    /// Presses made while a scene was loading: each moves on once it is ready.
+    queued: usize,
     /// Files that failed to load, each with why.
     pub errors: Vec<String>,
 }
@@ -28,7 +30,7 @@ pub struct SceneCycle {
 impl SceneCycle {
     /// `paths`: the scenes after the starting one, in cycling order.
     pub fn new(paths: Vec<PathBuf>) -> Self {
-        Self { paths, current: 0, pending: None, errors: vec![] }
+        Self { paths, current: 0, pending: None, queued: 0, errors: vec![] }
     }
 
     /// How many scenes cycle (the starting one included).
@@ -44,12 +46,26 @@ impl SceneCycle {
     pub fn reset(&mut self) {
         self.current = 0;
         self.pending = None;
+        self.queued = 0;
     }
 
-    /// Ask for the scene after the current one (ignored while one is loading).
+    /// Ask for the scene after the current one (while one is loading, after it).
     pub fn request_next(&mut self) {
-        if self.pending.is_none() && !self.paths.is_empty() {
+        if self.paths.is_empty() {
+            return;
+        }
+        if self.pending.is_some() {
+            self.queued += 1;
+        } else {
             self.start((self.current + 1) % self.count());
+        }
+    }
+
+    /// A press queued while loading: the next scene after `index`.
+    fn next_queued(&mut self, index: usize) {
+        if self.queued > 0 && self.pending.is_none() {
+            self.queued -= 1;
+            self.start((index + 1) % self.count());
         }
     }
 
@@ -84,8 +100,11 @@ impl SceneCycle {
         };
         self.pending = None;
         if index == 0 {
+            // Already showing it (every other scene failed): nothing to rebuild.
+            let changed = self.current != 0;
             self.current = 0;
-            return Some(Ready::Start);
+            self.next_queued(0);
+            return changed.then_some(Ready::Start);
         }
         let path = self.paths[index - 1].clone();
         match result {
@@ -94,6 +113,7 @@ impl SceneCycle {
                     log::info!("scene {}: {note}", path.display());
                 }
                 self.current = index;
+                self.next_queued(index);
                 Some(Ready::Loaded { index, path, scene: Box::new(scene) })
             }
             Err(e) => {
@@ -164,6 +184,17 @@ mod tests {
         assert_eq!(c.errors.len(), 1);
         assert!(c.errors[0].contains("b.gltf"), "{:?}", c.errors);
         assert!(scenes_in(&dir.join("missing")).is_empty());
+        // Two presses at once: the second waits for the first's scene, then the
+        // broken file is skipped and, already on the start, nothing is handed over.
+        c.request_next();
+        c.request_next();
+        assert!(matches!(wait(&mut c), Some(Ready::Loaded { index: 1, .. })));
+        assert!(wait(&mut c).is_some_and(|r| matches!(r, Ready::Start)));
+        assert_eq!(c.errors.len(), 2);
+        let mut only_broken = SceneCycle::new(vec![dir.join("b.gltf")]);
+        only_broken.request_next();
+        assert!(wait(&mut only_broken).is_none(), "the start again, already shown: no rebuild");
+        assert_eq!((only_broken.current(), only_broken.errors.len()), (0, 1));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

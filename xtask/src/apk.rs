@@ -362,10 +362,10 @@ fn check(apk: &Path, unstripped: &Path) -> Result<()> {
 }
 
 /// Where the app keeps its recordings on the headset: its external files folder
-/// (`Context.getExternalFilesDir(null)`), `recordings/rec-<unix seconds>`.
+/// (`Context.getExternalFilesDir(null)`), `recordings/rec-<unix milliseconds>`.
 const RECORDINGS: &str = "/sdcard/Android/data/org.blindaugment.app/files/recordings";
 
-/// The newest `rec-<unix seconds>` in an `ls -1` listing.
+/// The newest `rec-<unix milliseconds>` in an `ls -1` listing.
 fn newest_recording(listing: &str) -> Option<&str> {
     listing
         .lines()

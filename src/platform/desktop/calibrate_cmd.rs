@@ -39,13 +39,32 @@ pub fn parse_intrinsics(s: &str, w: usize, h: usize) -> Result<Intrinsics> {
 /// they increase in name order (a recording keeps the camera's numbering, with
 /// gaps where the live worker dropped frames: the temporal stages look for
 /// frame-number neighbours), else the position.
-pub fn frame_numbers(frames: &[std::path::PathBuf]) -> Vec<u64> {
+/// Where every name is a number the frames are put in number order (names past
+/// the zero padding sort wrongly by name); two names for one number fall back to
+/// positions. Says which numbering it used.
+pub fn frame_numbers(frames: &mut [std::path::PathBuf]) -> Vec<u64> {
     let parsed: Option<Vec<u64>> =
         frames.iter().map(|p| p.file_stem().and_then(|s| s.to_str()).and_then(|s| s.parse().ok())).collect();
-    match parsed {
-        Some(n) if n.windows(2).all(|w| w[1] > w[0]) => n,
-        _ => (0..frames.len() as u64).collect(),
+    if let Some(mut n) = parsed {
+        let mut order: Vec<usize> = (0..frames.len()).collect();
+        order.sort_by_key(|&i| n[i]);
+        let sorted: Vec<std::path::PathBuf> = order.iter().map(|&i| frames[i].clone()).collect();
+        n.sort_unstable();
+        if n.windows(2).all(|w| w[1] > w[0]) {
+            frames.clone_from_slice(&sorted);
+            if n.first() != Some(&0) || n.last() != Some(&(n.len() as u64 - 1)) {
+                eprintln!(
+                    "frames numbered by their names: {} to {} ({} files; the gaps are frames not recorded)",
+                    n[0],
+                    n[n.len() - 1],
+                    n.len()
+                );
+            }
+            return n;
+        }
+        eprintln!("frame names repeat a number: frames numbered by position in name order");
     }
+    (0..frames.len() as u64).collect()
 }
 
 /// One line of `--timeline` / `truth.jsonl`.
@@ -96,8 +115,8 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let tier = CalibrationTier::parse(&args.tier)
         .with_context(|| format!("--tier `{}`: expected fast, balanced or accurate", args.tier))?;
     ensure!(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0, "--fps {}: need 0 < fps ≤ 1000", args.fps);
-    let frames = list_frames(&args.frames)?;
-    let numbers = frame_numbers(&frames);
+    let mut frames = list_frames(&args.frames)?;
+    let numbers = frame_numbers(&mut frames);
     let (first, _) = io::load_rgb(&frames[0]).with_context(|| format!("frame {}", frames[0].display()))?;
     let (w, h) = (first.width, first.height);
     let poses: Option<Vec<PoseRow>> = match (&args.poses, &args.intrinsics) {
@@ -106,6 +125,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         (None, Some(_)) => bail!("--intrinsics is only used with --poses"),
         (None, None) => None,
     };
+    ensure!(!args.depth_optional || args.geometry.depth.is_some(), "--depth-optional is used with --depth");
     let intrinsics = args.intrinsics.as_deref().map(|s| parse_intrinsics(s, w, h)).transpose()?;
     let track = match (&args.pose_track, &poses) {
         (Some(p), Some(_)) => Some(read_pose_track_csv(p)?),
@@ -199,10 +219,14 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         };
         let g = &args.geometry;
         let depth = match &g.depth {
-            Some(d) => Some(DepthMap {
-                depth: io::load_depth(&sibling(d, path, "depth")?, g.depth_png_scale)?,
-                units: g.depth_units.into(),
-            }),
+            Some(d) => match sibling(d, path, "depth") {
+                Ok(file) => {
+                    Some(DepthMap { depth: io::load_depth(&file, g.depth_png_scale)?, units: g.depth_units.into() })
+                }
+                // A recording's frames the headset had no depth for: as live.
+                Err(_) if args.depth_optional => None,
+                Err(e) => return Err(e.context("(--depth-optional lets frames without a depth file go without)")),
+            },
             None => None,
         };
         let flow = match &args.geometry.flow {

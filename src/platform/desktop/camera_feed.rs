@@ -56,8 +56,8 @@ impl CameraFeed {
             "--camera-fps {}: need 0 < fps ≤ 1000",
             args.camera_fps
         );
-        let frames = list_frames(dir)?;
-        let numbers = frame_numbers(&frames);
+        let mut frames = list_frames(dir)?;
+        let numbers = frame_numbers(&mut frames);
         let (first, _) = io::load_rgb(&frames[0]).with_context(|| format!("frame {}", frames[0].display()))?;
         let (w, h) = (first.width, first.height);
         let poses = match (&args.poses, &args.intrinsics) {
@@ -97,7 +97,10 @@ impl CameraFeed {
                     intrinsics,
                     tier: tier.name().into(),
                 };
-                let limits = RecordLimits { max_s: args.record_s, ..RecordLimits::default() };
+                let limits = RecordLimits {
+                    max_s: args.record_s,
+                    min_free_bytes: args.record_min_free_mib.saturating_mul(1 << 20),
+                };
                 let (rec, tap) = Recording::start(out, info, limits)?;
                 worker.set_tap(Some(Box::new(tap)));
                 Some(rec)

@@ -244,6 +244,9 @@ pub struct XrArgs {
     /// Stop recording after this much video (s).
     #[arg(long, default_value_t = 10.0)]
     record_s: f64,
+    /// Stop recording when the disk has less than this free (MiB).
+    #[arg(long, default_value_t = 512)]
+    record_min_free_mib: u64,
 }
 
 #[derive(clap::Args)]
@@ -266,6 +269,10 @@ pub struct CalibrateArgs {
     /// Pinhole intrinsics in pixels of the frames: fx,fy,cx,cy (with --poses).
     #[arg(long)]
     intrinsics: Option<String>,
+    /// With --depth: a frame without a depth file goes without depth (a
+    /// recording's frames the headset had no depth for) instead of an error.
+    #[arg(long)]
+    depth_optional: bool,
     /// Every pose tracked, `t_s,tx,ty,tz,qx,qy,qz,qw` (a recording's
     /// pose_track.csv): the calibrator gets these instead of --poses' rows, each
     /// once the frame 2.5 frame intervals before it is read; --poses still gives

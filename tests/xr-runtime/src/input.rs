@@ -387,6 +387,9 @@ pub(crate) unsafe extern "system" fn sync_actions(
             .collect();
         let synced: Vec<u64> = active.iter().map(|a| a.action_set.into_raw()).collect();
         let bound = rt.input.profile.as_ref().and_then(|p| rt.input.bindings.get(p)).cloned().unwrap_or_default();
+        // Spec (XrActionStatePose::isActive): true only while an input source is
+        // bound and tracked; the scripted controller is tracked once posed.
+        let tracked = controller_pose(rt).is_some();
         let mut changes = Vec::new();
         for (h, a) in rt.input.actions.iter_mut() {
             // Spec (xrSyncActions): only the listed sets are active; the others'
@@ -399,10 +402,11 @@ pub(crate) unsafe extern "system" fn sync_actions(
             // Spec 11.5: not focused, every action is inactive and reads false.
             let active = focused
                 && !paths.is_empty()
-                && matches!(
-                    a.ty,
-                    xr::ActionType::BOOLEAN_INPUT | xr::ActionType::POSE_INPUT | xr::ActionType::VECTOR2F_INPUT
-                );
+                && match a.ty {
+                    xr::ActionType::BOOLEAN_INPUT | xr::ActionType::VECTOR2F_INPUT => true,
+                    xr::ActionType::POSE_INPUT => tracked,
+                    _ => false,
+                };
             let current = active && a.ty == xr::ActionType::BOOLEAN_INPUT && paths.iter().any(|p| pressed.contains(p));
             let changed = active && a.state.3 && current != a.state.0;
             let time = if changed { now } else { a.state.2 };
@@ -497,6 +501,9 @@ pub(crate) unsafe extern "system" fn get_action_state_vector2f(
         if a.ty != xr::ActionType::VECTOR2F_INPUT {
             return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
         }
+        if !rt.input.attached.contains(&a.set) {
+            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
+        }
         let active = a.state.3;
         let frame = rt.session.as_ref().map_or(0, |s| s.frame.ended);
         let v = if active {
@@ -532,6 +539,9 @@ pub(crate) unsafe extern "system" fn get_action_state_pose(
         let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
         if a.ty != xr::ActionType::POSE_INPUT {
             return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
+        }
+        if !rt.input.attached.contains(&a.set) {
+            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
         }
         // SAFETY: caller's output, checked non-null.
         unsafe { (*state).is_active = a.state.3.into() };
