@@ -13,7 +13,7 @@ use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_relative_
 use blind_augment::model::CameraModel;
 use blind_augment::synth::sequence::{procedural, SequenceSpec};
 use blind_augment::worker::{
-    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Providers, Worker,
+    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Providers, UpdateReason, Worker,
 };
 use common::calibration::*;
 
@@ -509,4 +509,37 @@ fn an_exposure_change_alone_is_found_by_the_estimates() {
         let last = lambdas.last().and_then(|l| l.1).expect("a λ published");
         assert!((last - 0.25).abs() <= 0.03, "{tier:?}: last λ {last}");
     }
+}
+
+/// The user's "restart calibration": after the start-up burst the fast tier
+/// publishes on its schedule; restarted at 1.2 s, the next frames publish as a
+/// start-up burst again (every frame, reason Burst), from frames after the restart
+/// only, and frame times and poses go on as before.
+#[test]
+fn restart_opens_a_new_start_up_burst() {
+    let (spec, frames) = sequence();
+    let mut cal = Calibrator::new(
+        CalibratorConfig::new(CalibrationTier::Fast, 1.0 / 30.0, Some(spec.view)),
+        Providers::for_tier(CalibrationTier::Fast),
+    )
+    .expect("valid config");
+    cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
+    let mut reasons: Vec<(usize, UpdateReason)> = vec![];
+    for f in &frames[..44] {
+        if f.index == 36 {
+            cal.restart();
+        }
+        cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
+        for e in cal.push_frame(frame(f)).expect("valid frame") {
+            if let Event::Published(u) = e {
+                reasons.push((f.index, u.reason));
+            }
+        }
+    }
+    let burst = |range: std::ops::Range<usize>| {
+        reasons.iter().filter(|(i, _)| range.contains(i)).map(|(_, r)| *r == UpdateReason::Burst).collect::<Vec<_>>()
+    };
+    assert!(burst(31..36).iter().all(|b| !b), "after the first burst, on schedule: {reasons:?}");
+    let after = burst(36..44);
+    assert!(!after.is_empty() && after.iter().all(|b| *b), "a burst again after the restart: {reasons:?}");
 }

@@ -179,6 +179,8 @@ struct LiveInputs {
     /// Record-button presses not yet acted on (the camera thread starts or stops
     /// the recording: the frame loop never touches storage).
     record_presses: std::sync::atomic::AtomicU32,
+    /// A restart-calibration press not yet acted on.
+    restart: AtomicBool,
 }
 
 impl LiveInputs {
@@ -186,6 +188,9 @@ impl LiveInputs {
         for t in &r.pressed {
             if *t == crate::xr::Toggle::Record {
                 self.record_presses.fetch_add(1, Ordering::SeqCst);
+            }
+            if *t == crate::xr::Toggle::RestartCalibration {
+                self.restart.store(true, Ordering::SeqCst);
             }
         }
         // Untracked views are the last tracked ones shown again (FrameRecord::
@@ -534,6 +539,10 @@ fn calibrate_live(
         while !stop.load(Ordering::SeqCst) && !camera.lost() {
             std::thread::sleep(Duration::from_millis(200));
             recorder.poll(live.record_presses.swap(0, Ordering::SeqCst), &worker);
+            if live.restart.swap(false, Ordering::SeqCst) {
+                log::info!("calibration restarted by the user: look around (start-up burst)");
+                worker.restart();
+            }
             if last_report.elapsed() >= Duration::from_secs(10) {
                 last_report = Instant::now();
                 let snapshot = models.latest();

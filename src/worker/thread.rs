@@ -46,6 +46,8 @@ struct Slot {
     /// A tap to install (Some(None): remove the current one) at the worker's next
     /// turn.
     tap_change: Option<Option<Box<dyn Tap>>>,
+    /// Restart the calibration (`Calibrator::restart`) at the worker's next turn.
+    restart: bool,
 }
 
 struct Shared {
@@ -76,6 +78,8 @@ pub struct WorkerStats {
     pub errors: Vec<String>,
     /// Why the thread's priority could not be lowered (None: it was).
     pub priority_error: Option<String>,
+    /// Restarts asked for (`Worker::restart`).
+    pub restarts: u64,
 }
 
 pub struct Worker {
@@ -129,11 +133,11 @@ impl Worker {
             // its pipeline's latency) lie within the poses it has.
             let mut recent: std::collections::VecDeque<TimedPose> = std::collections::VecDeque::new();
             loop {
-                let (frame, poses, change) = {
+                let (frame, poses, change, restart) = {
                     let mut slot = lock(&s.slot);
                     slot.busy = false;
                     s.idle.notify_all();
-                    while slot.frame.is_none() && !slot.stop && slot.tap_change.is_none() {
+                    while slot.frame.is_none() && !slot.stop && slot.tap_change.is_none() && !slot.restart {
                         slot = s.wake.wait(slot).unwrap_or_else(|p| p.into_inner());
                     }
                     if slot.stop {
@@ -142,8 +146,14 @@ impl Worker {
                         break;
                     }
                     slot.busy = true;
-                    (slot.frame.take(), std::mem::take(&mut slot.poses), slot.tap_change.take())
+                    let restart = std::mem::take(&mut slot.restart);
+                    (slot.frame.take(), std::mem::take(&mut slot.poses), slot.tap_change.take(), restart)
                 };
+                if restart {
+                    calibrator.restart();
+                    stats.restarts += 1;
+                    log::info!("calibration: restarted (start-up burst on the next frame)");
+                }
                 // The old tap is dropped here, on this thread: a recording's writer
                 // learns that its input ended.
                 if let Some(t) = change {
@@ -245,6 +255,13 @@ impl Worker {
     /// drops the tap it replaces on its own thread. Never waits for the worker.
     pub fn set_tap(&self, tap: Option<Box<dyn Tap>>) {
         lock(&self.shared.slot).tap_change = Some(tap);
+        self.shared.wake.notify_one();
+    }
+
+    /// Restart the calibration from scratch at the worker's next turn (after the
+    /// fit in progress); never waits for the worker.
+    pub fn restart(&self) {
+        lock(&self.shared.slot).restart = true;
         self.shared.wake.notify_one();
     }
 

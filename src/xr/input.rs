@@ -2,8 +2,8 @@
 //! Haptics"): the buttons that switch matched ↔ naive and each effect on its own,
 //! so the comparison the paper's evaluation rests on can be made on the headset.
 //!
-//! One action set with six boolean actions (four toggles, the record button and
-//! the next scene); bindings are suggested for Meta Touch Plus (Quest 3's controllers,
+//! One action set with seven buttons (four toggles, record, next scene, restart
+//! calibration), the grab, the aim pose and the thumbstick; bindings are suggested for Meta Touch Plus (Quest 3's controllers,
 //! XR_META_touch_controller_plus, when the runtime offers it), Oculus Touch (Quest 2
 //! and Pro; Quest runtimes also map Touch Plus onto this profile) and the Khronos
 //! simple controller (spec 6.4, "Interaction Profile Paths"), each suggestion on its
@@ -40,10 +40,13 @@ pub enum Toggle {
     Record,
     /// The next of the user's scenes (`scenes::SceneCycle`).
     NextScene,
+    /// Restart the calibration from scratch (the app acts on it:
+    /// `FrameRecord::pressed`).
+    RestartCalibration,
 }
 
 /// (toggle, action name, localized name, Touch binding, simple-controller binding).
-const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 6] = [
+const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 7] = [
     (
         Toggle::Matched,
         "toggle_matched",
@@ -66,6 +69,14 @@ const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 6] = [
         "Next scene",
         "/user/hand/right/input/thumbstick/click",
         Some("/user/hand/left/input/menu/click"),
+    ),
+    // Touch's left menu button (the app's; the right one is the system's).
+    (
+        Toggle::RestartCalibration,
+        "restart_calibration",
+        "Restart calibration",
+        "/user/hand/left/input/menu/click",
+        None,
     ),
 ];
 
@@ -98,7 +109,7 @@ impl Toggles {
             Toggle::Noise => self.effects.noise = !self.effects.noise,
             Toggle::MotionBlur => self.effects.motion_blur = !self.effects.motion_blur,
             Toggle::Dof => self.effects.dof = !self.effects.dof,
-            Toggle::Record | Toggle::NextScene => {}
+            Toggle::Record | Toggle::NextScene | Toggle::RestartCalibration => {}
         }
     }
 }

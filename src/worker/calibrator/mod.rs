@@ -227,6 +227,26 @@ impl Calibrator {
     /// Camera poses (`world_from_camera`, OpenCV axes) as they become known, in time
     /// order. Bad poses are errors; an impossible jump is a tracking loss: the
     /// history before it is dropped (reported as an event).
+    /// Start over as at start-up (the user's "restart calibration": a new room,
+    /// a camera setting changed by hand): every estimate, reference frame, pool and
+    /// presence vote is forgotten, and the next frame opens a full start-up burst.
+    /// The pose track and the last frame time stay (poses and frames go on); the
+    /// renderer keeps the model it has until the burst publishes a new one.
+    pub fn restart(&mut self) {
+        let providers = std::mem::replace(&mut self.providers, Providers::for_tier(self.cfg.tier));
+        match Calibrator::new(self.cfg.clone(), providers) {
+            Ok(mut fresh) => {
+                fresh.poses = std::mem::take(&mut self.poses);
+                fresh.track = self.track.take();
+                fresh.last_t_s = self.last_t_s;
+                *self = fresh;
+            }
+            // The configuration was accepted when this calibrator was made, so a
+            // fresh one cannot be refused; if it were, go on as before.
+            Err(e) => log::error!("calibration: restart refused ({e}); going on without it"),
+        }
+    }
+
     pub fn push_poses(&mut self, poses: &[TimedPose]) -> Result<Vec<Event>, CalibError> {
         let mut events = vec![];
         for p in poses {
