@@ -28,7 +28,7 @@ use super::poses::{format_pose_track_csv, format_poses_csv, PoseRow};
 use crate::analysis::timing::{PoseTrack, TimedPose};
 use crate::analysis::{Frame, Intrinsics};
 use crate::model::{CameraModel, DepthUnits};
-use crate::worker::Tap;
+use crate::worker::{Tap, Worker};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
@@ -216,6 +216,80 @@ impl Recording {
             Some(Ok(m)) => Ok(m),
             _ => Err(RecordingError::Panicked { path: self.dir.clone() }),
         }
+    }
+}
+
+/// Recordings started and stopped by the controller's record button: each a
+/// new folder `recordings/rec-<unix milliseconds>` in the app's external files
+/// folder (`adb pull`, or `cargo xtask pull-recording`), in `calibrate`'s input
+/// layout. The headset app runs it on its camera thread; it never touches the
+/// frame loop.
+pub struct Recorder {
+    root: Option<std::path::PathBuf>,
+    info: RecordingInfo,
+    current: Option<Recording>,
+}
+
+impl Recorder {
+    pub fn new(root: Option<std::path::PathBuf>, info: RecordingInfo) -> Self {
+        Self { root, info, current: None }
+    }
+
+    /// Act on `presses` record-button presses; end a recording that stopped by
+    /// itself (duration, low storage).
+    pub fn poll(&mut self, presses: u32, worker: &Worker) {
+        if self.current.as_ref().is_some_and(|r| r.is_finished()) {
+            self.stop(worker);
+        }
+        for _ in 0..presses {
+            if self.current.is_some() {
+                self.stop(worker);
+            } else {
+                self.start(worker);
+            }
+        }
+    }
+
+    pub fn start(&mut self, worker: &Worker) {
+        let Some(root) = &self.root else {
+            log::warn!("recording: the app has no external files folder");
+            return;
+        };
+        // Milliseconds: a stop and a new start within one second get two folders.
+        let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis());
+        let dir = root.join(format!("rec-{ms}"));
+        match Recording::start(&dir, self.info.clone(), RecordLimits::default()) {
+            Ok((rec, tap)) => {
+                worker.set_tap(Some(Box::new(tap)));
+                log::info!("recording into {}", dir.display());
+                self.current = Some(rec);
+            }
+            Err(e) => log::warn!("recording not started: {e}"),
+        }
+    }
+
+    pub fn stop(&mut self, worker: &Worker) {
+        let Some(rec) = self.current.take() else { return };
+        worker.set_tap(None);
+        let dir = rec.dir().to_path_buf();
+        // The worker drops the tap at its next turn; the writer then finishes.
+        match rec.finish() {
+            Ok(m) => log::info!(
+                "recording {}: {} frames, {} models, stopped: {:?}",
+                dir.display(),
+                m.frames,
+                m.models_published,
+                m.stopped
+            ),
+            Err(e) => log::warn!("recording: {e}"),
+        }
+    }
+}
+
+impl Recorder {
+    /// The recording in progress, if any.
+    pub fn current(&self) -> Option<&Path> {
+        self.current.as_ref().map(|r| r.dir())
     }
 }
 
@@ -557,6 +631,37 @@ mod tests {
         let again = Recording::start(&d, info(), RecordLimits::default());
         assert!(matches!(again, Err(RecordingError::Folder { .. })));
         let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// The record button's logic against a running worker: a press starts a
+    /// recording of what the worker takes, the next press stops it and writes the
+    /// manifest; a second recording goes to a new folder.
+    #[test]
+    fn the_record_button_records_what_the_worker_takes() {
+        use crate::worker::{CalibrationTier, Calibrator, CalibratorConfig, ModelChannel, Providers};
+        let root = dir("button");
+        let channel = ModelChannel::new(CameraModel::empty(8, 6)).unwrap();
+        let cfg = CalibratorConfig::new(CalibrationTier::Fast, 0.1, None);
+        let worker =
+            Worker::spawn(Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Fast)).unwrap(), channel).unwrap();
+        let mut r = Recorder::new(Some(root.clone()), info());
+        r.poll(1, &worker);
+        let first = r.current().expect("recording").to_path_buf();
+        for i in 0..3 {
+            worker.submit(frame(i, false), &[pose(i as f64 * 0.1)]);
+            assert!(worker.wait_idle(std::time::Duration::from_secs(30)));
+        }
+        r.poll(1, &worker);
+        assert!(r.current().is_none());
+        let m: Manifest = serde_json::from_str(&std::fs::read_to_string(first.join("manifest.json")).unwrap()).unwrap();
+        assert_eq!((m.frames, m.stopped), (3, StopReason::Stopped));
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        r.poll(1, &worker);
+        let second = r.current().expect("a second recording").to_path_buf();
+        assert_ne!(first, second);
+        r.stop(&worker);
+        drop(worker);
+        let _ = std::fs::remove_dir_all(&root);
     }
 
     /// Too little free space: nothing is written, the manifest says why, and the

@@ -28,7 +28,7 @@ use crate::analysis::headset_depth::HeadsetDepth;
 use crate::analysis::timing::{ClockMap, ClockSample, TimedPose, TimestampSource};
 use crate::android_camera::{CameraManager, PassthroughCamera};
 use crate::image::yuv::{Yuv420, YuvMatrix, YuvRange};
-use crate::io::recording::{RecordLimits, Recording, RecordingInfo};
+use crate::io::recording::{Recorder, RecordingInfo};
 use crate::model::CameraModel;
 use crate::render::LayerSettings;
 use crate::scene::Scene;
@@ -587,72 +587,6 @@ fn calibrate_live(
         Err(_) => log::warn!("calibration worker still referenced at exit: not joined"),
     }
     Ok(())
-}
-
-/// Recordings started and stopped by the controller's record button: each a
-/// new folder `recordings/rec-<unix milliseconds>` in the app's external files
-/// folder (`adb pull`, or `cargo xtask pull-recording`), in `calibrate`'s input
-/// layout (`io::recording`). Runs on the camera thread.
-struct Recorder {
-    root: Option<std::path::PathBuf>,
-    info: RecordingInfo,
-    current: Option<Recording>,
-}
-
-impl Recorder {
-    fn new(root: Option<std::path::PathBuf>, info: RecordingInfo) -> Self {
-        Self { root, info, current: None }
-    }
-
-    /// Act on `presses` record-button presses; end a recording that stopped by
-    /// itself (duration, low storage).
-    fn poll(&mut self, presses: u32, worker: &Worker) {
-        if self.current.as_ref().is_some_and(|r| r.is_finished()) {
-            self.stop(worker);
-        }
-        for _ in 0..presses {
-            if self.current.is_some() {
-                self.stop(worker);
-            } else {
-                self.start(worker);
-            }
-        }
-    }
-
-    fn start(&mut self, worker: &Worker) {
-        let Some(root) = &self.root else {
-            log::warn!("recording: the app has no external files folder");
-            return;
-        };
-        // Milliseconds: a stop and a new start within one second get two folders.
-        let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis());
-        let dir = root.join(format!("rec-{ms}"));
-        match Recording::start(&dir, self.info.clone(), RecordLimits::default()) {
-            Ok((rec, tap)) => {
-                worker.set_tap(Some(Box::new(tap)));
-                log::info!("recording into {}", dir.display());
-                self.current = Some(rec);
-            }
-            Err(e) => log::warn!("recording not started: {e}"),
-        }
-    }
-
-    fn stop(&mut self, worker: &Worker) {
-        let Some(rec) = self.current.take() else { return };
-        worker.set_tap(None);
-        let dir = rec.dir().to_path_buf();
-        // The worker drops the tap at its next turn; the writer then finishes.
-        match rec.finish() {
-            Ok(m) => log::info!(
-                "recording {}: {} frames, {} models, stopped: {:?}",
-                dir.display(),
-                m.frames,
-                m.models_published,
-                m.stopped
-            ),
-            Err(e) => log::warn!("recording: {e}"),
-        }
-    }
 }
 
 /// The first model: the one stored by the last run, else the APK's
