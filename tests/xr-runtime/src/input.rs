@@ -426,27 +426,43 @@ pub(crate) unsafe extern "system" fn sync_actions(
     })
 }
 
+/// The checks every xrGetActionState* makes (spec 11.5): a live session, non-null
+/// arguments, a known action of the expected type in an attached set; the action.
+fn checked_action(
+    rt: &crate::Runtime,
+    session: xr::Session,
+    info: *const xr::ActionStateGetInfo,
+    out_null: bool,
+    ty: xr::ActionType,
+) -> Result<&Action, xr::Result> {
+    if !session_ok(rt, session) {
+        return Err(xr::Result::ERROR_HANDLE_INVALID);
+    }
+    if info.is_null() || out_null {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    // SAFETY: the caller's info, checked non-null.
+    let action = unsafe { (*info).action.into_raw() };
+    let a = rt.input.actions.get(&action).ok_or(xr::Result::ERROR_HANDLE_INVALID)?;
+    if a.ty != ty {
+        return Err(xr::Result::ERROR_ACTION_TYPE_MISMATCH);
+    }
+    if !rt.input.attached.contains(&a.set) {
+        return Err(xr::Result::ERROR_ACTIONSET_NOT_ATTACHED);
+    }
+    Ok(a)
+}
+
 pub(crate) unsafe extern "system" fn get_action_state_boolean(
     session: xr::Session,
     info: *const xr::ActionStateGetInfo,
     state: *mut xr::ActionStateBoolean,
 ) -> xr::Result {
     with_runtime(|rt| {
-        if !session_ok(rt, session) {
-            return xr::Result::ERROR_HANDLE_INVALID;
-        }
-        if info.is_null() || state.is_null() {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        }
-        // SAFETY: the caller's info.
-        let action = unsafe { (*info).action.into_raw() };
-        let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
-        if a.ty != xr::ActionType::BOOLEAN_INPUT {
-            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
-        }
-        if !rt.input.attached.contains(&a.set) {
-            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
-        }
+        let a = match checked_action(rt, session, info, state.is_null(), xr::ActionType::BOOLEAN_INPUT) {
+            Ok(a) => a,
+            Err(e) => return e,
+        };
         let (current, changed, time, active) = a.state;
         // SAFETY: caller's output.
         unsafe {
@@ -489,21 +505,10 @@ pub(crate) unsafe extern "system" fn get_action_state_vector2f(
     state: *mut xr::ActionStateVector2f,
 ) -> xr::Result {
     with_runtime(|rt| {
-        if !session_ok(rt, session) {
-            return xr::Result::ERROR_HANDLE_INVALID;
-        }
-        if info.is_null() || state.is_null() {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        }
-        // SAFETY: the caller's info.
-        let action = unsafe { (*info).action.into_raw() };
-        let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
-        if a.ty != xr::ActionType::VECTOR2F_INPUT {
-            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
-        }
-        if !rt.input.attached.contains(&a.set) {
-            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
-        }
+        let a = match checked_action(rt, session, info, state.is_null(), xr::ActionType::VECTOR2F_INPUT) {
+            Ok(a) => a,
+            Err(e) => return e,
+        };
         let active = a.state.3;
         let frame = rt.session.as_ref().map_or(0, |s| s.frame.ended);
         let v = if active {
@@ -528,21 +533,10 @@ pub(crate) unsafe extern "system" fn get_action_state_pose(
     state: *mut xr::ActionStatePose,
 ) -> xr::Result {
     with_runtime(|rt| {
-        if !session_ok(rt, session) {
-            return xr::Result::ERROR_HANDLE_INVALID;
-        }
-        if info.is_null() || state.is_null() {
-            return xr::Result::ERROR_VALIDATION_FAILURE;
-        }
-        // SAFETY: the caller's info.
-        let action = unsafe { (*info).action.into_raw() };
-        let Some(a) = rt.input.actions.get(&action) else { return xr::Result::ERROR_HANDLE_INVALID };
-        if a.ty != xr::ActionType::POSE_INPUT {
-            return xr::Result::ERROR_ACTION_TYPE_MISMATCH;
-        }
-        if !rt.input.attached.contains(&a.set) {
-            return xr::Result::ERROR_ACTIONSET_NOT_ATTACHED;
-        }
+        let a = match checked_action(rt, session, info, state.is_null(), xr::ActionType::POSE_INPUT) {
+            Ok(a) => a,
+            Err(e) => return e,
+        };
         // SAFETY: caller's output, checked non-null.
         unsafe { (*state).is_active = a.state.3.into() };
         xr::Result::SUCCESS
@@ -617,6 +611,19 @@ pub(crate) fn controller_pose(rt: &crate::Runtime) -> Option<crate::session::Pos
     let q_yaw = crate::session::Pose { q: [0.0, (yaw / 2.0).sin(), 0.0, (yaw / 2.0).cos()], t: [x, y, z] };
     let q_pitch = crate::session::Pose { q: [(pitch / 2.0).sin(), 0.0, 0.0, (pitch / 2.0).cos()], t: [0.0; 3] };
     Some(q_yaw.mul(&q_pitch))
+}
+
+/// `base_from_space` of an action space at the frame being produced (spec
+/// xrLocateSpace): the scripted controller pose while its pose action is active,
+/// else None (no valid bits).
+pub(crate) fn locate_action_space(
+    rt: &crate::Runtime,
+    space: u64,
+    local_from_base: &crate::session::Pose,
+) -> Option<crate::session::Pose> {
+    let &(action, offset) = rt.action_spaces.get(&space)?;
+    let local_from_controller = controller_pose(rt).filter(|_| pose_active(rt, action))?;
+    Some(local_from_base.inverse().mul(&local_from_controller.mul(&crate::session::Pose::from_xr(&offset))))
 }
 
 /// Whether action `action` (a pose action) is active: synced, bound in the

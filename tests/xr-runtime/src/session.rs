@@ -511,38 +511,24 @@ pub(crate) unsafe extern "system" fn locate_space(
             unsafe { (*location).location_flags = xr::SpaceLocationFlags::EMPTY };
             return xr::Result::SUCCESS;
         }
-        if let Some(&(action, offset)) = rt.action_spaces.get(&space.into_raw()) {
-            let Some(b) = rt.spaces.get(&base.into_raw()) else { return xr::Result::ERROR_HANDLE_INVALID };
-            // Spec: an action space is located where its action is active and the
-            // device tracked; else no valid bits.
-            let pose = crate::input::controller_pose(rt).filter(|_| crate::input::pose_active(rt, action));
-            let Some(local_from_controller) = pose else {
-                // SAFETY: caller's output, checked non-null.
-                unsafe { (*location).location_flags = xr::SpaceLocationFlags::EMPTY };
-                return xr::Result::SUCCESS;
-            };
-            let local_from_b = local_from_space(rt, b.1, &b.2, time.as_nanos());
-            let b_from_a = local_from_b.inverse().mul(&local_from_controller.mul(&Pose::from_xr(&offset)));
-            // SAFETY: caller's output, checked non-null.
-            unsafe {
-                (*location).location_flags = xr::SpaceLocationFlags::ORIENTATION_VALID
-                    | xr::SpaceLocationFlags::POSITION_VALID
-                    | xr::SpaceLocationFlags::ORIENTATION_TRACKED
-                    | xr::SpaceLocationFlags::POSITION_TRACKED;
-                (*location).pose = b_from_a.to_xr();
-            }
-            return xr::Result::SUCCESS;
-        }
-        let (Some(a), Some(b)) = (rt.spaces.get(&space.into_raw()), rt.spaces.get(&base.into_raw())) else {
-            return xr::Result::ERROR_HANDLE_INVALID;
-        };
+        let Some(b) = rt.spaces.get(&base.into_raw()) else { return xr::Result::ERROR_HANDLE_INVALID };
         if time.as_nanos() <= 0 {
             return xr::Result::ERROR_TIME_INVALID;
         }
-        let local_from_a = local_from_space(rt, a.1, &a.2, time.as_nanos());
         let local_from_b = local_from_space(rt, b.1, &b.2, time.as_nanos());
-        let b_from_a = local_from_b.inverse().mul(&local_from_a);
-        // SAFETY: caller's output.
+        let b_from_a = if rt.action_spaces.contains_key(&space.into_raw()) {
+            // Located only while its action is active and the device tracked.
+            crate::input::locate_action_space(rt, space.into_raw(), &local_from_b)
+        } else {
+            let Some(a) = rt.spaces.get(&space.into_raw()) else { return xr::Result::ERROR_HANDLE_INVALID };
+            Some(local_from_b.inverse().mul(&local_from_space(rt, a.1, &a.2, time.as_nanos())))
+        };
+        let Some(b_from_a) = b_from_a else {
+            // SAFETY: caller's output, checked non-null.
+            unsafe { (*location).location_flags = xr::SpaceLocationFlags::EMPTY };
+            return xr::Result::SUCCESS;
+        };
+        // SAFETY: caller's output, checked non-null.
         unsafe {
             (*location).location_flags = xr::SpaceLocationFlags::ORIENTATION_VALID
                 | xr::SpaceLocationFlags::POSITION_VALID
