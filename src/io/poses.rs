@@ -19,6 +19,30 @@ pub struct PoseRow {
     pub pose: TimedPose,
 }
 
+/// `t_s,tx,ty,tz,qx,qy,qz,qw` of one row (both files' columns after the frame):
+/// finite numbers and a unit quaternion, else an error starting with `at`.
+fn parse_pose(fields: &[&str], at: &str) -> Result<(f64, TimedPose), String> {
+    let mut v = [0f64; 8];
+    for (k, f) in fields.iter().enumerate() {
+        let x: f64 = f.parse().map_err(|_| format!("{at}: `{f}` is not a number"))?;
+        if !x.is_finite() {
+            return Err(format!("{at}: non-finite value `{f}`"));
+        }
+        v[k] = x;
+    }
+    let q = Quat::from_xyzw(v[4] as f32, v[5] as f32, v[6] as f32, v[7] as f32);
+    let len = q.length();
+    if (len - 1.0).abs() > 1e-3 {
+        return Err(format!("{at}: quaternion of length {len:.5}, not a unit quaternion"));
+    }
+    let pose = TimedPose {
+        t_ns: (v[0] * 1e9).round() as i64,
+        position_m: Vec3::new(v[1] as f32, v[2] as f32, v[3] as f32),
+        orientation: q.normalize(),
+    };
+    Ok((v[0], pose))
+}
+
 pub fn read_poses_csv(path: &Path) -> Result<Vec<PoseRow>, IoError> {
     let text = std::fs::read_to_string(path).map_err(|source| IoError::Io { path: path.to_path_buf(), source })?;
     parse_poses_csv(&text).map_err(|problem| fmt_err(path, problem))
@@ -39,20 +63,7 @@ pub fn parse_poses_csv(text: &str) -> Result<Vec<PoseRow>, String> {
         }
         let frame: u64 =
             fields[0].parse().map_err(|_| format!("line {row}: frame `{}` is not a whole number", fields[0]))?;
-        let mut v = [0f64; 8];
-        for (k, f) in fields[1..].iter().enumerate() {
-            let x: f64 = f.parse().map_err(|_| format!("line {row} (frame {frame}): `{f}` is not a number"))?;
-            if !x.is_finite() {
-                return Err(format!("line {row} (frame {frame}): non-finite value `{f}`"));
-            }
-            v[k] = x;
-        }
-        let q = Quat::from_xyzw(v[4] as f32, v[5] as f32, v[6] as f32, v[7] as f32);
-        let len = q.length();
-        if (len - 1.0).abs() > 1e-3 {
-            return Err(format!("line {row} (frame {frame}): quaternion of length {len:.5}, not a unit quaternion"));
-        }
-        let t_s = v[0];
+        let (t_s, pose) = parse_pose(&fields[1..], &format!("line {row} (frame {frame})"))?;
         if let Some(prev) = rows.last() {
             if t_s <= prev.t_s {
                 return Err(format!(
@@ -64,15 +75,7 @@ pub fn parse_poses_csv(text: &str) -> Result<Vec<PoseRow>, String> {
                 return Err(format!("line {row}: frame {frame} does not follow frame {}", prev.frame));
             }
         }
-        rows.push(PoseRow {
-            frame,
-            t_s,
-            pose: TimedPose {
-                t_ns: (t_s * 1e9).round() as i64,
-                position_m: Vec3::new(v[1] as f32, v[2] as f32, v[3] as f32),
-                orientation: q.normalize(),
-            },
-        });
+        rows.push(PoseRow { frame, t_s, pose });
     }
     if rows.is_empty() {
         return Err("no pose rows".into());
@@ -105,28 +108,11 @@ pub fn parse_pose_track_csv(text: &str) -> Result<Vec<TimedPose>, String> {
         if fields.len() != 8 {
             return Err(format!("line {row}: {} fields, 8 expected", fields.len()));
         }
-        let mut v = [0f64; 8];
-        for (k, f) in fields.iter().enumerate() {
-            let x: f64 = f.parse().map_err(|_| format!("line {row}: `{f}` is not a number"))?;
-            if !x.is_finite() {
-                return Err(format!("line {row}: non-finite value `{f}`"));
-            }
-            v[k] = x;
+        let (t_s, pose) = parse_pose(&fields, &format!("line {row}"))?;
+        if out.last().is_some_and(|prev| pose.t_ns <= prev.t_ns) {
+            return Err(format!("line {row}: t_s {t_s} is not later than the previous row's"));
         }
-        let q = Quat::from_xyzw(v[4] as f32, v[5] as f32, v[6] as f32, v[7] as f32);
-        let len = q.length();
-        if (len - 1.0).abs() > 1e-3 {
-            return Err(format!("line {row}: quaternion of length {len:.5}, not a unit quaternion"));
-        }
-        let t_ns = (v[0] * 1e9).round() as i64;
-        if out.last().is_some_and(|prev| t_ns <= prev.t_ns) {
-            return Err(format!("line {row}: t_s {} is not later than the previous row's", v[0]));
-        }
-        out.push(TimedPose {
-            t_ns,
-            position_m: Vec3::new(v[1] as f32, v[2] as f32, v[3] as f32),
-            orientation: q.normalize(),
-        });
+        out.push(pose);
     }
     if out.is_empty() {
         return Err("no pose rows".into());
