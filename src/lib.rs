@@ -13,6 +13,7 @@ pub mod gpu;
 pub mod image;
 pub mod io;
 pub mod model;
+pub mod panel;
 pub mod plots;
 pub mod render;
 pub mod scene;

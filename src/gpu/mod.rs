@@ -15,6 +15,7 @@ mod graphics;
 mod image;
 mod pipeline;
 mod query;
+mod upload;
 
 pub use depth_readback::DepthReadback;
 pub use frames::{FrameRing, FrameSlot};
@@ -22,6 +23,7 @@ pub use graphics::{GraphicsDesc, GraphicsPipeline, MultiviewTarget, VertexAttrib
 pub use image::{record_copy_to_external_depth, texel_bytes, Image, Texture};
 pub use pipeline::{ComputePipeline, Resource};
 pub use query::{QueryPool, Statistics};
+pub use upload::ImageUpload;
 
 use ash::vk;
 use std::ffi::{c_void, CStr};

@@ -30,6 +30,7 @@ use crate::android_camera::{CameraManager, PassthroughCamera};
 use crate::image::yuv::{Yuv420, YuvMatrix, YuvRange};
 use crate::io::recording::{Recorder, RecordingInfo};
 use crate::model::CameraModel;
+use crate::panel::CalibrationStatus;
 use crate::render::LayerSettings;
 use crate::scene::Scene;
 use crate::worker::{CalibrationTier, Calibrator, CalibratorConfig, ModelChannel, Providers, Worker};
@@ -181,6 +182,9 @@ struct LiveInputs {
     record_presses: std::sync::atomic::AtomicU32,
     /// A restart-calibration press not yet acted on.
     restart: AtomicBool,
+    /// The status panel's camera and calibration lines (`panel::CalibrationStatus`),
+    /// refreshed by the camera thread.
+    status: Mutex<Vec<String>>,
 }
 
 impl LiveInputs {
@@ -218,6 +222,14 @@ impl LiveInputs {
             clocks.0.push_back(c);
             clocks.1 = true;
         }
+    }
+
+    fn set_status(&self, lines: Vec<String>) {
+        *self.status.lock().unwrap_or_else(|e| e.into_inner()) = lines;
+    }
+
+    fn status(&self) -> Vec<String> {
+        self.status.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     fn take_depth(&self) -> Option<Arc<EnvironmentDepth>> {
@@ -403,6 +415,7 @@ fn calibrate_live(
             Ok(true) => break,
             Ok(false) if !told => {
                 log::info!("calibration waits for a camera permission (rendering with the current model)");
+                live.set_status(vec!["!calibration waits for a camera permission (Settings → Apps)".into()]);
                 told = true;
             }
             Ok(false) => {}
@@ -511,6 +524,9 @@ fn calibrate_live(
     let mut backoff = ReopenBackoff::default();
     let mut last_report = Instant::now();
     let mut first = true;
+    let mut panel = CalibrationStatus::new(tier.name());
+    // Camera images delivered by the openings before the current one.
+    let mut images_before = 0u64;
     while !stop.load(Ordering::SeqCst) {
         let forward = handler.clone();
         let opened = PassthroughCamera::open(
@@ -539,6 +555,12 @@ fn calibrate_live(
         while !stop.load(Ordering::SeqCst) && !camera.lost() {
             std::thread::sleep(Duration::from_millis(200));
             recorder.poll(live.record_presses.swap(0, Ordering::SeqCst), &worker);
+            live.set_status(panel.lines(
+                Instant::now(),
+                images_before + camera.images(),
+                &worker.status(),
+                recorder.current(),
+            ));
             if live.restart.swap(false, Ordering::SeqCst) {
                 log::info!("calibration restarted by the user: look around (start-up burst)");
                 worker.restart();
@@ -559,6 +581,7 @@ fn calibrate_live(
         let (lost, error) = (camera.lost(), camera.error());
         // Streamed: only a camera that delivered images had recovered.
         let streamed = if camera.images() > 0 { since.elapsed() } else { Duration::ZERO };
+        images_before += camera.images();
         drop(camera);
         if lost {
             let delay = backoff.lost(streamed);
@@ -736,6 +759,10 @@ fn run(app: &AndroidApp) -> Result<(), String> {
                 env_depth_hz: ENV_DEPTH_HZ,
                 on_frame: Some(&mut on_frame),
                 stop: Some(&stop),
+                // Shown at start-up: the boundary-setup burst asks the user to
+                // look around; the left trigger hides it.
+                panel: true,
+                status: Some(&|| live.status()),
                 platform: &platform,
             });
             done.store(true, Ordering::SeqCst);

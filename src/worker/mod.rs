@@ -10,7 +10,7 @@ mod channel;
 pub mod thread;
 
 pub use calibrator::{
-    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, Providers, Update, UpdateReason,
+    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, Phase, Providers, Update, UpdateReason,
 };
 pub use channel::{ModelChannel, Snapshot};
-pub use thread::{Published, Tap, Worker, WorkerStats};
+pub use thread::{Published, Tap, Worker, WorkerStats, WorkerStatus};

@@ -11,7 +11,7 @@
 //! publishes, on the worker's thread: it is installed through the slot, so the
 //! frame loop that starts or stops one holds the slot's lock only for a swap.
 
-use super::calibrator::{Calibrator, Event};
+use super::calibrator::{Calibrator, Event, Phase};
 use super::ModelChannel;
 use crate::analysis::timing::TimedPose;
 use crate::analysis::Frame;
@@ -48,6 +48,8 @@ struct Slot {
     tap_change: Option<Option<Box<dyn Tap>>>,
     /// Restart the calibration (`Calibrator::restart`) at the worker's next turn.
     restart: bool,
+    /// What the worker has done so far (`Worker::status`), updated after each turn.
+    progress: WorkerStatus,
 }
 
 struct Shared {
@@ -80,6 +82,21 @@ pub struct WorkerStats {
     pub priority_error: Option<String>,
     /// Restarts asked for (`Worker::restart`).
     pub restarts: u64,
+}
+
+/// What the worker has done so far, read while it runs (`Worker::status`: the
+/// headset's status panel).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WorkerStatus {
+    /// Frames handed over, and those replaced before the worker took them.
+    pub submitted: u64,
+    pub dropped: u64,
+    /// Frames fitted, models published, frames and models refused.
+    pub processed: u64,
+    pub published: u64,
+    pub errors: u64,
+    pub restarts: u64,
+    pub phase: Phase,
 }
 
 pub struct Worker {
@@ -136,6 +153,14 @@ impl Worker {
                 let (frame, poses, change, restart) = {
                     let mut slot = lock(&s.slot);
                     slot.busy = false;
+                    slot.progress = WorkerStatus {
+                        processed: stats.processed,
+                        published: stats.published.len() as u64,
+                        errors: stats.errors.len() as u64,
+                        restarts: stats.restarts,
+                        phase: calibrator.phase(),
+                        ..slot.progress
+                    };
                     s.idle.notify_all();
                     while slot.frame.is_none() && !slot.stop && slot.tap_change.is_none() && !slot.restart {
                         slot = s.wake.wait(slot).unwrap_or_else(|p| p.into_inner());
@@ -263,6 +288,13 @@ impl Worker {
     pub fn restart(&self) {
         lock(&self.shared.slot).restart = true;
         self.shared.wake.notify_one();
+    }
+
+    /// What the worker has done so far (as of the end of its last turn) and the
+    /// frames handed over; holds the slot's lock only to copy it.
+    pub fn status(&self) -> WorkerStatus {
+        let slot = lock(&self.shared.slot);
+        WorkerStatus { submitted: slot.submitted, dropped: slot.dropped, ..slot.progress }
     }
 
     /// Whether the worker would take a frame now (none waiting, no fit running):

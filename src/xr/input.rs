@@ -2,8 +2,8 @@
 //! Haptics"): the buttons that switch matched ↔ naive and each effect on its own,
 //! so the comparison the paper's evaluation rests on can be made on the headset.
 //!
-//! One action set with seven buttons (four toggles, record, next scene, restart
-//! calibration), the grab, the aim pose and the thumbstick; bindings are suggested for Meta Touch Plus (Quest 3's controllers,
+//! One action set with eight buttons (four toggles, record, next scene, restart
+//! calibration, the status panel), the grab, the aim pose and the thumbstick; bindings are suggested for Meta Touch Plus (Quest 3's controllers,
 //! XR_META_touch_controller_plus, when the runtime offers it), Oculus Touch (Quest 2
 //! and Pro; Quest runtimes also map Touch Plus onto this profile) and the Khronos
 //! simple controller (spec 6.4, "Interaction Profile Paths"), each suggestion on its
@@ -43,10 +43,12 @@ pub enum Toggle {
     /// Restart the calibration from scratch (the app acts on it:
     /// `FrameRecord::pressed`).
     RestartCalibration,
+    /// Show or hide the status panel (`panel`).
+    Panel,
 }
 
 /// (toggle, action name, localized name, Touch binding, simple-controller binding).
-const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 7] = [
+const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 8] = [
     (
         Toggle::Matched,
         "toggle_matched",
@@ -78,6 +80,10 @@ const ACTIONS: [(Toggle, &str, &str, &str, Option<&str>); 7] = [
         "/user/hand/left/input/menu/click",
         None,
     ),
+    // The left trigger (a boolean action on a value input: the runtime thresholds
+    // it, spec 11.4): the left hand's one free button, the right hand's trigger
+    // staying free for pointing.
+    (Toggle::Panel, "toggle_panel", "Status panel", "/user/hand/left/input/trigger/value", None),
 ];
 
 /// The toggles' state: which effects the frame may apply.
@@ -109,7 +115,7 @@ impl Toggles {
             Toggle::Noise => self.effects.noise = !self.effects.noise,
             Toggle::MotionBlur => self.effects.motion_blur = !self.effects.motion_blur,
             Toggle::Dof => self.effects.dof = !self.effects.dof,
-            Toggle::Record | Toggle::NextScene | Toggle::RestartCalibration => {}
+            Toggle::Record | Toggle::NextScene | Toggle::RestartCalibration | Toggle::Panel => {}
         }
     }
 }

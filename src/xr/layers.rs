@@ -1,6 +1,7 @@
 //! The composition layers one rendered frame submits: the projection layer (both
 //! eyes of the multiview swapchain, with XR_FB_space_warp's motion vectors and depth
-//! chained per view) and, under it, XR_FB_passthrough's layer. Raw `openxr::sys`
+//! chained per view), under it XR_FB_passthrough's layer, and over it the status
+//! panel's quad when shown. Raw `openxr::sys`
 //! structs: openxr 0.22's builders can neither chain the space-warp info nor build
 //! XrCompositionLayerPassthroughFB.
 #![allow(unsafe_code)]
@@ -40,6 +41,8 @@ pub(super) struct Submission<'s> {
     pub space_warp: Option<&'s SpaceWarpChains>,
     pub passthrough_layer: Option<xr::sys::PassthroughLayerFB>,
     pub flags: xr::CompositionLayerFlags,
+    /// The status panel (`panel::Panel::layer`), drawn over everything.
+    pub quad: Option<xr::sys::CompositionLayerQuad>,
 }
 
 fn full((w, h): (u32, u32)) -> xr::Rect2Di {
@@ -51,7 +54,7 @@ fn sub_image(chain: xr::sys::Swapchain, size: (u32, u32), eye: usize) -> xr::sys
 }
 
 /// Submit `sub` with xrEndFrame: the passthrough layer first (painter's order,
-/// spec "Compositing"), then the projection layer.
+/// spec "Compositing"), then the projection layer, then the panel's quad.
 pub(super) fn end_frame(
     stream: &mut xr::FrameStream<xr::Vulkan>,
     display_time: xr::Time,
@@ -109,8 +112,8 @@ pub(super) fn end_frame(
     });
     // SAFETY: CompositionLayerBase is repr(transparent) over the layer header every
     // layer struct begins with (spec "Composition Layer Types"); the structs, the
-    // views and the space-warp infos they point to live on this stack frame, past
-    // the xrEndFrame call that reads them.
+    // views and the space-warp infos they point to live on this stack frame (the
+    // quad in `sub`, borrowed for this call), past the xrEndFrame call that reads them.
     let layers: Vec<&xr::CompositionLayerBase<'_, xr::Vulkan>> = unsafe {
         passthrough
             .as_ref()
@@ -121,6 +124,9 @@ pub(super) fn end_frame(
             .into_iter()
             .chain([&*(&projection as *const xr::sys::CompositionLayerProjection
                 as *const xr::CompositionLayerBase<'_, xr::Vulkan>)])
+            .chain(sub.quad.as_ref().map(|q| {
+                &*(q as *const xr::sys::CompositionLayerQuad as *const xr::CompositionLayerBase<'_, xr::Vulkan>)
+            }))
             .collect()
     };
     stream.end(display_time, blend_mode, &layers)

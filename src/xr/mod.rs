@@ -11,7 +11,7 @@
 //! Teardown order (openxrs' `examples/vulkan.rs`, and the spec's parent/child
 //! rule: a handle is destroyed before its parent, Vulkan objects before the
 //! device the session was created with): the GPU is drained; the renderer (its
-//! Vulkan objects) goes; the environment-depth read-back, swapchain and provider;
+//! Vulkan objects) goes; the status panel (its upload, swapchain and VIEW space); the environment-depth read-back, swapchain and provider;
 //! the passthrough layer and feature, the swapchain, the controls' action space
 //! and the reference space (children of the session); the session; then the Vulkan device
 //! and instance (`GpuContext`, created through the XR instance but owned by the
@@ -24,6 +24,7 @@ mod input;
 mod instance;
 mod layers;
 mod lifecycle;
+mod panel;
 mod record;
 mod scenes;
 mod spacewarp;
@@ -114,6 +115,12 @@ pub struct XrOptions<'a> {
     /// Set from any thread to shut down (Ctrl-C, Android's onDestroy): the loop
     /// calls xrRequestExitSession and ends when the runtime reaches EXITING.
     pub stop: Option<&'a std::sync::atomic::AtomicBool>,
+    /// Show the status panel from the start (the panel button toggles it).
+    pub panel: bool,
+    /// The app's lines for the status panel (camera rates, calibration phase,
+    /// recording: `crate::panel::CalibrationStatus`), called when the panel is
+    /// redrawn (≤ 2 Hz); it must not block.
+    pub status: Option<&'a dyn Fn() -> Vec<String>>,
     /// How the loader is initialised and the instance created: `&()` on desktop,
     /// `openxr::AndroidPlatformInfo` (JavaVM + activity) on Android.
     pub platform: &'a dyn xr::PlatformInfo,
@@ -195,6 +202,20 @@ pub fn default_camera() -> CameraModel {
         diagnostics: placeholder(),
     };
     m
+}
+
+/// The panel's line for the controller toggles: what A, B, X and Y switch now.
+fn effects_line(t: Toggles) -> String {
+    if !t.matched {
+        return "naive (A)".into();
+    }
+    let on = |b: bool| if b { "on" } else { "off" };
+    format!(
+        "matched (A) · noise {} (B) · blur {} (X) · focus {} (Y)",
+        on(t.effects.noise),
+        on(t.effects.motion_blur),
+        on(t.effects.dof)
+    )
 }
 
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
@@ -309,6 +330,16 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         .map(vk::Image::from_raw)
         .collect();
 
+    // The status panel: optional (a runtime that refuses its swapchain or the VIEW
+    // space costs the panel, never the session).
+    let mut status_panel = match panel::Panel::new(&ctx, &session, format, opts.panel) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            log::warn!("OpenXR: no status panel ({e})");
+            None
+        }
+    };
+
     // XR_FB_space_warp: motion vectors and depth for the compositor, which then
     // synthesises every other display frame; the runtime halves the app's rate.
     let mut space_warp = if enabled.fb_space_warp {
@@ -422,7 +453,11 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         toggles: vec![],
         scene_changes: vec![],
         scene_errors: vec![],
+        panel: status_panel.is_some(),
+        panel_redraws: 0,
     };
+    // When the snapshot's generation was first seen (the panel's model age).
+    let mut generation_seen: Option<(u64, Instant)> = None;
     let mut cycle = scenes::SceneCycle::new(opts.more_scenes.to_vec());
     // Where the object stands in the reference space: moved by grab-and-place.
     let mut placement = input::Placement::new(opts.local_from_scene);
@@ -548,6 +583,9 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
                     for t in input.pressed {
                         if t == Toggle::NextScene {
                             cycle.request_next();
+                        }
+                        if let (Toggle::Panel, Some(p)) = (t, status_panel.as_mut()) {
+                            p.shown = !p.shown;
                         }
                         pressed_now.push(t);
                         toggles.apply(t);
@@ -691,6 +729,36 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
         let fx = rendered?;
         let applied = Enabled { noise: fx.noise, motion_blur: fx.motion_blur, dof: fx.dof };
 
+        let now = Instant::now();
+        if generation_seen.map_or(true, |(g, _)| g != snapshot.generation) {
+            generation_seen = Some((snapshot.generation, now));
+        }
+        if let Some(p) = status_panel.as_mut() {
+            let lines = || {
+                let mut lines = vec![
+                    format!(
+                        "blind-augment · scene {}: {}",
+                        cycle.current(),
+                        cycle.current_name().unwrap_or_else(|| "the bundled one".into())
+                    ),
+                    effects_line(toggles),
+                ];
+                if let Some(status) = opts.status {
+                    lines.extend(status());
+                }
+                let age_s = generation_seen.map(|(_, t)| now.saturating_duration_since(t).as_secs_f64());
+                lines.extend(crate::panel::model_lines(&snapshot.model, snapshot.generation, age_s));
+                // The newest scene errors: a file that failed is named, then skipped.
+                let errors = &cycle.errors;
+                lines.extend(errors[errors.len().saturating_sub(2)..].iter().map(|e| format!("!{e}")));
+                lines
+            };
+            if let Err(e) = p.update(now, lines) {
+                log::warn!("OpenXR: status panel off ({e})");
+                status_panel = None;
+            }
+        }
+
         let submission = layers::Submission {
             space: &space,
             poses: views.poses,
@@ -700,6 +768,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             space_warp: space_warp.as_ref(),
             passthrough_layer: passthrough.as_ref().map(|(_, layer)| layer.as_raw()),
             flags,
+            quad: status_panel.as_ref().and_then(|p| p.layer()),
         };
         layers::end_frame(&mut frame_stream, state.predicted_display_time, blend_mode, &submission)
             .map_err(call("xrEndFrame"))?;
@@ -731,6 +800,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             views_tracked,
             clock,
             env_depth: depth,
+            panel: status_panel.as_ref().and_then(|p| p.showing()),
         };
         if let Some(f) = opts.on_frame.as_mut() {
             f(&record);
@@ -748,6 +818,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     summary.vulkan_messages = ctx.take_messages();
     // Explicit teardown in the documented order (the drops would do the same).
     drop(renderer);
+    summary.panel_redraws = status_panel.as_ref().map_or(0, |p| p.redraws);
+    drop(status_panel);
     if let Some(d) = env_depth.take() {
         summary.env_depth_reads += d.reads;
         if d.not_available > 0 {

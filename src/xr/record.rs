@@ -51,6 +51,9 @@ pub struct FrameRecord {
     /// The headset's depth read back since the previous rendered frame (acquired a
     /// frame or more earlier; XR_META_environment_depth at `env_depth_hz`).
     pub env_depth: Option<Arc<EnvironmentDepth>>,
+    /// The lines the status panel's quad shows in this frame (`crate::panel::draw`
+    /// of them is its image); None while hidden or not yet drawn.
+    pub panel: Option<Arc<[String]>>,
 }
 
 /// The frame-timing summary `blind-augment xr` prints.
@@ -98,6 +101,10 @@ pub struct XrSummary {
     pub scene_changes: Vec<(u64, usize)>,
     /// Scenes that failed to load (skipped), each with the file and why.
     pub scene_errors: Vec<String>,
+    /// The status panel could be set up (its swapchain and VIEW space), and how
+    /// often it was redrawn.
+    pub panel: bool,
+    pub panel_redraws: u64,
 }
 
 /// What the render core needs for one XR frame besides the snapshot: the

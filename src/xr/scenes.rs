@@ -42,6 +42,12 @@ impl SceneCycle {
         self.current
     }
 
+    /// The current scene's file name (None: the starting scene).
+    pub fn current_name(&self) -> Option<String> {
+        let path = self.paths.get(self.current.checked_sub(1)?)?;
+        Some(path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned()))
+    }
+
     /// The starting scene is shown again (a loaded one could not be drawn).
     pub fn reset(&mut self) {
         self.current = 0;

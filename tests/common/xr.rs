@@ -87,6 +87,7 @@ pub const VARS: &[&str] = &[
     "BA_XR_CONTROLLER",
     "BA_TEST_APP_HZ",
     "BA_TEST_SCENES",
+    "BA_TEST_PANEL",
 ];
 
 pub fn tmp(name: &str) -> PathBuf {
@@ -202,6 +203,9 @@ pub fn run_xr_until(
         env_depth_hz: 30.0,
         on_frame: Some(&mut on_frame),
         stop: Some(&stop),
+        // Shown from the start with BA_TEST_PANEL=1 (else the left trigger shows it).
+        panel: std::env::var("BA_TEST_PANEL").is_ok_and(|v| v == "1"),
+        status: Some(&|| vec!["test status line".to_string()]),
         platform: &(),
     });
     if let Some(t) = stopper {

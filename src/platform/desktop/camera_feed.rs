@@ -13,11 +13,13 @@ use blind_augment::analysis::{DepthMap, Frame};
 use blind_augment::io::poses::{read_poses_csv, PoseRow};
 use blind_augment::io::recording::{Manifest, RecordLimits, Recording, RecordingInfo};
 use blind_augment::io::{self};
+use blind_augment::panel::CalibrationStatus;
 use blind_augment::worker::{
     CalibrationTier, Calibrator, CalibratorConfig, ModelChannel, Providers, Worker, WorkerStats,
 };
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// Poses reach the worker this many frames ahead of their frame (`calibrate`'s
@@ -34,7 +36,13 @@ pub struct CameraFeed {
     flow: Option<PathBuf>,
     worker: Worker,
     recording: Option<Recording>,
+    tier: CalibrationTier,
+    /// The status panel's camera and calibration lines, refreshed as frames are fed.
+    pub status: Arc<Mutex<Vec<String>>>,
 }
+
+/// How often the feed refreshes its status lines (the panel redraws at ≤ 2 Hz).
+const STATUS_EVERY: Duration = Duration::from_millis(250);
 
 /// What a feed did.
 pub struct FeedSummary {
@@ -116,6 +124,8 @@ impl CameraFeed {
             flow: g.flow.clone(),
             worker,
             recording,
+            tier,
+            status: Arc::new(Mutex::new(vec![format!("{} tier · waiting for the first camera frame", tier.name())])),
         })
     }
 
@@ -147,7 +157,15 @@ impl CameraFeed {
         let t0 = self.t_s(self.numbers[0]);
         let (mut offered, mut skipped, mut pushed_rows) = (0u64, 0u64, 0usize);
         let mut failure = None;
+        let mut panel = CalibrationStatus::new(self.tier.name());
+        let mut refreshed: Option<Instant> = None;
         for k in 0..self.frames.len() {
+            if refreshed.map_or(true, |t| t.elapsed() >= STATUS_EVERY) {
+                let now = Instant::now();
+                refreshed = Some(now);
+                let lines = panel.lines(now, offered, &self.worker.status(), self.recording.as_ref().map(|r| r.dir()));
+                *self.status.lock().unwrap_or_else(|e| e.into_inner()) = lines;
+            }
             let n = self.numbers[k];
             let t_s = self.t_s(n);
             let due = start + Duration::from_secs_f64((t_s - t0).max(0.0));

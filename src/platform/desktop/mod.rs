@@ -213,6 +213,9 @@ pub struct XrArgs {
     /// (where installed); any Vulkan validation message fails the run.
     #[arg(long)]
     validation: bool,
+    /// Show the status panel from the start (the left trigger toggles it).
+    #[arg(long)]
+    panel: bool,
     /// Camera frames for live calibration (`calibrate`'s input layout: a recording
     /// or `synth-video`'s output), fed to the calibration worker in real time at
     /// their own times as the headset's camera would; the loop renders with the

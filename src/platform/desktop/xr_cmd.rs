@@ -107,6 +107,15 @@ pub fn run(args: XrArgs) -> Result<()> {
     // The feed ends the loop when its frames end (`frames_done`); the loop's end
     // stops the feed (`loop_done`).
     let (frames_done, loop_done) = (AtomicBool::new(false), AtomicBool::new(false));
+    // The panel's camera and calibration lines: the feed's, else what stands in.
+    let status_lines = feed.as_ref().map(|f| f.status.clone());
+    let status = || match &status_lines {
+        Some(lines) => lines.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+        None => vec![format!(
+            "no camera: {} (--camera-frames feeds the calibration)",
+            if args.camera.is_some() { "the model given by --camera" } else { "the default model" }
+        )],
+    };
     let (summary, fed) = std::thread::scope(|s| {
         let feeding = feed.map(|f| s.spawn(|| f.run(&loop_done, &frames_done)));
         let summary = xr::run(XrOptions {
@@ -124,6 +133,8 @@ pub fn run(args: XrArgs) -> Result<()> {
             env_depth_hz: 0.0,
             on_frame: None,
             stop: feeding.as_ref().map(|_| &frames_done),
+            panel: args.panel,
+            status: Some(&status),
             platform: &(),
         });
         loop_done.store(true, Ordering::SeqCst);
@@ -166,6 +177,9 @@ pub fn run(args: XrArgs) -> Result<()> {
     }
     for e in &summary.scene_errors {
         println!("scene skipped: {e}");
+    }
+    if !summary.panel {
+        println!("status panel: unavailable (see the log)");
     }
     if !summary.vulkan_messages.is_empty() {
         anyhow::bail!(

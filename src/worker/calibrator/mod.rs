@@ -102,6 +102,19 @@ const MB_MAX_SAMPLES: usize = 2048;
 /// oldest-or-blurriest one makes room (`Calibrator::push_frame`).
 const SHARP_AGE_PX_PER_S: f64 = 0.5;
 
+/// Where the calibration stands (`Calibrator::phase`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Phase {
+    /// No frame yet since the start or a restart.
+    #[default]
+    Waiting,
+    /// Fitting every frame: the start-up burst (boundary setup: the user should
+    /// look around), or the shorter one after a detected camera change.
+    Burst { elapsed_s: f64, of_s: f64, after_change: bool },
+    /// Updating on schedule.
+    Steady,
+}
+
 pub struct Calibrator {
     cfg: CalibratorConfig,
     providers: Providers,
@@ -244,6 +257,21 @@ impl Calibrator {
             // The configuration was accepted when this calibrator was made, so a
             // fresh one cannot be refused; if it were, go on as before.
             Err(e) => log::error!("calibration: restart refused ({e}); going on without it"),
+        }
+    }
+
+    /// Where the calibration stands at the last frame (the headset's status
+    /// panel: "look around" while the start-up burst runs).
+    pub fn phase(&self) -> Phase {
+        match self.last_t_s {
+            _ if self.burst_until_s == f64::NEG_INFINITY => Phase::Waiting,
+            Some(t_s) if t_s < self.burst_until_s => {
+                // A change's burst is half the start-up one (`change::on_change`).
+                let of_s = if self.after_change { 0.5 * self.cfg.burst_s } else { self.cfg.burst_s };
+                Phase::Burst { elapsed_s: t_s - (self.burst_until_s - of_s), of_s, after_change: self.after_change }
+            }
+            Some(_) => Phase::Steady,
+            None => Phase::Waiting,
         }
     }
 

@@ -1,6 +1,7 @@
 //! The frame loop: `xrWaitFrame` paced on a display-refresh grid (halved while the
 //! app submits XR_FB_space_warp data, as Quest throttles an AppSW app), and
-//! `xrEndFrame` checking and recording the submitted layers (JSON report, PNG).
+//! `xrEndFrame` checking and recording the submitted layers (JSON report, PNG):
+//! projection, XR_FB_passthrough and quad layers, composed as the spec says.
 
 use crate::{lock, Runtime};
 use openxr_sys as xr;
@@ -191,7 +192,7 @@ pub(crate) unsafe extern "system" fn end_frame(session: xr::Session, info: *cons
             "layers": layer_json,
         }));
         if rt.config.png_frames.contains(&frame_no) {
-            if let Err(e) = write_pngs(rt, frame_no, &layers, info.environment_blend_mode) {
+            if let Err(e) = write_pngs(rt, frame_no, t, &layers, info.environment_blend_mode) {
                 eprintln!("ba-xr-runtime: frame {frame_no}: writing PNG: {e}");
                 return xr::Result::ERROR_RUNTIME_FAILURE;
             }
@@ -216,6 +217,56 @@ pub(crate) struct Layer {
     pub source_alpha: bool,
     pub unpremultiplied: bool,
     pub space_warp: bool,
+    /// A quad layer's placement (its one sub-image is `views[0]`).
+    pub quad: Option<Quad>,
+}
+
+/// Where a quad layer stands (spec "Quad Layer"): `pose` in the space (kind and
+/// offset) at the frame's display time, `size_m` its width and height, centred on
+/// the pose in its X-Y plane; drawn for the eyes in `eyes`.
+pub(crate) struct Quad {
+    pub space: (crate::SpaceKind, xr::Posef),
+    pub pose: xr::Posef,
+    pub size_m: [f32; 2],
+    pub eyes: [bool; 2],
+}
+
+/// A pose the spec accepts in a layer: finite, unit quaternion ("XR_ERROR_POSE_INVALID").
+fn pose_valid(p: &xr::Posef) -> bool {
+    let (q, t) = (p.orientation, p.position);
+    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+    norm.is_finite() && (norm - 1.0).abs() < 1e-3 && t.x.is_finite() && t.y.is_finite() && t.z.is_finite()
+}
+
+/// A layer's sub-image: a live swapchain with a released image, the rectangle
+/// inside it, the array index among its layers (spec "Swapchain Image Management",
+/// XR_ERROR_SWAPCHAIN_RECT_INVALID).
+fn checked_sub_image(rt: &Runtime, sub: &xr::SwapchainSubImage) -> Result<SubmittedView, xr::Result> {
+    let Some(sc) = rt.swapchains.get(&sub.swapchain.into_raw()) else {
+        return Err(xr::Result::ERROR_HANDLE_INVALID);
+    };
+    if sc.last_released.is_none() {
+        return Err(xr::Result::ERROR_LAYER_INVALID);
+    }
+    let r = sub.image_rect;
+    if r.offset.x < 0
+        || r.offset.y < 0
+        || r.extent.width <= 0
+        || r.extent.height <= 0
+        || (r.offset.x + r.extent.width) as u32 > sc.width
+        || (r.offset.y + r.extent.height) as u32 > sc.height
+    {
+        return Err(xr::Result::ERROR_SWAPCHAIN_RECT_INVALID);
+    }
+    if sub.image_array_index >= sc.array_size {
+        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+    }
+    Ok(SubmittedView {
+        swapchain: sub.swapchain.into_raw(),
+        rect: r,
+        array_index: sub.image_array_index,
+        srgb: sc.format == ash::vk::Format::R8G8B8A8_SRGB,
+    })
 }
 
 fn fov_json(f: &xr::Fovf) -> serde_json::Value {
@@ -255,14 +306,8 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                     let view = unsafe { &*p.views.add(v) };
                     // "xrEndFrame ... XR_ERROR_POSE_INVALID": a projection view's
                     // pose must be a valid pose (unit quaternion, finite).
-                    let (q, t) = (view.pose.orientation, view.pose.position);
-                    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
-                    if !(norm.is_finite()
-                        && (norm - 1.0).abs() < 1e-3
-                        && t.x.is_finite()
-                        && t.y.is_finite()
-                        && t.z.is_finite())
-                    {
+                    let q = view.pose.orientation;
+                    if !pose_valid(&view.pose) {
                         return Err(xr::Result::ERROR_POSE_INVALID);
                     }
                     let sub = view.sub_image;
@@ -345,6 +390,58 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                     source_alpha,
                     unpremultiplied,
                     space_warp,
+                    quad: None,
+                });
+            }
+            xr::StructureType::COMPOSITION_LAYER_QUAD => {
+                // SAFETY: the type tag says what the struct is.
+                let q = unsafe { &*(base as *const xr::CompositionLayerQuad) };
+                let Some(&(_, kind, offset)) = rt.spaces.get(&q.space.into_raw()) else {
+                    return Err(xr::Result::ERROR_HANDLE_INVALID);
+                };
+                if !pose_valid(&q.pose) {
+                    return Err(xr::Result::ERROR_POSE_INVALID);
+                }
+                // A quad of no or non-finite extent is not a valid layer.
+                if !(q.size.width > 0.0 && q.size.height > 0.0 && q.size.width.is_finite() && q.size.height.is_finite())
+                {
+                    return Err(xr::Result::ERROR_VALIDATION_FAILURE);
+                }
+                let eyes = match q.eye_visibility {
+                    xr::EyeVisibility::BOTH => [true, true],
+                    xr::EyeVisibility::LEFT => [true, false],
+                    xr::EyeVisibility::RIGHT => [false, true],
+                    _ => return Err(xr::Result::ERROR_VALIDATION_FAILURE),
+                };
+                let view = checked_sub_image(rt, &q.sub_image)?;
+                let r = view.rect;
+                let f = q.layer_flags;
+                let source_alpha = f.contains(xr::CompositionLayerFlags::BLEND_TEXTURE_SOURCE_ALPHA);
+                let unpremultiplied = f.contains(xr::CompositionLayerFlags::UNPREMULTIPLIED_ALPHA);
+                let (p, o) = (q.pose.position, q.pose.orientation);
+                out.push(Layer {
+                    json: json!({
+                        "type": "quad",
+                        "space": format!("{kind:?}"),
+                        "position": [p.x, p.y, p.z],
+                        "orientation": [o.x, o.y, o.z, o.w],
+                        "size_m": [q.size.width, q.size.height],
+                        "rect": [r.offset.x, r.offset.y, r.extent.width, r.extent.height],
+                        "eyes": eyes,
+                        "source_alpha": source_alpha,
+                        "unpremultiplied": unpremultiplied,
+                    }),
+                    passthrough: false,
+                    views: vec![view],
+                    source_alpha,
+                    unpremultiplied,
+                    space_warp: false,
+                    quad: Some(Quad {
+                        space: (kind, offset),
+                        pose: q.pose,
+                        size_m: [q.size.width, q.size.height],
+                        eyes,
+                    }),
                 });
             }
             xr::StructureType::COMPOSITION_LAYER_PASSTHROUGH_FB => {
@@ -361,6 +458,7 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                     source_alpha: false,
                     unpremultiplied: false,
                     space_warp: false,
+                    quad: None,
                 });
             }
             other => {
@@ -371,6 +469,7 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                     source_alpha: false,
                     unpremultiplied: false,
                     space_warp: false,
+                    quad: None,
                 });
             }
         }
@@ -426,7 +525,18 @@ fn to8(v: f32) -> u8 {
 /// * "Environment Blend Mode": OPAQUE shows the composite's colour and ignores its
 ///   alpha; ALPHA_BLEND blends the composite over the real world by its alpha
 ///   (premultiplied, as composed).
-fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer], blend: xr::EnvironmentBlendMode) -> Result<(), String> {
+///
+/// A quad layer is written as submitted (`frame_NNNN_quadK.png`, K its place in the
+/// layer list) and composed where it stands: each eye's pixel looks along its ray
+/// (the eye at the display time, `session::eye_fov`) and takes the quad's nearest
+/// texel where the ray meets the quad's rectangle (its image's top row at +Y).
+fn write_pngs(
+    rt: &Runtime,
+    frame: u64,
+    display_ns: i64,
+    layers: &[Layer],
+    blend: xr::EnvironmentBlendMode,
+) -> Result<(), String> {
     let Some(dir) = &rt.config.png_dir else { return Ok(()) };
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let vk = rt.vk.as_ref().ok_or("no Vulkan state")?;
@@ -445,7 +555,63 @@ fn write_pngs(rt: &Runtime, frame: u64, layers: &[Layer], blend: xr::Environment
     for eye in 0..2 {
         // Linear RGBA, premultiplied.
         let mut canvas = vec![[0.0f32; 4]; (w * h) as usize];
-        for layer in layers {
+        for (k, layer) in layers.iter().enumerate() {
+            if let Some(q) = &layer.quad {
+                let view = layer.views.first().ok_or("quad without its image")?;
+                let sc = rt.swapchains.get(&view.swapchain).ok_or("swapchain gone")?;
+                let rgba = vk.read_layer(sc, view.array_index)?;
+                let r = view.rect;
+                let texel = |x: u32, y: u32| -> [u8; 4] {
+                    let i = (((y + r.offset.y as u32) * sc.width + x + r.offset.x as u32) * 4) as usize;
+                    [rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3]]
+                };
+                let (qw, qh) = (r.extent.width as u32, r.extent.height as u32);
+                if eye == 0 {
+                    let img = image::RgbaImage::from_fn(qw, qh, |x, y| image::Rgba(texel(x, y)));
+                    let p = dir.join(format!("frame_{frame:04}_quad{k}.png"));
+                    img.save(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+                }
+                if !q.eyes[eye] {
+                    continue;
+                }
+                let local_from_eye =
+                    crate::session::head_pose(rt.config.head, display_ns).mul(&crate::session::head_from_eye(eye));
+                let local_from_quad = crate::session::local_from_space(rt, q.space.0, &q.space.1, display_ns)
+                    .mul(&crate::session::Pose::from_xr(&q.pose));
+                let quad_from_eye = local_from_quad.inverse().mul(&local_from_eye);
+                let fov = crate::session::eye_fov(eye);
+                let (tl, tr, tu, td) =
+                    (fov.angle_left.tan(), fov.angle_right.tan(), fov.angle_up.tan(), fov.angle_down.tan());
+                let o = quad_from_eye.t;
+                for (i, c) in canvas.iter_mut().enumerate() {
+                    let (x, y) = (i as u32 % w, i as u32 / w);
+                    let u = tl + (x as f32 + 0.5) / w as f32 * (tr - tl);
+                    let v = tu - (y as f32 + 0.5) / h as f32 * (tu - td);
+                    let d = quad_from_eye.rotate([u, v, -1.0]);
+                    if d[2].abs() < 1e-9 {
+                        continue;
+                    }
+                    let along = -o[2] / d[2];
+                    if along <= 0.0 {
+                        continue;
+                    }
+                    let (px, py) = (o[0] + along * d[0], o[1] + along * d[1]);
+                    let (fx, fy) = (px / q.size_m[0] + 0.5, 0.5 - py / q.size_m[1]);
+                    if !(0.0..1.0).contains(&fx) || !(0.0..1.0).contains(&fy) {
+                        continue;
+                    }
+                    let t = texel(((fx * qw as f32) as u32).min(qw - 1), ((fy * qh as f32) as u32).min(qh - 1));
+                    let a = if layer.source_alpha { t[3] as f32 / 255.0 } else { 1.0 };
+                    for ch in 0..3 {
+                        let s = t[ch] as f32 / 255.0;
+                        let s = if view.srgb { srgb_to_linear(s) } else { s };
+                        let s = if layer.unpremultiplied { (s * a).clamp(0.0, 1.0) } else { s };
+                        c[ch] = s + c[ch] * (1.0 - a);
+                    }
+                    c[3] = a + c[3] * (1.0 - a);
+                }
+                continue;
+            }
             if layer.passthrough {
                 save_passthrough(eye)?;
                 for (i, c) in canvas.iter_mut().enumerate() {

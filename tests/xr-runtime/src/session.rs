@@ -486,7 +486,7 @@ pub(crate) fn head_pose(head: Head, time_ns: i64) -> Pose {
 }
 
 /// `local_from_space` of a space at `time_ns`.
-fn local_from_space(rt: &Runtime, kind: SpaceKind, offset: &xr::Posef, time_ns: i64) -> Pose {
+pub(crate) fn local_from_space(rt: &Runtime, kind: SpaceKind, offset: &xr::Posef, time_ns: i64) -> Pose {
     let base = match kind {
         SpaceKind::View => head_pose(rt.config.head, time_ns),
         SpaceKind::Local => Pose::IDENTITY,
