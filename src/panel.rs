@@ -294,7 +294,18 @@ mod tests {
 
     #[test]
     fn model_lines_name_each_effect_and_its_state() {
-        let mut m = crate::xr::default_camera();
+        use crate::model::{DepthOfField, DepthUnits, DofCurve, DofKernel, MotionBlur};
+        let mut m = CameraModel::empty(1280, 960);
+        m.noise = crate::synth::white_sensor_noise([2e-5, 1.2e-5, 4e-5], [8e-4, 5e-4, 1.2e-3], [0.0, 1.0]);
+        m.motion_blur = MotionBlur { present: true, exposure: Some(0.4), diagnostics: Diagnostics::not_fitted("") };
+        m.depth_of_field = DepthOfField {
+            present: true,
+            units: DepthUnits::MetricM,
+            curve: Some(DofCurve::ThinLens { k: 1.5, focus_depth: 1.5, c0: 0.2 }),
+            depth_range: [0.3, 10.0],
+            kernel: DofKernel::Gaussian,
+            diagnostics: Diagnostics::not_fitted(""),
+        };
         m.motion_blur.diagnostics.status = Status::Present;
         m.motion_blur.diagnostics.stderr = Some(0.021);
         m.depth_of_field.diagnostics.status = Status::NotIdentifiable;

@@ -13,7 +13,8 @@ use blind_augment::model::compare::{dof_rmse_px, exposure_error, noise_relative_
 use blind_augment::model::CameraModel;
 use blind_augment::synth::sequence::{procedural, SequenceSpec};
 use blind_augment::worker::{
-    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Providers, UpdateReason, Worker,
+    CalibError, CalibrationTier, Calibrator, CalibratorConfig, Event, ModelChannel, Phase, Providers, UpdateReason,
+    Worker,
 };
 use common::calibration::*;
 
@@ -163,7 +164,15 @@ fn worker_thread_drops_frames_and_publishes_through_the_channel() {
         assert!(nices.len() >= 2, "worker and pool threads: {nices:?}");
         assert!(nices.iter().all(|(_, n)| *n == 19), "calibration threads not at nice 19: {nices:?}");
     }
+    // What the status panel reads while the worker runs: idle, it has counted
+    // everything `stop` then reports, and 40 frames at 30 fps are past the burst.
+    let live = worker.status();
     let stats = worker.stop();
+    assert_eq!(
+        (live.submitted, live.dropped, live.processed, live.published, live.errors),
+        (stats.submitted, stats.dropped, stats.processed, stats.published.len() as u64, stats.errors.len() as u64)
+    );
+    assert_eq!(live.phase, Phase::Steady);
     eprintln!(
         "submitted {}, dropped {}, processed {}, published {}, priority error {:?}",
         stats.submitted,
@@ -513,7 +522,9 @@ fn an_exposure_change_alone_is_found_by_the_estimates() {
 
 /// The user's "restart calibration": after the start-up burst the fast tier
 /// publishes on its schedule; restarted at 1.2 s, the next frames publish as a
-/// start-up burst again (every frame, reason Burst), from frames after the restart
+/// start-up burst again (every frame, reason Burst), and the phase the status
+/// panel shows follows (waiting, burst counting up to `burst_s`, steady, waiting
+/// after the restart, burst again), from frames after the restart
 /// only, and frame times and poses go on as before.
 #[test]
 fn restart_opens_a_new_start_up_burst() {
@@ -525,15 +536,31 @@ fn restart_opens_a_new_start_up_burst() {
     .expect("valid config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
     let mut reasons: Vec<(usize, UpdateReason)> = vec![];
+    let burst_s = cal.config().burst_s;
+    assert_eq!(cal.phase(), Phase::Waiting);
     for f in &frames[..44] {
         if f.index == 36 {
             cal.restart();
+            assert_eq!(cal.phase(), Phase::Waiting, "restarted: waiting for the burst's first frame");
         }
         cal.push_poses(&[pose(spec, f.index + 2)]).expect("poses");
         for e in cal.push_frame(frame(f)).expect("valid frame") {
             if let Event::Published(u) = e {
                 reasons.push((f.index, u.reason));
             }
+        }
+        // Frame times from the burst's first frame (0 or 36) at 30 fps.
+        let since_s = (f.index - if f.index >= 36 { 36 } else { 0 }) as f64 / 30.0;
+        let phase = cal.phase();
+        if since_s < burst_s - 1e-6 {
+            match phase {
+                Phase::Burst { elapsed_s, of_s, after_change: false } => {
+                    assert!((elapsed_s - since_s).abs() < 1e-6 && of_s == burst_s, "frame {}: {phase:?}", f.index)
+                }
+                other => panic!("frame {}: {other:?} during the burst", f.index),
+            }
+        } else {
+            assert_eq!(phase, Phase::Steady, "frame {}", f.index);
         }
     }
     let burst = |range: std::ops::Range<usize>| {

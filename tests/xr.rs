@@ -144,8 +144,9 @@ fn space_warp_renders_at_half_the_display_rate() {
             v["array_size"].as_i64().unwrap(),
         ));
     }
-    // Colour (sRGB RGBA8), motion vectors (RGBA16F) and depth (D32), two layers each.
-    let want: std::collections::BTreeSet<_> = [(43, false, 2), (97, false, 2), (126, true, 2)].into();
+    // Colour (sRGB RGBA8), motion vectors (RGBA16F) and depth (D32), two layers
+    // each; the status panel's (sRGB RGBA8, one layer).
+    let want: std::collections::BTreeSet<_> = [(43, false, 1), (43, false, 2), (97, false, 2), (126, true, 2)].into();
     assert_eq!(chains, want);
 }
 
@@ -732,15 +733,24 @@ fn grab_and_place_moves_the_object_with_the_aim() {
 /// frame as a quad layer in VIEW space over the projection layer, until pressed
 /// again. The runtime's copy of the quad's image is the CPU drawing
 /// (`panel::draw`) of exactly the lines the app reports for that frame (a buffer
-/// copy: bit-exact), and those lines carry the app's status and the model's
-/// state; redrawn at ≤ 2 Hz; the quad shows in the composite where it stands.
+/// copy: bit-exact), and those lines carry the app's status, the model's state and
+/// the scene that failed to load; redrawn at ≤ 2 Hz; the quad shows in the
+/// composite where it stands.
 #[test]
 fn status_panel_quad_shows_the_cpu_drawing_and_toggles() {
     use blind_augment::panel::{draw, PANEL_SIZE};
     let models = ModelChannel::new(model(0.4)).expect("model");
+    let broken = tmp("panel-scenes").join("broken.glb");
+    std::fs::write(&broken, b"glTF not really").expect("write");
+    let broken = broken.display().to_string();
     let trigger = "/user/hand/left/input/trigger/value";
-    let script = format!("press:{trigger}@10,press:{trigger}@60");
-    let env = [("BA_XR_SCRIPT", script.as_str()), ("BA_XR_PNG_DIR", "{dir}"), ("BA_XR_PNG_FRAMES", "5,40,70")];
+    let script = format!("press:/user/hand/right/input/thumbstick/click@3,press:{trigger}@10,press:{trigger}@60");
+    let env = [
+        ("BA_TEST_SCENES", broken.as_str()),
+        ("BA_XR_SCRIPT", script.as_str()),
+        ("BA_XR_PNG_DIR", "{dir}"),
+        ("BA_XR_PNG_FRAMES", "5,40,70"),
+    ];
     let Some(run) = run_xr("panel", &env, 80, true, &models) else { return };
     assert_clean(&run, true);
     let s = &run.summary;
@@ -768,7 +778,9 @@ fn status_panel_quad_shows_the_cpu_drawing_and_toggles() {
     }
     let lines = record_at(40).expect("record of frame 40").panel.clone().expect("frame 40 shows the panel");
     let text = lines.join("\n");
-    for want in ["test status line", "model generation 0", "motion blur: ", "depth of field: ", "matched (A)"] {
+    for want in
+        ["test status line", "model generation 0", "motion blur: ", "depth of field: ", "matched (A)", "broken.glb"]
+    {
         assert!(text.contains(want), "{want:?} not on the panel:\n{text}");
     }
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("xr/panel");

@@ -57,7 +57,7 @@ fn a_desktop_recording_replays_the_live_calibration() {
         .arg(seq.join("poses.csv"))
         .args(["--intrinsics", k.trim(), "--depth"])
         .arg(seq.join("depth"))
-        .args(["--tier", "fast", "--record-s", "100", "--record-min-free-mib", "0", "--record"])
+        .args(["--tier", "fast", "--record-s", "100", "--record-min-free-mib", "0", "--panel", "--record"])
         .arg(&rec)
         .env("XR_RUNTIME_JSON", &manifest)
         .env("BA_XR_EYE_SIZE", "64x64"));
@@ -68,6 +68,12 @@ fn a_desktop_recording_replays_the_live_calibration() {
     assert!(ok, "{text}");
     assert!(text.contains("ended: Exited"), "the loop ended when the frames did:\n{text}");
     assert!(text.contains("camera frames: 36 offered"), "{text}");
+    // The status panel (shown from the start) carried the feed's and the model's
+    // state as the frames went by.
+    let panel: Vec<&str> = text.lines().filter_map(|l| l.strip_prefix("  | ")).collect();
+    for want in ["fast tier · camera ", "recording into rec", "model generation ", "motion blur: "] {
+        assert!(panel.iter().any(|l| l.contains(want)), "{want:?} not on the panel's last drawing: {panel:#?}");
+    }
     let m: Manifest =
         serde_json::from_str(&std::fs::read_to_string(rec.join("manifest.json")).expect("manifest")).expect("manifest");
     assert_eq!(m.stopped, StopReason::Stopped);

@@ -116,6 +116,13 @@ pub fn run(args: XrArgs) -> Result<()> {
             if args.camera.is_some() { "the model given by --camera" } else { "the default model" }
         )],
     };
+    // The lines the panel showed last (printed at the end: what a user saw).
+    let mut panel_lines: Option<std::sync::Arc<[String]>> = None;
+    let mut on_frame = |r: &xr::FrameRecord| {
+        if r.panel.is_some() {
+            panel_lines.clone_from(&r.panel);
+        }
+    };
     let (summary, fed) = std::thread::scope(|s| {
         let feeding = feed.map(|f| s.spawn(|| f.run(&loop_done, &frames_done)));
         let summary = xr::run(XrOptions {
@@ -131,7 +138,7 @@ pub fn run(args: XrArgs) -> Result<()> {
             // The desktop app's calibration takes no headset depth (depth comes
             // with the frames).
             env_depth_hz: 0.0,
-            on_frame: None,
+            on_frame: Some(&mut on_frame),
             stop: feeding.as_ref().map(|_| &frames_done),
             panel: args.panel,
             status: Some(&status),
@@ -180,6 +187,11 @@ pub fn run(args: XrArgs) -> Result<()> {
     }
     if !summary.panel {
         println!("status panel: unavailable (see the log)");
+    } else if let Some(lines) = &panel_lines {
+        println!("status panel: {} redraws; last shown:", summary.panel_redraws);
+        for l in lines.iter() {
+            println!("  | {}", l.strip_prefix('!').unwrap_or(l));
+        }
     }
     if !summary.vulkan_messages.is_empty() {
         anyhow::bail!(
