@@ -251,6 +251,11 @@ impl Recorder {
     }
 
     pub fn start(&mut self, worker: &Worker) {
+        self.start_with(worker, RecordLimits::default());
+    }
+
+    /// Start a recording that stops by itself at `limits` (an intent's duration).
+    pub fn start_with(&mut self, worker: &Worker, limits: RecordLimits) {
         let Some(root) = &self.root else {
             log::warn!("recording: the app has no external files folder");
             return;
@@ -258,7 +263,7 @@ impl Recorder {
         // Milliseconds: a stop and a new start within one second get two folders.
         let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis());
         let dir = root.join(format!("rec-{ms}"));
-        match Recording::start(&dir, self.info.clone(), RecordLimits::default()) {
+        match Recording::start(&dir, self.info.clone(), limits) {
             Ok((rec, tap)) => {
                 worker.set_tap(Some(Box::new(tap)));
                 log::info!("recording into {}", dir.display());

@@ -28,7 +28,7 @@ use crate::analysis::headset_depth::HeadsetDepth;
 use crate::analysis::timing::{ClockMap, ClockSample, TimedPose, TimestampSource};
 use crate::android_camera::{CameraManager, PassthroughCamera};
 use crate::image::yuv::{Yuv420, YuvMatrix, YuvRange};
-use crate::io::recording::{Recorder, RecordingInfo};
+use crate::io::recording::{RecordLimits, Recorder, RecordingInfo};
 use crate::model::CameraModel;
 use crate::panel::CalibrationStatus;
 use crate::render::LayerSettings;
@@ -268,6 +268,41 @@ fn with_activity<T>(
         }
         r
     })
+}
+
+/// Longest recording an intent may ask for (s): about 2 GB of 16-bit frames at the
+/// worker's rate; the free-space floor still applies.
+const MAX_INTENT_RECORD_S: i32 = 300;
+
+/// The launching intent's `record_s` extra (`adb shell am start -n
+/// org.blindaugment.app/android.app.NativeActivity --ei record_s 20`): record that
+/// many seconds of what calibration takes, from the first camera frames on, without
+/// a controller (scripted data collection). None without it; values outside
+/// 1..=MAX_INTENT_RECORD_S are refused by name.
+fn intent_record_s(app: &AndroidApp) -> Result<Option<f64>, String> {
+    use jni::objects::JValue;
+    use jni::{jni_sig, jni_str};
+    let value = with_activity(app, |env, activity| {
+        let intent =
+            env.call_method(activity, jni_str!("getIntent"), jni_sig!("()Landroid/content/Intent;"), &[])?.l()?;
+        if intent.is_null() {
+            return Ok(0);
+        }
+        let key = env.new_string("record_s")?;
+        env.call_method(
+            &intent,
+            jni_str!("getIntExtra"),
+            jni_sig!("(Ljava/lang/String;I)I"),
+            &[JValue::Object(&key), JValue::Int(0)],
+        )?
+        .i()
+    })
+    .map_err(|e| format!("the launching intent is unreadable ({e})"))?;
+    match value {
+        0 => Ok(None),
+        1..=MAX_INTENT_RECORD_S => Ok(Some(value as f64)),
+        v => Err(format!("intent extra record_s = {v}: expected 1 to {MAX_INTENT_RECORD_S} seconds")),
+    }
 }
 
 /// Whether a camera permission is granted now (either suffices:
@@ -525,6 +560,14 @@ fn calibrate_live(
     let mut last_report = Instant::now();
     let mut first = true;
     let mut panel = CalibrationStatus::new(tier.name());
+    // A recording the launching intent asks for starts with the first streaming camera.
+    let mut intent_recording = match intent_record_s(app) {
+        Ok(r) => r,
+        Err(e) => {
+            log::warn!("{e}: not recording");
+            None
+        }
+    };
     // Camera images delivered by the openings before the current one.
     let mut images_before = 0u64;
     while !stop.load(Ordering::SeqCst) {
@@ -551,6 +594,10 @@ fn calibrate_live(
             first = false;
         } else {
             log::info!("camera {} reopened: calibration resumes", choice.id);
+        }
+        if let Some(max_s) = intent_recording.take() {
+            log::info!("recording {max_s} s as the launching intent asks (record_s)");
+            recorder.start_with(&worker, RecordLimits { max_s, ..RecordLimits::default() });
         }
         while !stop.load(Ordering::SeqCst) && !camera.lost() {
             std::thread::sleep(Duration::from_millis(200));
