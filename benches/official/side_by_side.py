@@ -28,6 +28,7 @@ imports and torch's start-up not counted).
     git clone https://github.com/prakashSidd18/blind_augmentation /tmp/official
     cargo build --release --bin blind-augment
     /tmp/pyref/bin/python benches/official/side_by_side.py /tmp/official [--rounds 3] [--official-1t]
+    /tmp/pyref/bin/python benches/official/side_by_side.py --ours-only [--rounds 5] [--compare OTHER_BUILD]
 
 Prints one line per fit and a table of medians over rounds.
 """
@@ -151,21 +152,34 @@ def official(python, repo, case, kind, threads):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("official", type=pathlib.Path)
+    ap.add_argument("official", type=pathlib.Path, nargs="?")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--official-1t", action="store_true")
+    ap.add_argument("--ours-only", action="store_true", help="time blind-augment alone (no official code needed)")
+    ap.add_argument("--compare", type=pathlib.Path,
+                    help="another blind-augment build, timed interleaved with --binary on every case")
     ap.add_argument("--binary", type=pathlib.Path,
                     default=pathlib.Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target")) / "release/blind-augment")
     a = ap.parse_args()
+    if a.official is None and not a.ours_only:
+        ap.error("give the official code's folder, or --ours-only")
     tmp = pathlib.Path(tempfile.mkdtemp(prefix="ba-side-by-side-"))
     try:
         cases = make_cases(tmp)
-        cols = ["ours 1t", "official default"] + (["official 1t"] if a.official_1t else [])
+        cols = ["ours 1t"] + (["compared build 1t"] if a.compare else [])
+        if not a.ours_only:
+            cols += ["official default"] + (["official 1t"] if a.official_1t else [])
         times = {(c.name, col): [] for c, _ in cases for col in cols}
         for r in range(a.rounds):
             for case, kind in cases:
                 t = ours(a.binary, case, kind)
                 times[(case.name, "ours 1t")].append(t)
+                if a.compare:
+                    tc = ours(a.compare, case, kind)
+                    times[(case.name, "compared build 1t")].append(tc)
+                if a.ours_only:
+                    print(f"round {r + 1} {case.name}: ours {t:.1f} ms" + (f", compared build {tc:.1f} ms" if a.compare else ""), flush=True)
+                    continue
                 o = official(sys.executable, a.official, case, kind, 0)
                 times[(case.name, "official default")].append(o)
                 line = f"round {r + 1} {case.name}: ours {t:.1f} ms, official {o:.1f} ms"
@@ -189,7 +203,7 @@ def main():
                         for kind in ["noise", "mb", "dof"]) for c in cols}
         print("| **total (noise + MB + DoF)** | " + " | ".join(f"**{total[c]:.1f}**" for c in cols) + " |")
         for c in cols[1:]:
-            print(f"official ({c}) / ours: {total[c] / total['ours 1t']:.0f}x")
+            print(f"{c} / ours: {total[c] / total['ours 1t']:.2f}x")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

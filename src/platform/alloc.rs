@@ -15,6 +15,10 @@
 //! peak, which the worker reaches again on its next update (a process fitting
 //! those frames: maximum resident set 85 MB with the thresholds, 79 MB without).
 //!
+//! A one-shot command (`fit`: one fit per process) pays for its first touches
+//! every run, which keeping freed blocks cannot help: `huge_heap_one_arena` makes
+//! them cheap (see its doc).
+//!
 //! Android (bionic's scudo) has its own knobs (the secondary cache's size) and is
 //! left at its defaults: not measured here, no headset.
 #![allow(unsafe_code)]
@@ -53,6 +57,70 @@ pub fn keep_freed_blocks() -> AllocTuning {
             if unsafe { libc::mallopt(param, value) } == 0 {
                 return AllocTuning::Refused(name);
             }
+        }
+        AllocTuning::Applied
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        AllocTuning::NotApplicable
+    }
+}
+
+/// Heap grown ahead of use and marked for transparent huge pages: the working set
+/// of a 512² accurate fit or a 1280×960 fast one fits in it.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const HUGE_HEAP_BYTES: usize = 128 << 20;
+/// The block that makes the heap grow now (below the mmap threshold, so it is
+/// served from the heap; above anything free at its top this early).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const GROW_BYTES: usize = 16 << 20;
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const HUGE_PAGE_BYTES: usize = 2 << 20;
+
+/// For one-shot commands (`fit`), after `keep_freed_blocks` and before any other
+/// thread starts: a fresh process's fit faults in every page of its planes once (a 512²
+/// accurate noise fit: ~6 100 faults of 4 KiB, a third of its time in the kernel's
+/// fault path under `perf`). Here the heap is grown by 128 MiB at once (M_TOP_PAD)
+/// and that range marked MADV_HUGEPAGE, so where the kernel's transparent huge
+/// pages are `madvise` or `always` a first touch maps 2 MiB; and the process keeps
+/// one malloc arena (M_ARENA_MAX = 1), so the fit pool's threads allocate from that
+/// heap instead of arenas of their own. Measured on the side-by-side's six 512²
+/// cases (`benches/official/side_by_side.py`'s inputs, `fit --threads 1`, fresh
+/// processes, the builds with and without this interleaved): the three accurate
+/// fits 39.0 → 27.8 ms, a noise fit's faults 6 140 → 1 060; the fast tier at
+/// 1280×960 40.8 → 30.0 ms (BENCHMARKS.md). The cost: a first run after the kernel's huge pages
+/// are used up may wait for compaction (seen: one run in fifteen 1.4× slower than
+/// without), and threads share one arena's lock (a one-shot fit allocates plane
+/// by plane, not per pixel). Not for the long-running app (`xr`, the worker): its
+/// frame loop should not share a lock with the worker, and it is warm after its
+/// first update.
+pub fn huge_heap_one_arena() -> AllocTuning {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: mallopt only reads its integer arguments (0 on refusal).
+        if unsafe { libc::mallopt(libc::M_ARENA_MAX, 1) } == 0 {
+            return AllocTuning::Refused("M_ARENA_MAX");
+        }
+        // SAFETY: as above.
+        if unsafe { libc::mallopt(libc::M_TOP_PAD, HUGE_HEAP_BYTES as libc::c_int) } == 0 {
+            return AllocTuning::Refused("M_TOP_PAD");
+        }
+        // SAFETY: a block is allocated and freed, never touched; sbrk(0) only reads
+        // the break; madvise gets a range inside the heap's mapping (from the block,
+        // rounded up to a huge page, to the break), which it only advises.
+        unsafe {
+            let block = libc::malloc(GROW_BYTES);
+            if block.is_null() {
+                return AllocTuning::Refused("malloc");
+            }
+            let start = (block as usize).next_multiple_of(HUGE_PAGE_BYTES);
+            let top = libc::sbrk(0) as usize;
+            if top > start {
+                // Refused where the kernel has no transparent huge pages: the heap
+                // then stays in 4 KiB pages, as without this call.
+                libc::madvise(start as *mut libc::c_void, top - start, libc::MADV_HUGEPAGE);
+            }
+            libc::free(block);
         }
         AllocTuning::Applied
     }

@@ -421,6 +421,15 @@ pub fn main() -> std::process::ExitCode {
         eprintln!("warning: the C allocator refused {param}: fits will page-fault their planes afresh each call");
     }
     let cli = Cli::parse();
+    // `fit`: one fit per process, so its first touches are most of its memory
+    // traffic: huge pages, one arena (before the thread pool starts; see
+    // `blind_augment::alloc::huge_heap_one_arena`). Not `calibrate`: over a
+    // sequence it is warm after the first updates, and measured no faster.
+    if matches!(cli.cmd, Command::Fit(_)) {
+        if let blind_augment::alloc::AllocTuning::Refused(what) = blind_augment::alloc::huge_heap_one_arena() {
+            log::info!("the C allocator refused {what}: first touches stay in 4 KiB pages");
+        }
+    }
     if let Some(n) = cli.threads {
         if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global() {
             eprintln!("error: cannot set up {n} threads: {e}");
