@@ -204,20 +204,6 @@ pub fn default_camera() -> CameraModel {
     m
 }
 
-/// The panel's line for the controller toggles: what A, B, X and Y switch now.
-fn effects_line(t: Toggles) -> String {
-    if !t.matched {
-        return "naive (A)".into();
-    }
-    let on = |b: bool| if b { "on" } else { "off" };
-    format!(
-        "matched (A) · noise {} (B) · blur {} (X) · focus {} (Y)",
-        on(t.effects.noise),
-        on(t.effects.motion_blur),
-        on(t.effects.dof)
-    )
-}
-
 /// Pick the display rate: `want` if offered, else the offered rate nearest it.
 pub fn pick_refresh_rate(offered: &[f32], want: f32) -> Option<f32> {
     offered
@@ -332,13 +318,9 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
 
     // The status panel: optional (a runtime that refuses its swapchain or the VIEW
     // space costs the panel, never the session).
-    let mut status_panel = match panel::Panel::new(&ctx, &session, format, opts.panel) {
-        Ok(p) => Some(p),
-        Err(e) => {
-            log::warn!("OpenXR: no status panel ({e})");
-            None
-        }
-    };
+    let mut status_panel = panel::Panel::new(&ctx, &session, format, opts.panel)
+        .map_err(|e| log::warn!("OpenXR: no status panel ({e})"))
+        .ok();
 
     // XR_FB_space_warp: motion vectors and depth for the compositor, which then
     // synthesises every other display frame; the runtime halves the app's rate.
@@ -734,25 +716,8 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             generation_seen = Some((snapshot.generation, now));
         }
         if let Some(p) = status_panel.as_mut() {
-            let lines = || {
-                let mut lines = vec![
-                    format!(
-                        "blind-augment · scene {}: {}",
-                        cycle.current(),
-                        cycle.current_name().unwrap_or_else(|| "the bundled one".into())
-                    ),
-                    effects_line(toggles),
-                ];
-                if let Some(status) = opts.status {
-                    lines.extend(status());
-                }
-                let age_s = generation_seen.map(|(_, t)| now.saturating_duration_since(t).as_secs_f64());
-                lines.extend(crate::panel::model_lines(&snapshot.model, snapshot.generation, age_s));
-                // The newest scene errors: a file that failed is named, then skipped.
-                let errors = &cycle.errors;
-                lines.extend(errors[errors.len().saturating_sub(2)..].iter().map(|e| format!("!{e}")));
-                lines
-            };
+            let age_s = generation_seen.map(|(_, t)| now.saturating_duration_since(t).as_secs_f64());
+            let lines = || panel::frame_lines(&cycle, toggles, opts.status, &snapshot, age_s);
             if let Err(e) = p.update(now, lines) {
                 log::warn!("OpenXR: status panel off ({e})");
                 status_panel = None;

@@ -9,7 +9,8 @@
 //! before the VIEW space and the session (fields in that order).
 #![allow(unsafe_code)]
 
-use super::{call, XrError};
+use super::scenes::SceneCycle;
+use super::{call, Toggles, XrError};
 use crate::gpu::{GpuContext, ImageUpload};
 use crate::panel::PANEL_SIZE;
 use ash::vk;
@@ -26,6 +27,48 @@ const REDRAW: Duration = Duration::from_millis(500);
 /// wide (the texture's 2:1 aspect).
 const POSITION_M: [f32; 3] = [0.0, -0.15, -0.9];
 const WIDTH_M: f32 = 0.5;
+
+/// The panel's lines for this frame: the scene and the effect switches, the app's
+/// lines (camera, calibration, recording), the snapshot's model (`age_s` since
+/// its generation was first seen), the newest scene errors (a file that failed
+/// to load is named, then skipped).
+pub(super) fn frame_lines(
+    cycle: &SceneCycle,
+    toggles: Toggles,
+    status: Option<&dyn Fn() -> Vec<String>>,
+    snapshot: &crate::worker::Snapshot,
+    age_s: Option<f64>,
+) -> Vec<String> {
+    let mut lines = vec![
+        format!(
+            "blind-augment · scene {}: {}",
+            cycle.current(),
+            cycle.current_name().unwrap_or_else(|| "the bundled one".into())
+        ),
+        effects_line(toggles),
+    ];
+    if let Some(status) = status {
+        lines.extend(status());
+    }
+    lines.extend(crate::panel::model_lines(&snapshot.model, snapshot.generation, age_s));
+    let errors = &cycle.errors;
+    lines.extend(errors[errors.len().saturating_sub(2)..].iter().map(|e| format!("!{e}")));
+    lines
+}
+
+/// What A, B, X and Y switch now.
+fn effects_line(t: Toggles) -> String {
+    if !t.matched {
+        return "naive (A)".into();
+    }
+    let on = |b: bool| if b { "on" } else { "off" };
+    format!(
+        "matched (A) · noise {} (B) · blur {} (X) · focus {} (Y)",
+        on(t.effects.noise),
+        on(t.effects.motion_blur),
+        on(t.effects.dof)
+    )
+}
 
 pub(super) struct Panel<'a> {
     upload: ImageUpload<'a>,
