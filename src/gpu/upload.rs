@@ -135,9 +135,12 @@ impl<'a> ImageUpload<'a> {
         // least width×height with `layer` among its layers (the caller's contract).
         unsafe {
             d.begin_command_buffer(self.cmd, &begin).map_err(vkr("vkBeginCommandBuffer"))?;
+            // After everything before it on the queue: a runtime may read its
+            // swapchain images with work on the app's queue (XR_KHR_vulkan_enable
+            // lets it use the queue in xrEndFrame and xrReleaseSwapchainImage).
             d.cmd_pipeline_barrier(
                 self.cmd,
-                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::ALL_COMMANDS,
                 vk::PipelineStageFlags::TRANSFER,
                 vk::DependencyFlags::empty(),
                 &[],

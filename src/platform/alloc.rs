@@ -109,13 +109,18 @@ pub fn huge_heap_one_arena() -> AllocTuning {
         // the break; madvise gets a range inside the heap's mapping (from the block,
         // rounded up to a huge page, to the break), which it only advises.
         unsafe {
+            let base = libc::sbrk(0) as usize;
             let block = libc::malloc(GROW_BYTES);
             if block.is_null() {
                 return AllocTuning::Refused("malloc");
             }
             let start = (block as usize).next_multiple_of(HUGE_PAGE_BYTES);
             let top = libc::sbrk(0) as usize;
-            if top > start {
+            // Only where the block came from the break's heap (glibc may serve it
+            // by mmap: a refused mmap threshold, a failed brk): the range is then
+            // the heap's own mapping.
+            let from_heap = (block as usize) >= base && (block as usize) + GROW_BYTES <= top;
+            if from_heap && top > start {
                 // Refused where the kernel has no transparent huge pages: the heap
                 // then stays in 4 KiB pages, as without this call.
                 libc::madvise(start as *mut libc::c_void, top - start, libc::MADV_HUGEPAGE);

@@ -720,6 +720,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
             let lines = || panel::frame_lines(&cycle, toggles, opts.status, &snapshot, age_s);
             if let Err(e) = p.update(now, lines) {
                 log::warn!("OpenXR: status panel off ({e})");
+                summary.panel_redraws += p.redraws;
                 status_panel = None;
             }
         }
@@ -783,7 +784,7 @@ pub fn run(mut opts: XrOptions<'_>) -> Result<XrSummary, XrError> {
     summary.vulkan_messages = ctx.take_messages();
     // Explicit teardown in the documented order (the drops would do the same).
     drop(renderer);
-    summary.panel_redraws = status_panel.as_ref().map_or(0, |p| p.redraws);
+    summary.panel_redraws += status_panel.as_ref().map_or(0, |p| p.redraws);
     drop(status_panel);
     if let Some(d) = env_depth.take() {
         summary.env_depth_reads += d.reads;

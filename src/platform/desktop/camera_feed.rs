@@ -198,8 +198,11 @@ impl CameraFeed {
                 }
             }
         }
-        // The last frame's fit, then the frame loop may end.
+        // The last frame's fit (its status shown), then the frame loop may end.
         self.worker.wait_idle(Duration::from_secs(120));
+        let lines =
+            panel.lines(Instant::now(), offered, &self.worker.status(), self.recording.as_ref().map(|r| r.dir()));
+        *self.status.lock().unwrap_or_else(|e| e.into_inner()) = lines;
         done.store(true, Ordering::SeqCst);
         let stats = self.worker.stop();
         let recording = self.recording.map(|r| r.finish()).transpose()?;

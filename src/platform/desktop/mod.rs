@@ -417,7 +417,8 @@ pub fn main() -> std::process::ExitCode {
     // …"): warnings and errors on stderr unless RUST_LOG says otherwise.
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     // Before any frame-sized allocation (see `blind_augment::alloc`).
-    if let blind_augment::alloc::AllocTuning::Refused(param) = blind_augment::alloc::keep_freed_blocks() {
+    let kept = blind_augment::alloc::keep_freed_blocks();
+    if let blind_augment::alloc::AllocTuning::Refused(param) = kept {
         eprintln!("warning: the C allocator refused {param}: fits will page-fault their planes afresh each call");
     }
     let cli = Cli::parse();
@@ -425,7 +426,7 @@ pub fn main() -> std::process::ExitCode {
     // traffic: huge pages, one arena (before the thread pool starts; see
     // `blind_augment::alloc::huge_heap_one_arena`). Not `calibrate`: over a
     // sequence it is warm after the first updates, and measured no faster.
-    if matches!(cli.cmd, Command::Fit(_)) {
+    if matches!(cli.cmd, Command::Fit(_)) && kept == blind_augment::alloc::AllocTuning::Applied {
         if let blind_augment::alloc::AllocTuning::Refused(what) = blind_augment::alloc::huge_heap_one_arena() {
             log::info!("the C allocator refused {what}: first touches stay in 4 KiB pages");
         }

@@ -249,12 +249,13 @@ fn checked_sub_image(rt: &Runtime, sub: &xr::SwapchainSubImage) -> Result<Submit
         return Err(xr::Result::ERROR_LAYER_INVALID);
     }
     let r = sub.image_rect;
+    // In i64: an offset plus an extent near i32::MAX must be refused, not overflow.
     if r.offset.x < 0
         || r.offset.y < 0
         || r.extent.width <= 0
         || r.extent.height <= 0
-        || (r.offset.x + r.extent.width) as u32 > sc.width
-        || (r.offset.y + r.extent.height) as u32 > sc.height
+        || r.offset.x as i64 + r.extent.width as i64 > sc.width as i64
+        || r.offset.y as i64 + r.extent.height as i64 > sc.height as i64
     {
         return Err(xr::Result::ERROR_SWAPCHAIN_RECT_INVALID);
     }
@@ -583,6 +584,12 @@ fn write_pngs(
                 let (tl, tr, tu, td) =
                     (fov.angle_left.tan(), fov.angle_right.tan(), fov.angle_up.tan(), fov.angle_down.tan());
                 let o = quad_from_eye.t;
+                // "Only front face of the quad surface is visible; the back face is
+                // not visible and must not be drawn by the runtime": the front faces
+                // +Z, so an eye at z ≤ 0 in the quad's frame sees nothing of it.
+                if o[2] <= 0.0 {
+                    continue;
+                }
                 for (i, c) in canvas.iter_mut().enumerate() {
                     let (x, y) = (i as u32 % w, i as u32 / w);
                     let u = tl + (x as f32 + 0.5) / w as f32 * (tr - tl);
