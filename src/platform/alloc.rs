@@ -117,9 +117,12 @@ pub fn huge_heap_one_arena() -> AllocTuning {
             let start = (block as usize).next_multiple_of(HUGE_PAGE_BYTES);
             let top = libc::sbrk(0) as usize;
             // Only where the block came from the break's heap (glibc may serve it
-            // by mmap: a refused mmap threshold, a failed brk): the range is then
-            // the heap's own mapping.
-            let from_heap = (block as usize) >= base && (block as usize) + GROW_BYTES <= top;
+            // by mmap: a refused mmap threshold, a failed brk): the break moved and
+            // the block ends between the old and the new break (it may start below
+            // the old one, in the free space that was left at the heap's top), so
+            // [block, top) is the heap's own mapping.
+            let end = block as usize + GROW_BYTES;
+            let from_heap = top > base && end > base && end <= top;
             if from_heap && top > start {
                 // Refused where the kernel has no transparent huge pages: the heap
                 // then stays in 4 KiB pages, as without this call.
