@@ -584,6 +584,7 @@ fn calibrate_live(
             Err(e) => {
                 let delay = backoff.lost(Duration::ZERO);
                 log::warn!("camera {}: {e}: trying again in {delay:?} (the current model stays)", choice.id);
+                live.set_status(vec![format!("!camera {}: {e}: trying again in {delay:.0?}", choice.id)]);
                 sleep_unless(stop, delay);
                 continue;
             }
@@ -634,6 +635,7 @@ fn calibrate_live(
             let delay = backoff.lost(streamed);
             let why = error.map_or_else(|| "disconnected".to_string(), |e| format!("device error {e}"));
             log::warn!("camera {} {why}: reopening in {delay:?} (the current model stays)", choice.id);
+            live.set_status(vec![format!("!camera {} {why}: reopening in {delay:.0?}", choice.id)]);
             sleep_unless(stop, delay);
         }
     }
@@ -777,6 +779,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
     log::info!("{} scene(s) of the user's to cycle: {:?}", more_scenes.len(), more_scenes);
     let models = ModelChannel::new(first_model(app)?).map_err(|e| e.to_string())?;
     let live = Arc::new(LiveInputs::default());
+    live.set_status(vec!["calibration: opening the passthrough camera".into()]);
     // Raw pointers are not Send: carried as addresses into the XR thread.
     let (vm, activity) = (app.vm_as_ptr() as usize, app.activity_as_ptr() as usize);
     let stop = AtomicBool::new(false);
@@ -786,6 +789,7 @@ fn run(app: &AndroidApp) -> Result<(), String> {
         let camera_thread = s.spawn(|| {
             if let Err(e) = calibrate_live(app, &models, &live, &camera_stop) {
                 log::error!("live calibration stopped: {e} (rendering with the current model)");
+                live.set_status(vec![format!("!live calibration stopped: {e}")]);
             }
         });
         let xr_thread = s.spawn(|| {
