@@ -312,25 +312,11 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                         return Err(xr::Result::ERROR_POSE_INVALID);
                     }
                     let sub = view.sub_image;
+                    let submitted = checked_sub_image(rt, &sub)?;
                     let Some(sc) = rt.swapchains.get(&sub.swapchain.into_raw()) else {
                         return Err(xr::Result::ERROR_HANDLE_INVALID);
                     };
-                    if sc.last_released.is_none() {
-                        return Err(xr::Result::ERROR_LAYER_INVALID);
-                    }
                     let r = sub.image_rect;
-                    if r.offset.x < 0
-                        || r.offset.y < 0
-                        || r.extent.width <= 0
-                        || r.extent.height <= 0
-                        || (r.offset.x + r.extent.width) as u32 > sc.width
-                        || (r.offset.y + r.extent.height) as u32 > sc.height
-                    {
-                        return Err(xr::Result::ERROR_SWAPCHAIN_RECT_INVALID);
-                    }
-                    if sub.image_array_index >= sc.array_size {
-                        return Err(xr::Result::ERROR_VALIDATION_FAILURE);
-                    }
                     let mut sw = false;
                     let mut next = view.next;
                     while !next.is_null() {
@@ -374,12 +360,7 @@ unsafe fn read_layers(rt: &Runtime, info: &xr::FrameEndInfo) -> Result<Vec<Layer
                         "orientation": [q.x, q.y, q.z, q.w],
                         "space_warp": sw,
                     }));
-                    views.push(SubmittedView {
-                        swapchain: sub.swapchain.into_raw(),
-                        rect: r,
-                        array_index: sub.image_array_index,
-                        srgb: sc.format == ash::vk::Format::R8G8B8A8_SRGB,
-                    });
+                    views.push(submitted);
                 }
                 let f = p.layer_flags;
                 let source_alpha = f.contains(xr::CompositionLayerFlags::BLEND_TEXTURE_SOURCE_ALPHA);
