@@ -8,10 +8,11 @@
 //! The images are the runtime's: they are read with texel fetches through image views
 //! this struct owns (SAMPLED usage, which images made to be sampled carry — not
 //! TRANSFER_SRC, which a runtime need not grant), in the layout the runtime keeps
-//! them in. Teardown (`Drop`): wait for an in-flight read-back, then the fence, the
-//! command buffer and the views; the pipeline and the output buffer (fields) after.
+//! them in. Teardown (`Drop`): wait for an in-flight read-back, then the views; the
+//! command buffer and its fence, the pipeline and the output buffer (fields) after.
 #![allow(unsafe_code)]
 
+use super::fenced::FencedCommand;
 use super::{vkr, Buffer, ComputePipeline, GpuContext, GpuError, Resource};
 use ash::vk;
 
@@ -33,9 +34,7 @@ pub struct DepthReadback<'a> {
     layout: vk::ImageLayout,
     width: u32,
     height: u32,
-    cmd: vk::CommandBuffer,
-    fence: vk::Fence,
-    in_flight: bool,
+    commands: FencedCommand<'a>,
     pipeline: ComputePipeline<'a>,
     /// Host-visible: 2 × width × height f32, layer-major, rows as stored.
     output: Buffer<'a>,
@@ -73,18 +72,8 @@ impl<'a> DepthReadback<'a> {
             vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT,
             "env_depth values",
         )?;
-        let mut me = Self {
-            ctx,
-            views: vec![],
-            layout,
-            width,
-            height,
-            cmd: vk::CommandBuffer::null(),
-            fence: vk::Fence::null(),
-            in_flight: false,
-            pipeline,
-            output,
-        };
+        let mut me =
+            Self { ctx, views: vec![], layout, width, height, commands: FencedCommand::new(ctx)?, pipeline, output };
         for &image in images {
             let info = vk::ImageViewCreateInfo::default()
                 .image(image)
@@ -103,10 +92,6 @@ impl<'a> DepthReadback<'a> {
             let view = unsafe { ctx.device.create_image_view(&info, None) }.map_err(vkr("vkCreateImageView"))?;
             me.views.push(view);
         }
-        me.cmd = ctx.allocate_command_buffer()?;
-        // SAFETY: valid device; destroyed in `Drop`.
-        me.fence =
-            unsafe { ctx.device.create_fence(&vk::FenceCreateInfo::default(), None) }.map_err(vkr("vkCreateFence"))?;
         Ok(me)
     }
 
@@ -116,13 +101,13 @@ impl<'a> DepthReadback<'a> {
 
     /// Whether a read-back is queued and not yet collected.
     pub fn busy(&self) -> bool {
-        self.in_flight
+        self.commands.in_flight()
     }
 
     /// Queue the read of image `index`; false (nothing queued) while the previous
     /// read-back has not been collected.
     pub fn start(&mut self, index: usize) -> Result<bool, GpuError> {
-        if self.in_flight {
+        if self.commands.in_flight() {
             return Ok(false);
         }
         let Some(&view) = self.views.get(index) else {
@@ -138,63 +123,44 @@ impl<'a> DepthReadback<'a> {
         )?;
         let d = &self.ctx.device;
         let push = Push { width: self.width, height: self.height };
-        let begin = vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
-        // SAFETY: the command buffer is not pending (never submitted, or its fence was
-        // seen signalled and reset); recorded, ended and submitted on this thread.
-        unsafe {
-            d.begin_command_buffer(self.cmd, &begin).map_err(vkr("vkBeginCommandBuffer"))?;
-        }
-        self.pipeline.record(self.cmd, bytemuck::bytes_of(&push), [self.width.div_ceil(8), self.height.div_ceil(8), 2]);
-        // The shader's writes made visible to the host's reads after the fence
-        // (Vulkan spec 7.9, host access: a HOST_READ barrier is still required).
-        let to_host = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ);
-        // SAFETY: recording; a plain memory barrier.
-        unsafe {
-            d.cmd_pipeline_barrier(
-                self.cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[to_host],
-                &[],
-                &[],
-            );
-            d.end_command_buffer(self.cmd).map_err(vkr("vkEndCommandBuffer"))?;
-            let submit = vk::SubmitInfo::default().command_buffers(std::slice::from_ref(&self.cmd));
-            d.queue_submit(self.ctx.queue, &[submit], self.fence).map_err(vkr("vkQueueSubmit"))?;
-        }
-        self.in_flight = true;
+        let (pipeline, groups) = (&self.pipeline, [self.width.div_ceil(8), self.height.div_ceil(8), 2]);
+        self.commands.submit(|cmd| {
+            pipeline.record(cmd, bytemuck::bytes_of(&push), groups);
+            // The shader's writes made visible to the host's reads after the fence
+            // (Vulkan spec 7.9, host access: a HOST_READ barrier is still required).
+            let to_host = vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+                .dst_access_mask(vk::AccessFlags::HOST_READ);
+            // SAFETY: recording; a plain memory barrier.
+            unsafe {
+                d.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::PipelineStageFlags::HOST,
+                    vk::DependencyFlags::empty(),
+                    &[to_host],
+                    &[],
+                    &[],
+                )
+            };
+        })?;
         Ok(true)
     }
 
     /// The values of the read-back started last, once the GPU is done with it (never
     /// waits): 2 × width × height NDC depths, layer 0 (left eye) first, rows as stored.
     pub fn poll(&mut self) -> Result<Option<Vec<f32>>, GpuError> {
-        if !self.in_flight {
+        if !self.commands.in_flight() || self.commands.busy()? {
             return Ok(None);
         }
-        let d = &self.ctx.device;
-        // SAFETY: a fence of this device.
-        if !unsafe { d.get_fence_status(self.fence) }.map_err(vkr("vkGetFenceStatus"))? {
-            return Ok(None);
-        }
-        // SAFETY: signalled, so not in use by a pending submission.
-        unsafe { d.reset_fences(&[self.fence]) }.map_err(vkr("vkResetFences"))?;
-        self.in_flight = false;
         let bytes = self.output.read()?;
         Ok(Some(bytemuck::pod_collect_to_vec(&bytes)))
     }
 
-    /// Block until an in-flight read-back is done (teardown, tests).
+    /// Block until an in-flight read-back is done (teardown, tests); `poll` then
+    /// collects it.
     pub fn wait(&mut self) -> Result<(), GpuError> {
-        if self.in_flight {
-            // SAFETY: a fence of this device with a pending submission.
-            unsafe { self.ctx.device.wait_for_fences(&[self.fence], true, u64::MAX) }
-                .map_err(vkr("vkWaitForFences"))?;
-        }
-        Ok(())
+        self.commands.wait()
     }
 }
 
@@ -205,16 +171,10 @@ impl Drop for DepthReadback<'_> {
             // SAFETY: valid device.
             let _ = unsafe { self.ctx.device.device_wait_idle() };
         }
-        let d = &self.ctx.device;
-        // SAFETY: nothing pending uses the command buffer, fence or views (waited
-        // above); null handles (a failed `new`) are ignored by vkDestroy*/vkFree*.
+        // SAFETY: nothing pending uses the views (waited above).
         unsafe {
-            d.destroy_fence(self.fence, None);
-            if self.cmd != vk::CommandBuffer::null() {
-                d.free_command_buffers(self.ctx.command_pool, &[self.cmd]);
-            }
             for &v in &self.views {
-                d.destroy_image_view(v, None);
+                self.ctx.device.destroy_image_view(v, None);
             }
         }
     }

@@ -358,7 +358,7 @@ impl Drop for Texture<'_> {
 }
 
 /// A layout transition / memory dependency on `range` of `image` (same queue family).
-fn image_barrier(
+pub(crate) fn image_barrier(
     image: vk::Image,
     range: vk::ImageSubresourceRange,
     from: vk::ImageLayout,

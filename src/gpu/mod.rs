@@ -10,6 +10,7 @@
 #![allow(unsafe_code)]
 
 mod depth_readback;
+mod fenced;
 mod frames;
 mod graphics;
 mod image;
