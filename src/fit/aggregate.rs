@@ -126,7 +126,11 @@ fn pooled_level_sources(fits: &[&CameraModel]) -> Vec<LevelSource> {
 pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError> {
     let first = models.first().ok_or(FitError::NoFrames)?;
     let mut out = first.clone();
-    let total = models.len();
+    // Per effect, the frames that fitted it (an update may refit only some effects:
+    // the worker's per-effect cadence), so "p of n frames" counts like with like.
+    let fitted =
+        |d: fn(&CameraModel) -> &Diagnostics| models.iter().filter(|m| d(m).status != Status::NotFitted).count();
+    let total = fitted(|m| &m.noise.diagnostics);
 
     let noise: Vec<&CameraModel> = models.iter().filter(|m| m.noise.present).collect();
     let same = noise_pool(&noise);
@@ -161,7 +165,7 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         let votes =
             mb.iter().filter(|m| matches!(m.motion_blur.diagnostics.status, Status::Present | Status::Absent)).count();
         out.motion_blur.present = 2 * present > votes;
-        out.motion_blur.diagnostics = summary(&ds, present, total);
+        out.motion_blur.diagnostics = summary(&ds, present, fitted(|m| &m.motion_blur.diagnostics));
         out.motion_blur.diagnostics.status = match (out.motion_blur.present, votes) {
             (true, _) => Status::Present,
             (false, 0) => Status::NotIdentifiable,
@@ -179,7 +183,7 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         let pick = dof[dof.len() / 2];
         let ds: Vec<&Diagnostics> = dof.iter().map(|m| &m.depth_of_field.diagnostics).collect();
         out.depth_of_field = pick.depth_of_field.clone();
-        out.depth_of_field.diagnostics = summary(&ds, dof.len(), total);
+        out.depth_of_field.diagnostics = summary(&ds, dof.len(), fitted(|m| &m.depth_of_field.diagnostics));
     }
     out.validate().map_err(|e| FitError::Option { option: "aggregate", problem: e.to_string() })?;
     Ok(out)

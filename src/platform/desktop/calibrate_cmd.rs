@@ -239,6 +239,15 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             match e {
                 Event::Published(u) => {
                     fitted_frames.push(u.t_s);
+                    // Where the update's time went (RUST_LOG=debug): the worker's cost
+                    // per stage, as BENCHMARKS.md's breakdown reads it.
+                    log::debug!(
+                        "frame {} {:?} {:.1} ms: {}",
+                        u.frame,
+                        u.reason,
+                        1e3 * u.compute_s,
+                        u.stages_s.iter().map(|(k, v)| format!("{k} {:.1}", 1e3 * v)).collect::<Vec<_>>().join(", ")
+                    );
                     if let Some(tl) = &mut timeline {
                         let line = serde_json::to_string(&TimelineEntry {
                             frame: u.frame,

@@ -48,6 +48,7 @@ impl Calibrator {
         self.burst_until_s = t_s + 0.5 * self.cfg.burst_s;
         self.noise_since_s = t_s;
         self.after_change = true;
+        self.exposure_suspect = None;
         self.window.retain(|a| a.frame.t_s >= since_s);
         self.sharp.retain(|a| a.frame.t_s >= since_s);
         self.lagged.retain(|a| a.frame.t_s >= since_s);
@@ -197,8 +198,18 @@ impl Calibrator {
     /// as a change in both tiers (the accurate: 0.356 twice against a model of
     /// 0.460; the fast: 0.55 and 0.60 against 0.43; truth 0.40 throughout), and the
     /// restart published the drifted values (BENCHMARKS.md "The worker's noise at
-    /// a burst's start and after a reset").
-    pub(super) fn check_exposure(&mut self, m: &CameraModel) -> Option<String> {
+    /// a burst's start and after a reset"). Not checked in a change's burst
+    /// (`push_frame`): the model holds the old λ until the new estimates come.
+    ///
+    /// The second estimate is judged against the model and scatter the first one
+    /// was (`exposure_suspect`), and the change dates from the first (the estimates
+    /// and sharp frames from then on are the new camera's; with per-effect refits
+    /// the update before the second is not the first): the first new reading already moves a window of
+    /// few λ estimates, and the two readings then widen its scatter, so the second
+    /// judged against the moved model hid the change (an exposure change alone, the
+    /// fast tier refitting λ every other frame of its burst: published λ 0.36 and
+    /// a scatter of 0.19 after one reading of 0.23 against 0.50).
+    pub(super) fn check_exposure(&mut self, m: &CameraModel, t_s: f64) -> Option<(String, f64)> {
         let agg = self.published.as_ref()?;
         let (a, mb) = (agg.motion_blur.exposure?, &m.motion_blur);
         let (b, se) = (mb.exposure?, mb.diagnostics.stderr?);
@@ -208,17 +219,20 @@ impl Calibrator {
         {
             return None;
         }
-        let spread = self.exposure_scatter(&mb.diagnostics.method);
+        let (a, spread, since_s) = match self.exposure_suspect {
+            Some(first) => first,
+            None => (a, self.exposure_scatter(&mb.diagnostics.method), t_s),
+        };
         if (a - b).abs() as f64 > (4.0 * se.hypot(spread as f64)).max(0.1) {
-            self.exposure_suspects += 1;
-            if self.exposure_suspects >= 2 {
-                self.exposure_suspects = 0;
-                return Some(format!(
+            if self.exposure_suspect.take().is_some() {
+                let cause = format!(
                     "two estimates in a row read λ ≈ {b:.3}, the model {a:.3} (scatter of its estimates {spread:.3})"
-                ));
+                );
+                return Some((cause, since_s));
             }
+            self.exposure_suspect = Some((a, spread, t_s));
         } else {
-            self.exposure_suspects = 0;
+            self.exposure_suspect = None;
         }
         None
     }

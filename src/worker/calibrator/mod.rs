@@ -134,7 +134,9 @@ pub struct Calibrator {
     probes: VecDeque<Probe>,
     last_probe_s: f64,
     last_effect_fit_s: [f64; 3],
-    exposure_suspects: usize,
+    /// The published λ and its estimates' scatter a first off-model λ estimate was
+    /// judged against, and that estimate's time (`check_exposure`).
+    exposure_suspect: Option<(f32, f32, f64)>,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -205,7 +207,7 @@ impl Calibrator {
             probes: VecDeque::new(),
             last_probe_s: f64::NEG_INFINITY,
             last_effect_fit_s: [f64::NEG_INFINITY; 3],
-            exposure_suspects: 0,
+            exposure_suspect: None,
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -463,8 +465,10 @@ impl Calibrator {
             self.last_fit_s = t_s;
             match self.fit_frame(&analysed, &held, &mut events) {
                 Some((model, noise_lags)) => {
-                    if let Some(cause) = self.check_exposure(&model) {
-                        let since = self.estimates.back().map_or(t_s, |e| e.t_s);
+                    // Not in a change's burst: its model still holds the λ from before
+                    // the change until new estimates come, and they are following it.
+                    let following = in_burst && self.after_change;
+                    if let Some((cause, since)) = self.check_exposure(&model, t_s).filter(|_| !following) {
                         self.on_change(index, t_s, since, cause, &mut events);
                     }
                     let speed_px = analysed.sparse_flow.as_deref().and_then(sparse_speed_px);
@@ -524,8 +528,8 @@ impl Calibrator {
         events: &mut Vec<Event>,
     ) -> Option<(CameraModel, Vec<u64>)> {
         let index = current.frame.index;
-        // Per-effect cadence (`CalibratorConfig::refit_s`): every update during a
-        // burst, else when the effect's interval has passed.
+        // Per-effect cadence (`CalibratorConfig::refit_s`, `burst_refit_s` during a
+        // burst): each effect when its interval has passed and its phase comes.
         let t_s = current.frame.t_s;
         let in_burst = t_s < self.burst_until_s;
         // The blind noise refit waits for a frame the noise probe has already
@@ -533,19 +537,27 @@ impl Calibrator {
         // aligned previous frame, the largest single cost of a fast update (37 ms of
         // one core at 1280×960). Out of phase they made two alignments per 0.1 s.
         let aligned_now = self.aligned_previous.as_ref().is_some_and(|(i, a)| *i == index && a.is_some());
+        // Without a previous frame held (a burst's first frame, a reset that dropped
+        // them) the noise fit reads the frame alone and is superseded by the first
+        // fit with an aligned neighbour: that one comes on the next frame, whatever
+        // the burst's cadence.
+        let noise_alone = in_burst && self.window.is_empty();
         let mut due = |k: usize, wanted: bool, busy: bool| {
             let since = t_s - self.last_effect_fit_s[k];
-            let interval = self.cfg.refit_s[k] - 1e-9;
-            // Noise waits for an aligned frame; motion blur for an update that does
-            // not refit noise; depth of field for one that refits neither (the
-            // costly fits of the fast tier on separate updates). Each waits at most
-            // `PHASE_WAIT_S` past its interval.
+            let every_frame = in_burst && self.cfg.burst_refit_s[k] <= 0.0;
+            let interval = if in_burst { self.cfg.burst_refit_s[k] } else { self.cfg.refit_s[k] } - 1e-9;
+            // Noise waits for an aligned frame (in a burst it aligns its own);
+            // motion blur for an update that does not refit noise; depth of field
+            // for one that refits neither, in a burst one that does not refit noise
+            // (the costly parts of the fast tier on separate updates). Each waits at
+            // most `PHASE_WAIT_S` past its interval.
             let in_phase = match k {
-                0 => aligned_now,
+                0 => aligned_now || in_burst,
                 _ => !busy,
-            } || since >= interval + PHASE_WAIT_S;
-            let ok = wanted && (in_burst || (since >= interval && in_phase));
-            if ok {
+            } || since >= interval + PHASE_WAIT_S
+                || every_frame;
+            let ok = wanted && since >= interval && in_phase;
+            if ok && !(k == 0 && noise_alone) {
                 self.last_effect_fit_s[k] = t_s;
             }
             ok
@@ -555,7 +567,8 @@ impl Calibrator {
         // Depth of field waits for a frame with the head at rest once the edge pool
         // holds one (`pool_dof`): a moving frame's edges carry motion blur.
         let dof_wanted = self.cfg.effects.depth_of_field && (self.dof_pool.is_empty() || dof_still(current));
-        let fx = Effects { noise, motion_blur, depth_of_field: due(2, dof_wanted, noise || motion_blur) };
+        let dof_busy = noise || (motion_blur && !in_burst);
+        let fx = Effects { noise, motion_blur, depth_of_field: due(2, dof_wanted, dof_busy) };
         // The blind noise fit reads texture off the previous exposure aligned by pose
         // and depth (`fit::Neighbour`): on the calibration video its error falls from
         // ~20% to ~5% (BENCHMARKS.md).
