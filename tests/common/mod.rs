@@ -4,6 +4,7 @@
 
 pub mod calibration;
 pub mod independent;
+pub mod scenes;
 pub mod vtest;
 
 use blind_augment::image::{Flow, Plane, Rgb};

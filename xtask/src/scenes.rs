@@ -3,7 +3,8 @@
 //! mirrors (`owner+name/repo`, what the project's `fetch` tool brings) into
 //! `target/bench-scenes/`, writes `manifest.tsv` (how to read each one's depth), and
 //! runs `cargo bench --bench scenes` on them; its Markdown goes to
-//! `target/bench/scenes.md`. Nothing is vendored: each scene names its repository.
+//! `target/bench/scenes.md`. Each scene names its repository; three tuning scenes
+//! are also vendored for the CI subset (`tests/real_scenes.rs`).
 //! With a mirror of the PolyU real-world noisy image dataset it first runs `cargo
 //! bench --bench real_noise` on its crops (`target/bench/real_noise.md`);
 //! `--noise-only` stops there.
