@@ -585,3 +585,37 @@ fn restart_opens_a_new_start_up_burst() {
     let after = burst(36..44);
     assert!(!after.is_empty() && after.iter().all(|b| *b), "a burst again after the restart: {reasons:?}");
 }
+
+/// The fast tier's burst alternates noise with motion blur at any frame rate: with
+/// every other frame of the 30 fps sequence dropped (a 15 fps camera, or a worker
+/// dropping frames under load), noise and motion blur still never refit on the same
+/// update after the first frame, and each takes about half of the burst's updates
+/// (a fixed 0.05 s interval alone let noise take every update there and motion
+/// blur only every third, beside it).
+#[test]
+fn fast_burst_alternates_at_fifteen_fps() {
+    let (spec, frames) = sequence();
+    let cfg = CalibratorConfig::new(CalibrationTier::Fast, 1.0 / 30.0, Some(spec.view));
+    let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Fast)).expect("valid config");
+    cal.push_poses(&[pose(spec, 0)]).expect("poses");
+    let mut burst = vec![];
+    for f in frames.iter().filter(|f| f.index % 2 == 0) {
+        cal.push_poses(&[pose(spec, f.index + 1), pose(spec, f.index + 2)]).expect("poses");
+        for e in cal.push_frame(frame(f)).expect("valid frame") {
+            if let Event::Published(u) = e {
+                if u.t_s > 1e-9 && u.t_s < 1.0 - 1e-9 {
+                    let fits = |k: &str| u.stages_s.iter().any(|(s, _)| *s == k);
+                    burst.push((u.t_s, fits("fit.noise"), fits("fit.motion_blur")));
+                }
+            }
+        }
+    }
+    eprintln!("burst updates (t, noise, motion blur): {burst:?}");
+    assert!(burst.len() >= 13, "{} burst updates", burst.len());
+    assert!(burst.iter().all(|&(_, n, m)| !(n && m)), "noise and motion blur on one update: {burst:?}");
+    for (name, count) in
+        [("noise", burst.iter().filter(|b| b.1).count()), ("motion blur", burst.iter().filter(|b| b.2).count())]
+    {
+        assert!(2 * count + 2 >= burst.len(), "{name} on {count} of {} burst updates", burst.len());
+    }
+}

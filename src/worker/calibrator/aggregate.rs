@@ -20,8 +20,9 @@ const SHOWN_STREAK_PX: f32 = 0.7;
 /// aligned from ~40 px away read λ = 0.000 ± 0.013 (confident) where the truth was
 /// 0.4 (a Middlebury scene of `cargo xtask bench-quality`), and once the turn's
 /// present readings had left the window that lone vote dropped the exposure for
-/// the whole rest that followed. Three readings span a tenth of a second at the
-/// worker's 30 Hz burst and a few tenths on schedule.
+/// the whole rest that followed. Three readings span a tenth of a second in an
+/// accurate-tier burst at 30 Hz, about two tenths in the fast tier's (each effect
+/// every other frame), and a few tenths on schedule.
 const MIN_ABSENT_VOTES: usize = 3;
 
 /// Presence with hysteresis.

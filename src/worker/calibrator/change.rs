@@ -6,6 +6,9 @@ use crate::analysis::temporal::{band_stride, in_band};
 
 /// Video time between noise probes (change detection), every tier.
 pub(super) const PROBE_INTERVAL_S: f64 = 0.1;
+/// How long a first off-model λ reading waits for its second (`check_exposure`):
+/// λ refits come every 0.1 s after the burst, so a few of them.
+const SUSPECT_MAX_AGE_S: f64 = 0.5;
 
 /// Pixels the temporal noise probe reads at most: above this, bands of rows spread
 /// over the frame (`temporal::in_band`), the same ones every time. Its threshold was
@@ -218,6 +221,12 @@ impl Calibrator {
             || agg.motion_blur.diagnostics.method != mb.diagnostics.method
         {
             return None;
+        }
+        // Two in a row means two readings close in time: a first one older than
+        // `SUSPECT_MAX_AGE_S` (a rest between, whose readings are not confident) is
+        // forgotten, and this one judged afresh.
+        if self.exposure_suspect.is_some_and(|(_, _, t0)| t_s - t0 > SUSPECT_MAX_AGE_S) {
+            self.exposure_suspect = None;
         }
         let (a, spread, since_s) = match self.exposure_suspect {
             Some(first) => first,

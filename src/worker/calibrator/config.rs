@@ -66,11 +66,13 @@ pub struct CalibratorConfig {
     /// the cost of rarely changing ones is spread out (a fixed-focus camera's DoF
     /// only changes with a detected change, which restarts the burst).
     pub refit_s: [f64; 3],
-    /// The same during a burst (0: every frame). The fast tier refits each effect
-    /// every other frame at 30 fps there, noise on one, motion blur and depth of
-    /// field on the next: the noise fit's alignment and the motion-blur fit's
-    /// references (~20 ms each of one core at 1280×960) then never share an update,
-    /// and a burst second still holds 15 fits of each.
+    /// The same during a burst (0: every frame). Where it is not 0 noise also takes
+    /// turns with the other effects, update by update (the first frame, whose
+    /// noise fit has no previous frame, aside): the fast tier refits noise on one
+    /// frame and motion blur and depth of field on the next, so the noise fit's
+    /// alignment and the motion-blur fit's references (~20 ms each of one core at
+    /// 1280×960) never share an update, and a 30 fps burst second still holds 15
+    /// fits of each.
     pub burst_refit_s: [f64; 3],
     /// Newest frames held for temporal references (besides the sharp ones).
     pub frames_held: usize,

@@ -7,7 +7,9 @@
 //!    window (the newest `frames_held`, plus the sharpest frames seen recently, the
 //!    references for motion blur).
 //! 2. **Fit** when due: every frame during the start-up burst (boundary setup) and
-//!    after a detected change, then every `update_interval_s` of video. The tier
+//!    after a detected change (each effect every `burst_refit_s`: the fast tier
+//!    alternates noise with motion blur and depth of field), then every
+//!    `update_interval_s` of video. The tier
 //!    decides the references: `fast` fits the frame alone (blind); `balanced` and
 //!    `accurate` use video as its own reference (aligned mean as I_noNoise, the
 //!    sharpest aligned frames as I_noMB; `analysis::temporal`) or the providers
@@ -108,7 +110,7 @@ pub enum Phase {
     /// No frame yet since the start or a restart.
     #[default]
     Waiting,
-    /// Fitting every frame: the start-up burst (boundary setup: the user should
+    /// Updating every frame: the start-up burst (boundary setup: the user should
     /// look around), or the shorter one after a detected camera change.
     Burst { elapsed_s: f64, of_s: f64, after_change: bool },
     /// Updating on schedule.
@@ -137,6 +139,9 @@ pub struct Calibrator {
     /// The published λ and its estimates' scatter a first off-model λ estimate was
     /// judged against, and that estimate's time (`check_exposure`).
     exposure_suspect: Option<(f32, f32, f64)>,
+    /// Whether the last update refitted noise with a neighbour (the fast tier's
+    /// burst alternates noise with the other effects: `fit_frame`).
+    noise_last_update: bool,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -208,6 +213,7 @@ impl Calibrator {
             last_probe_s: f64::NEG_INFINITY,
             last_effect_fit_s: [f64::NEG_INFINITY; 3],
             exposure_suspect: None,
+            noise_last_update: false,
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -466,9 +472,12 @@ impl Calibrator {
             match self.fit_frame(&analysed, &held, &mut events) {
                 Some((model, noise_lags)) => {
                     // Not in a change's burst: its model still holds the λ from before
-                    // the change until new estimates come, and they are following it.
+                    // the change until new estimates come, and they are following it
+                    // (no reading there starts a suspicion either).
                     let following = in_burst && self.after_change;
-                    if let Some((cause, since)) = self.check_exposure(&model, t_s).filter(|_| !following) {
+                    if following {
+                        self.exposure_suspect = None;
+                    } else if let Some((cause, since)) = self.check_exposure(&model, t_s) {
                         self.on_change(index, t_s, since, cause, &mut events);
                     }
                     let speed_px = analysed.sparse_flow.as_deref().and_then(sparse_speed_px);
@@ -542,17 +551,23 @@ impl Calibrator {
         // fit with an aligned neighbour: that one comes on the next frame, whatever
         // the burst's cadence.
         let noise_alone = in_burst && self.window.is_empty();
+        // In a burst that spaces its refits, noise takes turns with the others,
+        // update by update, whatever the frame rate (a fixed interval let noise take
+        // every update at 20 fps or less, or when frames are dropped under load).
+        let noise_turn = !self.noise_last_update || !(self.cfg.effects.motion_blur || self.cfg.effects.depth_of_field);
         let mut due = |k: usize, wanted: bool, busy: bool| {
             let since = t_s - self.last_effect_fit_s[k];
             let every_frame = in_burst && self.cfg.burst_refit_s[k] <= 0.0;
             let interval = if in_burst { self.cfg.burst_refit_s[k] } else { self.cfg.refit_s[k] } - 1e-9;
-            // Noise waits for an aligned frame (in a burst it aligns its own);
+            // Noise waits for an aligned frame (in a burst it aligns its own, on
+            // the updates after one that did not refit it);
             // motion blur for an update that does not refit noise; depth of field
             // for one that refits neither, in a burst one that does not refit noise
             // (the costly parts of the fast tier on separate updates). Each waits at
             // most `PHASE_WAIT_S` past its interval.
             let in_phase = match k {
-                0 => aligned_now || in_burst,
+                0 if in_burst => noise_turn,
+                0 => aligned_now,
                 _ => !busy,
             } || since >= interval + PHASE_WAIT_S
                 || every_frame;
@@ -563,6 +578,7 @@ impl Calibrator {
             ok
         };
         let noise = due(0, self.cfg.effects.noise, false);
+        self.noise_last_update = noise && !noise_alone;
         let motion_blur = due(1, self.cfg.effects.motion_blur, noise);
         // Depth of field waits for a frame with the head at rest once the edge pool
         // holds one (`pool_dof`): a moving frame's edges carry motion blur.
