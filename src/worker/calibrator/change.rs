@@ -205,13 +205,14 @@ impl Calibrator {
     /// (`push_frame`): the model holds the old λ until the new estimates come.
     ///
     /// The second estimate is judged against the model and scatter the first one
-    /// was (`exposure_suspect`), and the change dates from the first (the estimates
-    /// and sharp frames from then on are the new camera's; with per-effect refits
-    /// the update before the second is not the first): the first new reading already moves a window of
-    /// few λ estimates, and the two readings then widen its scatter, so the second
+    /// was (`exposure_suspect`): the first new reading already moves a window of few
+    /// λ estimates, and the two readings then widen its scatter, so the second
     /// judged against the moved model hid the change (an exposure change alone, the
-    /// fast tier refitting λ every other frame of its burst: published λ 0.36 and
-    /// a scatter of 0.19 after one reading of 0.23 against 0.50).
+    /// fast tier refitting λ every other frame of its burst: published λ 0.36 and a
+    /// scatter of 0.19 after one reading of 0.23 against 0.50). The change dates
+    /// from the first reading (the estimates and sharp frames from then on are the
+    /// new camera's; with per-effect refits the update before the second is not the
+    /// first).
     pub(super) fn check_exposure(&mut self, m: &CameraModel, t_s: f64) -> Option<(String, f64)> {
         let agg = self.published.as_ref()?;
         let (a, mb) = (agg.motion_blur.exposure?, &m.motion_blur);
