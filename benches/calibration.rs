@@ -204,7 +204,9 @@ fn main() {
     let known_frames = frames(&textured, &known, known.frames);
     let mut points = vec![];
     let mut stage_lines = vec![];
-    for tier in TIERS {
+    // One tier by name (`CALIB_BENCH_TIER=accurate`): a third of the run.
+    let tier_only = std::env::var("CALIB_BENCH_TIER").ok();
+    for tier in TIERS.into_iter().filter(|t| tier_only.as_deref().map_or(true, |n| n == t.name())) {
         let r = run(tier, &small, &small_frames, small.source_pixel_blur_px(&scene));
         let big_run = one.install(|| run(tier, &big, &big_frames, big.source_pixel_blur_px(&scene)));
         let burst: Vec<f64> = big_run.published.iter().filter(|p| p.t_s < 1.0).map(|p| p.compute_s).collect();

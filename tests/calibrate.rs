@@ -619,3 +619,50 @@ fn fast_burst_alternates_at_fifteen_fps() {
         assert!(2 * count + 2 >= burst.len(), "{name} on {count} of {} burst updates", burst.len());
     }
 }
+
+/// The accurate tier refits λ on every update (one per 0.1 s) while the head moves
+/// and not at rest (`CalibratorConfig::mb_moving_only`). The calibration video's
+/// head, 2.5 s of it turning faster (0.08 rad in 0.4 s, rests of 0.4 s: up to ~8
+/// px/frame): after the 1 s start-up burst, every update that refits motion blur is
+/// on a frame moving ≥ 3.5 px/frame at its fastest (the worker's rule is ≥ 4 px on
+/// the sparse grid, which the truth flow's maximum over every pixel bounds from
+/// above, less 0.5 px for the pose track's interpolation), and the moving frames
+/// get at least one λ fit per 0.15 s of video (one update per 0.25 s gave two to
+/// five λ fits on a turn of 0.5–1.2 s, each ±2–8% on real scenes made elsewhere:
+/// BENCHMARKS.md).
+#[test]
+fn accurate_tier_refits_motion_blur_while_the_head_moves() {
+    let mut spec = SequenceSpec::motorcycle(scene(), 320, 240, 75, None);
+    spec.path.yaw_amplitude_rad = 0.08;
+    spec.path.move_s = 0.4;
+    let frames: Vec<_> = (0..spec.frames).map(|i| spec.frame(scene(), i)).collect();
+    let max_speed = |i: usize| {
+        let f = &frames[i.min(frames.len() - 1)].flow;
+        f.dx.iter().zip(&f.dy).map(|(x, y)| x.hypot(*y)).fold(0.0f32, f32::max)
+    };
+    let cfg = CalibratorConfig::new(CalibrationTier::Accurate, 1.0 / 30.0, Some(spec.view));
+    let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Accurate)).expect("valid config");
+    cal.push_poses(&[pose(&spec, 0), pose(&spec, 1)]).expect("poses");
+    let mut mb_fits = vec![];
+    for f in &frames {
+        cal.push_poses(&[pose(&spec, f.index + 2)]).expect("poses");
+        for e in cal.push_frame(frame(f)).expect("valid frame") {
+            if let Event::Published(u) = e {
+                if u.t_s >= 1.0 && u.stages_s.iter().any(|(k, _)| *k == "fit.motion_blur") {
+                    mb_fits.push((u.t_s, max_speed(f.index)));
+                }
+            }
+        }
+    }
+    let moving_s = (30..frames.len()).filter(|&i| max_speed(i) >= 4.0).count() as f64 / spec.fps as f64;
+    eprintln!("λ fits after the burst (t, fastest px/frame): {mb_fits:?}; moving {moving_s:.2} s of it");
+    assert!(moving_s >= 0.5, "the sequence must move after the burst: {moving_s} s");
+    for (t, speed) in &mb_fits {
+        assert!(*speed >= 3.5, "λ refitted at {t:.2} s with the head at rest ({speed:.2} px/frame)");
+    }
+    assert!(
+        mb_fits.len() as f64 >= (moving_s / 0.15).floor(),
+        "{} λ fits in {moving_s:.2} s of moving video",
+        mb_fits.len()
+    );
+}

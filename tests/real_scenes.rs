@@ -45,12 +45,12 @@ fn scenes() -> Vec<Entry> {
 
 /// Per scene and tier, the targets for the held-out split, held here on the
 /// tuning subset (measured values in brackets, VM, 2026-12-07):
-/// * λ: the fast tier within 0.05 (0.004 / 0.011 / 0.012); the accurate tier's median
-///   over the three within 0.01 (0.0079), each within 0.05 — not the 0.02 p90 target:
-///   Art reads 0.040, the accurate tier's known upward bias on footage not made here;
+/// * λ: the fast tier within 0.05 (0.004 / 0.011 / 0.012); the accurate tier each
+///   within 0.02, its p90 target, and their median within 0.01 (0.002 / 0.013 /
+///   0.008; with one λ fit per 0.25 s instead of one per moving update, Art 0.040);
 /// * noise (median relative error of the published level stds): fast within 15%
-///   (3.9 / 1.5 / 2.0%), accurate within 3% (1.4 / 1.0 / 2.1%);
-/// * the change followed within 1 s of the first frame that can show it (0.03–0.23 s);
+///   (3.9 / 1.5 / 2.0%), accurate within 3% (1.6 / 1.1 / 1.6%);
+/// * the change followed within 1 s of the first frame that can show it (0.03–0.07 s);
 /// * motion blur never dropped after it is first published (no flicker over rests).
 #[test]
 fn real_scenes_calibrate_within_stated_tolerances() {
@@ -80,7 +80,7 @@ fn real_scenes_calibrate_within_stated_tolerances() {
             );
             let (lambda_max, noise_max) = match tier {
                 CalibrationTier::Fast => (0.05, 0.15),
-                _ => (0.05, 0.03),
+                _ => (0.02, 0.03),
             };
             let lambda = r.lambda_err.unwrap_or_else(|| panic!("{} {tier:?}: no λ published", e.id));
             assert!(lambda <= lambda_max, "{} {tier:?}: λ error {lambda:.4} > {lambda_max}", e.id);

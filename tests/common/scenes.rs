@@ -192,11 +192,40 @@ impl blind_augment::analysis::MotionDeblurrer for TruthSharp {
 }
 
 pub struct RunResult {
+    /// Per publication outside the settling windows, the published δ(Z) (px) at
+    /// `dof_depths`.
+    pub dof_sigma_px: Vec<Vec<f32>>,
+    /// The truth's δ(Z) at `dof_depths` (constant over the run).
+    pub truth_sigma_px: Vec<f32>,
     pub lambda_err: Option<f32>,
     pub noise_err: Option<f32>,
     pub follow_s: Option<f64>,
     pub drops: usize,
     pub secs: f64,
+}
+
+/// The depths δ(Z) is compared at: the 16 quantiles (1/32, 3/32, …) of the
+/// scene's measured depth, so a depth counts as often as the scene shows it.
+pub fn dof_depths(scene: &Scene) -> Vec<f32> {
+    let mut z: Vec<f32> = scene.depth_m.data.iter().copied().filter(|z| z.is_finite() && *z > 0.0).collect();
+    z.sort_by(f32::total_cmp);
+    if z.is_empty() {
+        return vec![];
+    }
+    (0..16).map(|i| z[((z.len() - 1) as f32 * (i as f32 + 0.5) / 16.0) as usize]).collect()
+}
+
+/// The same sequence without the applied defocus (its δ(Z) absent, λ and noise
+/// as before): what the blind δ(Z) reads there is the scene's own softness (the
+/// photograph's focus, its pixel, the re-rendering's resampling).
+pub fn without_defocus(spec: &SequenceSpec) -> SequenceSpec {
+    let mut s = spec.clone();
+    let absent = |d: &mut DepthOfField| *d = DepthOfField::absent(d.units, Diagnostics::not_fitted("ground truth"));
+    absent(&mut s.truth.depth_of_field);
+    if let Some((_, after)) = &mut s.change {
+        absent(&mut after.depth_of_field);
+    }
+    s
 }
 
 /// 90th percentile of a flow's speed (px/frame; 0 for an empty flow).
@@ -280,6 +309,13 @@ pub fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResu
         }
     }
     let settled = |t: f64| t >= SETTLE_S && !(CHANGE_S..CHANGE_S + SETTLE_S).contains(&t);
+    let depths = dof_depths(&entry.scene);
+    let dof_sigma_px = published
+        .iter()
+        .filter(|p| settled(p.0))
+        .map(|(_, m, _)| depths.iter().map(|&z| m.depth_of_field.sigma_px(z)).collect())
+        .collect();
+    let truth_sigma_px = depths.iter().map(|&z| spec.truth.depth_of_field.sigma_px(z)).collect();
     let lambda = published
         .iter()
         .filter(|p| settled(p.0))
@@ -297,6 +333,8 @@ pub fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResu
     let first = published.iter().position(|p| p.1.motion_blur.present);
     let drops = first.map_or(0, |i| published[i..].iter().filter(|p| !p.1.motion_blur.present).count());
     RunResult {
+        dof_sigma_px,
+        truth_sigma_px,
         lambda_err: median(lambda),
         noise_err: median(noise.collect()),
         follow_s,

@@ -42,7 +42,7 @@ impl CalibrationTier {
         match self {
             Self::Fast => 0.0,
             Self::Balanced => 0.2,
-            Self::Accurate => 0.25,
+            Self::Accurate => 0.1,
         }
     }
 }
@@ -74,6 +74,11 @@ pub struct CalibratorConfig {
     /// 1280×960) never share an update, and a 30 fps burst second still holds 15
     /// fits of each.
     pub burst_refit_s: [f64; 3],
+    /// Outside a burst, refit motion blur only on frames whose motion (the sparse
+    /// grid's largest, px per frame) shows a streak the temporal fit reads
+    /// (`MB_MIN_FLOW_PX`): at rest λ is not identifiable, and a reference made
+    /// then is spent for nothing.
+    pub mb_moving_only: bool,
     /// Newest frames held for temporal references (besides the sharp ones).
     pub frames_held: usize,
     /// Sharp frames (head at rest) held, and how long (s).
@@ -106,7 +111,11 @@ impl CalibratorConfig {
                 // every 0.1 s, on the updates that refit neither noise nor λ, the
                 // window's median sees ten of them.
                 CalibrationTier::Fast => [0.1, 0.1, 0.1],
-                _ => [0.0, 0.0, 1.0],
+                CalibrationTier::Balanced => [0.0, 0.0, 1.0],
+                // λ on every update the head moves (`mb_moving_only`), noise every
+                // 0.25 s: a turn of 0.5–1.2 s gave two to five λ fits at one update
+                // per 0.25 s, each ±2–8% on real scenes made elsewhere (BENCHMARKS.md).
+                CalibrationTier::Accurate => [0.25, 0.0, 1.0],
             },
             burst_refit_s: match tier {
                 // 1.5 frame intervals at 30 fps: every other frame, whatever the
@@ -115,6 +124,7 @@ impl CalibratorConfig {
                 _ => [0.0; 3],
             },
             window_s: 1.0,
+            mb_moving_only: tier == CalibrationTier::Accurate,
             frames_held: match tier {
                 CalibrationTier::Fast => 1, // the previous frame: flow fallback, noise probe
                 CalibrationTier::Balanced => 6,

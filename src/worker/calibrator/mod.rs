@@ -579,7 +579,9 @@ impl Calibrator {
         };
         let noise = due(0, self.cfg.effects.noise, false);
         self.noise_last_update = noise && !noise_alone;
-        let motion_blur = due(1, self.cfg.effects.motion_blur, noise);
+        let moving = current.max_motion_px().map_or(true, |m| m >= MB_MIN_FLOW_PX);
+        let motion_blur =
+            due(1, self.cfg.effects.motion_blur && (in_burst || moving || !self.cfg.mb_moving_only), noise);
         // Depth of field waits for a frame with the head at rest once the edge pool
         // holds one (`pool_dof`): a moving frame's edges carry motion blur.
         let dof_wanted = self.cfg.effects.depth_of_field && (self.dof_pool.is_empty() || dof_still(current));
