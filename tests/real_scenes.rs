@@ -47,7 +47,7 @@ fn scenes() -> Vec<Entry> {
 /// tuning subset (measured values in brackets, VM, 2026-12-07):
 /// * λ: the fast tier within 0.05 (0.004 / 0.011 / 0.012); the accurate tier each
 ///   within 0.02, its p90 target, and their median within 0.01 (0.002 / 0.013 /
-///   0.008; with one λ fit per 0.25 s instead of one per moving update, Art 0.040);
+///   0.004; with one λ fit per 0.25 s instead of one per moving update, Art 0.040);
 /// * noise (median relative error of the published level stds): fast within 15%
 ///   (3.9 / 1.5 / 2.0%), accurate within 3% (1.6 / 1.1 / 1.6%);
 /// * the change followed within 1 s of the first frame that can show it (0.03–0.07 s);

@@ -77,9 +77,12 @@ fn a_desktop_recording_replays_the_live_calibration() {
     let m: Manifest =
         serde_json::from_str(&std::fs::read_to_string(rec.join("manifest.json")).expect("manifest")).expect("manifest");
     assert_eq!(m.stopped, StopReason::Stopped);
-    // However little CPU the low-priority worker gets on a loaded machine, it
-    // takes the first frame and, waited for at the end, the ones after its fits.
-    assert!(m.frames >= 2, "the worker took {} frames", m.frames);
+    // The low-priority worker takes the first frame and then whichever frames come
+    // while it is idle: how many depends on the CPU it gets (on a quiet two-core
+    // machine about half; with two other jobs busy on both cores its first fit
+    // outlasted the 1.2 s feed and it took that frame alone). What must hold
+    // whatever it took: the replay below reproduces it.
+    assert!(m.frames >= 1, "the worker took no frame");
     assert_eq!(m.frames_with_depth, m.frames);
     assert!(m.poses_csv, "{:?}", m.notes);
     assert!(m.models_published >= 1, "{m:?}");

@@ -243,7 +243,11 @@ fn median(mut v: Vec<f32>) -> Option<f32> {
 pub fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResult {
     let t0 = Instant::now();
     let trace = std::env::var_os("BENCH_SCENES_TRACE").is_some();
-    let cfg = CalibratorConfig::new(tier, 1.0 / FPS as f64, Some(spec.view));
+    let mut cfg = CalibratorConfig::new(tier, 1.0 / FPS as f64, Some(spec.view));
+    // `BENCH_SCENES_EXPOSURE_MEMORY_S=S`: the exposure memory tried at another length.
+    if let Some(s) = std::env::var("BENCH_SCENES_EXPOSURE_MEMORY_S").ok().and_then(|s| s.parse().ok()) {
+        cfg.exposure_memory_s = s;
+    }
     // `BENCH_SCENES_TRUTH_FLOW=1`: the frames carry the truth flow and the worker
     // reads it instead of the pose + depth flow (the references still come from
     // poses and depth): separates the flow's part of a λ error from the references'.
@@ -263,6 +267,7 @@ pub fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResu
     let mut cal = Calibrator::new(cfg, providers).expect("valid config");
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
     let mut published: Vec<(f64, CameraModel, CameraModel)> = vec![];
+    let depths = dof_depths(&entry.scene);
     // The first frame after the change whose streak λ can be read (truth flow ≥
     // 4 px/frame at its 90th percentile, the temporal fit's shortest flow): a change
     // during a rest cannot show in λ before it.
@@ -282,6 +287,17 @@ pub fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResu
             let r =
                 blind_augment::synth::apply_camera_model(&f.clean, &m, Some(&f.depth_m), Some(&f.flow), 977 + i as u64);
             *sharp_slot.lock().expect("slot") = Some(r.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0));
+        }
+        // `BENCH_SCENES_DUMP=DIR`: a tuning scene's frames 0, 45, 90 and 135 as PNG (what
+        // the worker saw), named by scene, frame and whether defocus was applied.
+        if let (Some(dir), false) = (std::env::var_os("BENCH_SCENES_DUMP"), entry.held_out) {
+            if i % 45 == 0 {
+                let dof = if spec.truth.depth_of_field.present { "dof" } else { "free" };
+                let path = std::path::Path::new(&dir).join(format!("{}-{dof}-{i:03}.png", entry.id));
+                if let Err(e) = blind_augment::io::save_rgb(&path, &f.image, blind_augment::io::BitDepth::Eight) {
+                    eprintln!("{}: {e}", path.display());
+                }
+            }
         }
         let mut input = frame(&f);
         if truth_flow {
@@ -303,13 +319,23 @@ pub fn run(entry: &Entry, spec: &SequenceSpec, tier: CalibrationTier) -> RunResu
                         noise_relative_error(&u.model.noise, &f.truth.noise),
                         mb.diagnostics.reason
                     );
+                    // δ(Z) at the scene's depth quantiles 1/32, 15/32, 31/32 against the
+                    // truth's there (px).
+                    let dof = &u.model.depth_of_field;
+                    let at = |d: &DepthOfField| [0, 7, 15].map(|i| depths.get(i).map_or(0.0, |&z| d.sigma_px(z)));
+                    eprintln!(
+                        "    δ {:.2?} (truth {:.2?}) {:?} | {}",
+                        at(dof),
+                        at(&f.truth.depth_of_field),
+                        dof.diagnostics.status,
+                        dof.diagnostics.reason
+                    );
                 }
                 published.push((u.t_s, u.model, f.truth.clone()));
             }
         }
     }
     let settled = |t: f64| t >= SETTLE_S && !(CHANGE_S..CHANGE_S + SETTLE_S).contains(&t);
-    let depths = dof_depths(&entry.scene);
     let dof_sigma_px = published
         .iter()
         .filter(|p| settled(p.0))

@@ -143,7 +143,30 @@ impl Calibrator {
                 m.depth_of_field = crate::model::DepthOfField::absent(units, not_fitted());
             }
         }
+        // The newest estimate's λ, if confident and made with a reference, joins the
+        // exposure history; where the window's λ comes from such estimates, the
+        // history's median (back to `exposure_memory_s` or the last change) is
+        // published instead of the window's alone.
+        let reference_lambda =
+            |m: &CameraModel| m.motion_blur.exposure.filter(|_| with_reference(&m.motion_blur.diagnostics));
+        if let Some(l) = models.last().and_then(reference_lambda) {
+            self.exposure_history.push_back((t_s, l));
+        }
+        let memory_from = t_s - self.cfg.exposure_memory_s.max(self.cfg.window_s);
+        while self.exposure_history.front().is_some_and(|e| e.0 < memory_from) {
+            self.exposure_history.pop_front();
+        }
         let mut agg = fit::aggregate_models(&models).ok()?;
+        if self.cfg.exposure_memory_s > self.cfg.window_s
+            && agg.motion_blur.exposure.is_some()
+            && models.iter().any(|m| reference_lambda(m).is_some())
+        {
+            let mut v: Vec<f32> = self.exposure_history.iter().map(|e| e.1).collect();
+            v.sort_by(f32::total_cmp);
+            if let Some(&m) = v.get(v.len() / 2) {
+                agg.motion_blur.exposure = Some(m);
+            }
+        }
         let prev = self.published.clone();
         let on = [self.presence[0].update(np, ni), self.presence[1].update(mp, mi), self.presence[2].update(dp, di)];
         // Hysteresis holds an effect on while the window's majority has flipped:
@@ -309,6 +332,49 @@ mod tests {
             assert_eq!(m.motion_blur.exposure, Some(0.5), "frame {frame}");
             assert_eq!(m.motion_blur.diagnostics.status, Status::Present, "frame {frame}");
         }
+    }
+
+    /// The accurate tier's exposure memory (`CalibratorConfig::exposure_memory_s`,
+    /// 4 s): two turns 2 s apart, the first reading λ 0.43–0.45, the second 0.35–
+    /// 0.38 (single fits scatter like that on real scenes made elsewhere), with a
+    /// rest between them that reads nothing: at the end of the second turn the
+    /// published λ is the median of all seven readings (0.38), not of the second
+    /// turn's alone (the 1 s window's: 0.37). After a detected change the readings
+    /// from before it are gone: the new camera's 0.8 is published alone.
+    #[test]
+    fn the_accurate_exposure_is_the_median_since_the_last_change() {
+        let cfg = CalibratorConfig::new(CalibrationTier::Accurate, 1.0 / 30.0, None);
+        let mut cal = Calibrator::new(cfg, Providers::for_tier(CalibrationTier::Accurate)).expect("config");
+        let reading = |frame: u64, lambda: Option<f32>| {
+            let status = if lambda.is_some() { Status::Present } else { Status::NotIdentifiable };
+            let mut e = estimate(frame, status, lambda, if lambda.is_some() { 8.0 } else { 0.2 });
+            e.model.motion_blur.diagnostics.method = "accurate".into();
+            e
+        };
+        let publish = |cal: &mut Calibrator, e: Estimate| {
+            let (frame, t_s) = (e.frame, e.t_s);
+            cal.estimates.push_back(e);
+            cal.aggregate(frame, t_s, UpdateReason::Schedule, Instant::now()).expect("published").model
+        };
+        // Turn one: frames 0, 3, 6 (every 0.1 s); rest: frames 9…57, nothing read;
+        // turn two: frames 60, 63, 66, 69.
+        for (f, l) in [(0, 0.44), (3, 0.43), (6, 0.45)] {
+            publish(&mut cal, reading(f, Some(l)));
+        }
+        for f in (9..60).step_by(3) {
+            let m = publish(&mut cal, reading(f, None));
+            assert_eq!(m.motion_blur.exposure, Some(0.44), "frame {f}: the rest keeps the first turn's median");
+        }
+        let mut last = None;
+        for (f, l) in [(60, 0.36), (63, 0.37), (66, 0.35), (69, 0.38)] {
+            last = Some(publish(&mut cal, reading(f, Some(l))));
+        }
+        let m = last.expect("published");
+        assert_eq!(m.motion_blur.exposure, Some(0.38), "the median of both turns' seven readings");
+        let mut events = vec![];
+        cal.on_change(70, 70.0 / 30.0, 70.0 / 30.0, "test".into(), &mut events);
+        let m = publish(&mut cal, reading(72, Some(0.8)));
+        assert_eq!(m.motion_blur.exposure, Some(0.8), "readings from before the change are forgotten");
     }
 
     /// A window whose only identifiable reading says "present" but pins λ down to

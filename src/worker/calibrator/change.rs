@@ -47,6 +47,7 @@ impl Calibrator {
     pub(super) fn on_change(&mut self, frame: u64, t_s: f64, since_s: f64, cause: String, events: &mut Vec<Event>) {
         events.push(Event::ChangeDetected { frame, t_s, cause });
         self.estimates.retain(|e| e.t_s >= since_s);
+        self.exposure_history.retain(|e| e.0 >= since_s);
         self.probes.retain(|p| p.t_s >= since_s);
         self.burst_until_s = t_s + 0.5 * self.cfg.burst_s;
         self.noise_since_s = t_s;

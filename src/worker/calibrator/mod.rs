@@ -19,7 +19,8 @@
 //!    coefficient-wise median (`fit::aggregate_models`: outliers do not move it;
 //!    noise over the fits near the medoid, of the form most of them share),
 //!    presence with hysteresis (on at ≥ 60% of identifiable estimates, off at
-//!    ≤ 30%) so effects do not flicker.
+//!    ≤ 30%) so effects do not flicker; confident λ fitted against references over
+//!    `exposure_memory_s` since the last change (the accurate tier: 4 s).
 //! 4. **Detect change** (`change.rs`): a shift of the luminance histogram, a step in
 //!    the noise probe (this frame minus the previous one aligned, every 0.1 s), or
 //!    two confident exposure estimates in a row off the model beyond their own and
@@ -136,6 +137,9 @@ pub struct Calibrator {
     probes: VecDeque<Probe>,
     last_probe_s: f64,
     last_effect_fit_s: [f64; 3],
+    /// Confident λ estimates with a reference (time, λ) of the last
+    /// `exposure_memory_s` since the last change (`aggregate`).
+    exposure_history: VecDeque<(f64, f32)>,
     /// The published λ and its estimates' scatter a first off-model λ estimate was
     /// judged against, and that estimate's time (`check_exposure`).
     exposure_suspect: Option<(f32, f32, f64)>,
@@ -212,6 +216,7 @@ impl Calibrator {
             probes: VecDeque::new(),
             last_probe_s: f64::NEG_INFINITY,
             last_effect_fit_s: [f64::NEG_INFINITY; 3],
+            exposure_history: VecDeque::new(),
             exposure_suspect: None,
             noise_last_update: false,
             after_change: false,
