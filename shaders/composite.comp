@@ -1,7 +1,7 @@
 #version 450
 // Composite over the background, per eye (desktop: the camera frame, opaque; the
 // headset: transparent, the compositor blends the result over passthrough):
-// out = bg·(1 − α) + C + α·n, alpha = bg.a·(1 − α) + α, with C, α the (blurred) premultiplied virtual layer
+// out = bg·(1 − α) + G(C) + α·n, G the camera's colour gain (colour_gain.glsl), alpha = bg.a·(1 − α) + α, with C, α the (blurred) premultiplied virtual layer
 // and n the grain field at the virtual content's luma, faded by the blurred alpha
 // so the grain stops where the object does. Encoded (sRGB) space throughout: the
 // camera model was fitted on encoded frames. Stored premultiplied, or straight
@@ -24,7 +24,10 @@ layout(push_constant) uniform Push {
     int row1;
     int straight_alpha;  // 1: colour divided by the output alpha (see the end of main)
     int pad1;
+    vec4 gain;           // xyz: the camera's colour gains (linear light); w > 0.5: apply
 } p;
+
+#include "colour_gain.glsl"
 
 void main() {
     ivec2 xy = ivec2(gl_GlobalInvocationID.xy);
@@ -41,6 +44,11 @@ void main() {
     vec4 c = !inside ? vec4(0.0)
              : (p.use_fx == 2 ? imageLoad(mb_colour, at)
                 : (p.use_fx == 1 ? imageLoad(dof_colour, at) : imageLoad(raw_colour, at)));
+    // The camera's order: optics (DoF, MB: the chain) before the ISP's white
+    // balance and exposure, then its noise.
+    if (p.gain.w > 0.5) {
+        c = colour_gain(c, p.gain.xyz);
+    }
     vec4 bg = imageLoad(background, ivec3(xy, layer));
     float a = clamp(c.a, 0.0, 1.0);
     vec3 rgb = bg.rgb * (1.0 - a) + c.rgb;

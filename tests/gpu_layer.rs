@@ -269,7 +269,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
             let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             // The composite reads the chain's last output: MB's, else DoF's.
             let last = if fx.motion_blur { &out[e * n..(e + 1) * n] } else { &dof_out[e * n..(e + 1) * n] };
-            let cpu = composite(&bg8, &layers[e].colour, Some(last), None, W, full, false);
+            let cpu = composite(&bg8, &layers[e].colour, Some(last), None, W, full, false, fx.colour_gain);
             let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             check(&format!("{name}_composite_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
         }
@@ -404,8 +404,16 @@ fn composite_straight_alpha_matches_cpu_twin() {
             .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
             .collect();
         for e in 0..2 {
-            let cpu =
-                composite(&bg, &layers[e].colour, Some(&dof_out[e * n..(e + 1) * n]), None, W, full, straight_alpha);
+            let cpu = composite(
+                &bg,
+                &layers[e].colour,
+                Some(&dof_out[e * n..(e + 1) * n]),
+                None,
+                W,
+                full,
+                straight_alpha,
+                None,
+            );
             let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             check(&format!("composite_straight{straight_alpha}_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
         }
@@ -538,4 +546,66 @@ fn space_warp_pass_matches_cpu_twin() {
     assert!(vectors.iter().any(|v| v.abs() > 1e-3));
     let msgs = ctx.take_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// The camera's white balance and exposure (`model::Colour`) in the composite
+/// against its twin (`synth::layer::composite` with the gain): the same tolerance
+/// as every deterministic pass (the shader's `pow` against `powf`, then 8 bits).
+/// Not vacuous: the gain is in effect (`FrameEffects::colour_gain`) and moves the
+/// covered pixels by more than 8 steps on average; an identity colour costs nothing
+/// (no gain in the frame's effects).
+#[test]
+fn composite_colour_gain_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("composite_colour_gain") else { return };
+    let layers = [test_layer(0), test_layer(1)];
+    let bg = vec![[0.3f32, 0.4, 0.5, 1.0]; W * H];
+    let rig = rig(&ctx, &layers, &bg);
+    let mut m = model(true, false, false);
+    let full = Rect::full(W, H);
+    let n = W * H;
+    let settings = LayerSettings { dof_half_res: false, ..LayerSettings::default() };
+    let fxs = chain(&ctx, &rig, settings);
+    let download = || -> Vec<[f32; 4]> {
+        rig.output
+            .download()
+            .expect("download")
+            .chunks_exact(4)
+            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
+            .collect()
+    };
+    let fx = run(&ctx, &rig, &fxs, &m, 2);
+    assert_eq!(fx.colour_gain, None, "no colour term: no gain");
+    let plain = download();
+    // A tungsten-lit room one stop under middle grey, as `fit_colour` reports one.
+    m.colour = Colour {
+        present: true,
+        illuminant: Some([1.45, 0.93, 0.52]),
+        exposure: Some(0.5),
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    m.validate().expect("valid model");
+    let fx = run(&ctx, &rig, &fxs, &m, 2);
+    let gain = fx.colour_gain.expect("a present colour term is applied");
+    let gpu = download();
+    let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
+    let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+    let mut moved = 0.0f64;
+    let mut covered = 0usize;
+    for e in 0..2 {
+        let cpu =
+            composite(&bg8, &layers[e].colour, Some(&dof_out[e * n..(e + 1) * n]), None, W, full, false, Some(gain));
+        let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+        check(&format!("composite_colour_gain_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
+        for i in 0..n {
+            if layers[e].colour[i][3] > 0.99 {
+                covered += 1;
+                moved += (0..3).map(|c| (gpu[e * n + i][c] - plain[e * n + i][c]).abs() as f64).sum::<f64>() / 3.0;
+            }
+        }
+    }
+    let mean_moved = moved / covered.max(1) as f64;
+    assert!(covered > 1000 && mean_moved > 8.0 / 255.0, "gain moved covered pixels by {:.1}/255", mean_moved * 255.0);
+    // Switched off in the settings: no gain, whatever the model says.
+    let off = FrameEffects::from_model(&m, None, None, &LayerSettings { colour: false, ..settings });
+    assert_eq!(off.colour_gain, None);
 }

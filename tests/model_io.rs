@@ -33,9 +33,41 @@ fn sample_model() -> CameraModel {
 fn json_round_trip_and_schema_tag() {
     let m = sample_model();
     let text = m.to_json().expect("valid");
-    assert!(text.contains("\"schema\": \"blind-augment/camera-model/1\""));
+    assert!(text.contains("\"schema\": \"blind-augment/camera-model/2\""));
     assert!(text.contains("\"form\": \"thin_lens\""));
     assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
+}
+
+/// A version-1 file (no `colour`) still reads, as the current schema with the
+/// colour term not fitted; an unknown schema is refused naming it; a colour gain
+/// out of range or not finite is refused naming the field.
+#[test]
+fn version_1_files_read_and_colour_is_validated() {
+    let m = sample_model();
+    let mut v = serde_json::to_value(&m).expect("serialises");
+    v["schema"] = serde_json::json!("blind-augment/camera-model/1");
+    v.as_object_mut().expect("object").remove("colour");
+    let old = CameraModel::from_json(&v.to_string()).expect("a version-1 file parses");
+    assert_eq!(old.schema, blind_augment::model::SCHEMA);
+    assert_eq!(old.colour.diagnostics.status, Status::NotFitted);
+    assert_eq!(old.colour.gains_or_one(), [1.0; 3]);
+    v["schema"] = serde_json::json!("blind-augment/camera-model/9");
+    let e = CameraModel::from_json(&v.to_string()).expect_err("unknown schema").to_string();
+    assert!(e.contains("schema"), "{e}");
+    let mut c = sample_model();
+    c.colour = blind_augment::model::Colour {
+        present: true,
+        illuminant: Some([1.2, 1.0, 0.7]),
+        exposure: Some(0.8),
+        diagnostics: Diagnostics::not_fitted("x"),
+    };
+    assert_eq!(CameraModel::from_json(&c.to_json().expect("valid")).expect("parses"), c);
+    for (field, bad) in [("illuminant", serde_json::json!([1.0, 100.0, 1.0])), ("exposure", serde_json::json!(0.0))] {
+        let mut v = serde_json::to_value(&c).expect("serialises");
+        v["colour"][field] = bad;
+        let e = CameraModel::from_json(&v.to_string()).expect_err("out of range").to_string();
+        assert!(e.contains(&format!("colour.{field}")), "{e}");
+    }
 }
 
 /// The DoF kernel shape round-trips; files written before it existed (no `kernel`)

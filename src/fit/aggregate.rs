@@ -185,6 +185,29 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
         out.depth_of_field = pick.depth_of_field.clone();
         out.depth_of_field.diagnostics = summary(&ds, dof.len(), fitted(|m| &m.depth_of_field.diagnostics));
     }
+    // Colour: the median illuminant (per channel, luma renormalised) and exposure
+    // over the frames that could read them, present or absent alike (an absent
+    // reading is an identity measured, not a missing one); present where most of
+    // them are. Frames that could not read it do not vote. None: the newest
+    // frame's (not identifiable or not fitted) stands.
+    let colour: Vec<&CameraModel> =
+        models.iter().filter(|m| m.colour.illuminant.is_some() && m.colour.exposure.is_some()).collect();
+    if !colour.is_empty() {
+        let ill: [f32; 3] =
+            std::array::from_fn(|c| median(colour.iter().filter_map(|m| m.colour.illuminant.map(|i| i[c])).collect()));
+        let y: f32 = (0..3).map(|c| crate::image::LUMA_WEIGHTS[c] * ill[c]).sum();
+        let present = colour.iter().filter(|m| m.colour.present).count();
+        let pick = colour.last().expect("not empty");
+        out.colour = pick.colour.clone();
+        out.colour.illuminant = (y > 0.0).then(|| ill.map(|v| v / y));
+        out.colour.exposure = Some(median(colour.iter().filter_map(|m| m.colour.exposure).collect()));
+        out.colour.present = 2 * present > colour.len() && out.colour.illuminant.is_some();
+        let ds: Vec<&Diagnostics> = colour.iter().map(|m| &m.colour.diagnostics).collect();
+        out.colour.diagnostics = summary(&ds, present, fitted(|m| &m.colour.diagnostics));
+        out.colour.diagnostics.status = if out.colour.present { Status::Present } else { Status::Absent };
+    } else if let Some(last) = models.last() {
+        out.colour = last.colour.clone();
+    }
     out.validate().map_err(|e| FitError::Option { option: "aggregate", problem: e.to_string() })?;
     Ok(out)
 }

@@ -10,6 +10,7 @@
 //! the test stated in its module.
 
 mod aggregate;
+pub mod colour;
 mod curve;
 pub mod defocus_spectrum;
 mod dof;
@@ -121,6 +122,9 @@ pub struct FitOptions {
     /// `None`: accurate where the effect's reference image is given, fast otherwise.
     pub tier: Option<Tier>,
     pub effects: Effects,
+    /// Fit the colour term (`model::Colour`, `colour::fit_colour`): the frame alone
+    /// whatever the tier; `--only` without `colour` leaves it not fitted.
+    pub colour: bool,
     /// Largest noise sample stride at level 0 in pixels, halved per level (paper: 32);
     /// small frames use a finer one to keep ~1000 samples.
     pub noise_stride_px: usize,
@@ -206,6 +210,7 @@ impl Default for FitOptions {
         Self {
             tier: None,
             effects: Effects::ALL,
+            colour: true,
             noise_stride_px: noise::DEFAULT_STRIDE_PX,
             dof_node_spacing_px: dof::DEFAULT_NODE_SPACING_PX,
             dof_max_sigma_px: crate::model::MAX_DOF_SIGMA_PX,
@@ -485,6 +490,11 @@ fn sanitize(model: &mut CameraModel) {
         model.depth_of_field =
             DepthOfField::absent(units, reset("depth-of-field", e, &model.depth_of_field.diagnostics));
     }
+    let mut probe = CameraModel::empty(w.max(1), h.max(1));
+    probe.colour = model.colour.clone();
+    if let Err(e) = probe.validate() {
+        model.colour = crate::model::Colour::absent(reset("colour", e, &model.colour.diagnostics));
+    }
 }
 
 /// `luma`: the frame's luma where a blind exposure or defocus fit of the same call
@@ -666,6 +676,9 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     (model.noise, plots.noise) = noise;
     (model.motion_blur, plots.motion_blur) = mb;
     (model.depth_of_field, plots.depth_of_field) = dof;
+    if opts.colour {
+        model.colour = colour::fit_colour(inp.image);
+    }
     // The luma, built with the input check, has its build time added to the fit
     // stage that would otherwise build it (~0 there with the luma prebuilt): the
     // blind noise fit's `blur.shared_luma` stage, or without that fit the blind

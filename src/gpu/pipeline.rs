@@ -208,9 +208,15 @@ impl<'a> ComputePipeline<'a> {
     pub fn record_set(&self, cmd: vk::CommandBuffer, set: usize, push: &[u8], groups: [u32; 3]) {
         let d = &self.ctx.device;
         let set = self.sets[set.min(self.sets.len() - 1)];
+        // More bytes than the layout's push-constant range is undefined behaviour
+        // (VUID-vkCmdPushConstants-size-00369): lavapipe corrupts its heap. A pass
+        // whose struct outgrew its declared size fails here in tests, and never
+        // writes past the range in a release build.
+        debug_assert_eq!(push.len(), self.push_size as usize, "push constants vs the pipeline's declared size");
+        let push = &push[..push.len().min(self.push_size as usize)];
         // SAFETY: `cmd` is recording; pipeline, layout and set are live; `push` is
-        // exactly the declared push-constant size (checked by the pass structs'
-        // static size assertions).
+        // at most the declared push-constant size (cut above; the pass structs'
+        // static size assertions and the debug assertion keep them equal).
         unsafe {
             d.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             d.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[set], &[]);

@@ -1,6 +1,7 @@
 //! The camera model: plain data, one versioned JSON document
-//! (`"schema": "blind-augment/camera-model/1"`), with validation on load so that
-//! no NaN, Inf or out-of-range parameter can reach a renderer.
+//! (`"schema": "blind-augment/camera-model/2"`; version 1 documents, which have no
+//! `colour`, still read), with validation on load so that no NaN, Inf or
+//! out-of-range parameter can reach a renderer.
 //!
 //! Every effect carries `present` (the renderer skips absent effects) and
 //! `diagnostics` (how sure the estimator is, how it got there).
@@ -14,7 +15,14 @@ mod validate;
 use serde::{Deserialize, Serialize};
 pub use validate::ModelError;
 
-pub const SCHEMA: &str = "blind-augment/camera-model/1";
+pub const SCHEMA: &str = "blind-augment/camera-model/2";
+/// Schemas `CameraModel::from_json` reads: version 1 is version 2 without `colour`
+/// (read as not fitted); files are always written as `SCHEMA`.
+pub const READABLE_SCHEMAS: [&str; 2] = ["blind-augment/camera-model/1", SCHEMA];
+/// Largest linear-light gain `Colour::gains` may apply to a channel (and smallest
+/// its reciprocal): six stops either way, beyond any auto-exposure's reach between
+/// a lit room and the virtual content's authored level.
+pub const MAX_COLOUR_GAIN: f32 = 64.0;
 /// Band-pass levels of the noise pyramid (the paper's 4; the official code's 3 is
 /// what the paper calls a mistake-prone simplification: see docs/camera-model.md).
 pub const NOISE_LEVELS: usize = 4;
@@ -52,8 +60,33 @@ pub struct CameraModel {
     pub noise: Noise,
     pub motion_blur: MotionBlur,
     pub depth_of_field: DepthOfField,
+    /// The camera's white balance and exposure as a virtual surface must take them;
+    /// absent from version-1 files (read as not fitted).
+    #[serde(default = "Colour::not_fitted")]
+    pub colour: Colour,
 }
 
+/// The camera's rendering of a neutral surface under the room's light, relative to
+/// the virtual content's neutral (ARCore's colour correction and pixel intensity
+/// are the same quantities): a virtual surface's linear-light colour is multiplied
+/// by `gains` = `exposure` · `illuminant`, so a virtual grey lands where the camera
+/// puts a real grey of the same reflectance. Applied after motion blur and before
+/// the grain (the camera's order: optics, then the ISP's white balance and gain,
+/// then its noise).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Colour {
+    pub present: bool,
+    /// Linear RGB of a neutral surface as the camera renders it, luma 1 (Rec. 601
+    /// weights, as the noise maps' luma): its chromaticity only. `null` when not
+    /// identifiable.
+    pub illuminant: Option<[f32; 3]>,
+    /// Linear-light brightness gain: the camera's rendering of an 18% grey surface
+    /// over 0.18. `null` when not identifiable.
+    pub exposure: Option<f32>,
+    /// `diagnostics.stderr`: one-sigma angular uncertainty of `illuminant` in degrees.
+    pub diagnostics: Diagnostics,
+}
 /// The frames the model was fitted on, so a renderer can convert camera pixels and
 /// frame intervals into its own pixels and seconds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -418,6 +451,24 @@ impl MotionBlur {
     }
 }
 
+impl Colour {
+    pub fn absent(diagnostics: Diagnostics) -> Self {
+        Self { present: false, illuminant: None, exposure: None, diagnostics }
+    }
+
+    pub fn not_fitted() -> Self {
+        Self::absent(Diagnostics::not_fitted("not fitted"))
+    }
+
+    /// The per-channel linear gain the renderer applies: 1 when absent or unknown.
+    pub fn gains_or_one(&self) -> [f32; 3] {
+        match (self.present, self.illuminant, self.exposure) {
+            (true, Some(i), Some(e)) => i.map(|c| c * e),
+            _ => [1.0; 3],
+        }
+    }
+}
+
 impl CameraModel {
     /// A model with every effect absent, for the given reference frame size.
     pub fn empty(width: u32, height: u32) -> Self {
@@ -427,12 +478,17 @@ impl CameraModel {
             noise: Noise::absent(Diagnostics::not_fitted("not fitted")),
             motion_blur: MotionBlur::absent(Diagnostics::not_fitted("not fitted")),
             depth_of_field: DepthOfField::absent(DepthUnits::MetricM, Diagnostics::not_fitted("not fitted")),
+            colour: Colour::not_fitted(),
         }
     }
 
-    /// Parse and validate a JSON document.
+    /// Parse and validate a JSON document (any of `READABLE_SCHEMAS`; an older one
+    /// comes back as the current schema, its missing effects not fitted).
     pub fn from_json(text: &str) -> Result<Self, ModelError> {
-        let model: CameraModel = serde_json::from_str(text).map_err(|e| ModelError::Parse(e.to_string()))?;
+        let mut model: CameraModel = serde_json::from_str(text).map_err(|e| ModelError::Parse(e.to_string()))?;
+        if model.schema != SCHEMA && READABLE_SCHEMAS.contains(&model.schema.as_str()) {
+            model.schema = SCHEMA.to_string();
+        }
         model.validate()?;
         Ok(model)
     }

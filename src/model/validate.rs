@@ -61,7 +61,42 @@ impl CameraModel {
         }
         self.validate_noise()?;
         self.validate_motion_blur()?;
-        self.validate_dof()
+        self.validate_dof()?;
+        self.validate_colour()
+    }
+
+    fn validate_colour(&self) -> Result<(), ModelError> {
+        let c = &self.colour;
+        check_diagnostics("colour", &c.diagnostics)?;
+        let range = 1.0 / MAX_COLOUR_GAIN..=MAX_COLOUR_GAIN;
+        if let Some(i) = c.illuminant {
+            for (k, v) in i.iter().enumerate() {
+                if !v.is_finite() || !range.contains(v) {
+                    return Err(bad(
+                        format!("colour.illuminant[{k}]"),
+                        format!("must be in [1/{MAX_COLOUR_GAIN}, {MAX_COLOUR_GAIN}], got {v}"),
+                    ));
+                }
+            }
+        }
+        if let Some(e) = c.exposure {
+            if !e.is_finite() || !range.contains(&e) {
+                return Err(bad(
+                    "colour.exposure",
+                    format!("must be in [1/{MAX_COLOUR_GAIN}, {MAX_COLOUR_GAIN}], got {e}"),
+                ));
+            }
+        }
+        if c.present && (c.illuminant.is_none() || c.exposure.is_none()) {
+            return Err(bad("colour", "illuminant and exposure must be set when present is true"));
+        }
+        // Their product is what reaches the GPU: bounded too.
+        for (k, g) in c.gains_or_one().iter().enumerate() {
+            if !g.is_finite() || !range.contains(g) {
+                return Err(bad(format!("colour gain[{k}]"), format!("exposure × illuminant out of range: {g}")));
+            }
+        }
+        Ok(())
     }
 
     fn validate_noise(&self) -> Result<(), ModelError> {

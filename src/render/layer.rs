@@ -78,9 +78,13 @@ struct LumaPush {
     /// Packed height (eye 0's rows + eye 1's).
     height: i32,
     seed: [u32; 2],
+    pad: [u32; 2],
+    /// xyz: the camera's colour gains (`FrameEffects::colour_gain`); w: 1 to apply.
+    gain: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<LumaPush>() == 56);
+const _: () = assert!(std::mem::size_of::<LumaPush>() == 80);
 const _: () = assert!(std::mem::offset_of!(LumaPush, seed) == 48);
+const _: () = assert!(std::mem::offset_of!(LumaPush, gain) == 64);
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -93,9 +97,12 @@ struct CompositePush {
     row1: i32,
     straight_alpha: i32,
     pad: i32,
+    /// As `LumaPush::gain`.
+    gain: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<CompositePush>() == 64);
+const _: () = assert!(std::mem::size_of::<CompositePush>() == 80);
 const _: () = assert!(std::mem::offset_of!(CompositePush, straight_alpha) == 56);
+const _: () = assert!(std::mem::offset_of!(CompositePush, gain) == 64);
 
 /// Quality settings: the speed/accuracy knobs measured in BENCHMARKS.md.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -118,6 +125,9 @@ pub struct LayerSettings {
     pub render_interval_s: f32,
     /// Synthesise grain (the paper's pyramid; off = no noise even if present).
     pub grain: bool,
+    /// Apply the camera's white balance and exposure (`model::Colour`; off = the
+    /// authored colours even where the model has them).
+    pub colour: bool,
     /// Store the composite with straight (unpremultiplied) alpha: the colour divided
     /// by the output alpha. The headset's projection layer uses it with
     /// XR_COMPOSITION_LAYER_UNPREMULTIPLIED_ALPHA_BIT, so the compositor, which
@@ -140,6 +150,7 @@ impl Default for LayerSettings {
             mb_tile_px: 16,
             render_interval_s: 1.0 / 45.0,
             grain: true,
+            colour: true,
             straight_alpha: false,
         }
     }
@@ -154,6 +165,9 @@ pub struct FrameEffects {
     pub dof_disc: bool,
     pub motion_blur: bool,
     pub noise: bool,
+    /// The camera's per-channel colour gain (linear light) where the model has one
+    /// and the settings apply it; `None`: the authored colours, at no cost.
+    pub colour_gain: Option<[f32; 3]>,
     /// Eye-buffer / camera `pixels_per_radian`.
     pub ppr_ratio: f32,
     /// Exposure time over the render frame interval (λ · camera interval / render
@@ -220,6 +234,10 @@ impl FrameEffects {
             dof_disc: dof_model.kernel == crate::model::DofKernel::Disc,
             motion_blur: exposure_ratio > 0.0 && exposure_ratio.is_finite(),
             noise: model.noise.present && settings.grain,
+            // Validated models hold gains in [1/64, 64]; identity gains are skipped.
+            colour_gain: (model.colour.present && settings.colour)
+                .then(|| model.colour.gains_or_one())
+                .filter(|g| g.iter().all(|v| v.is_finite() && *v > 0.0) && *g != [1.0; 3]),
             ppr_ratio,
             exposure_ratio: if exposure_ratio.is_finite() { exposure_ratio } else { 0.0 },
             dof_radius_px,
@@ -354,8 +372,22 @@ impl<'a> LayerEffects<'a> {
             mb_tiles: ComputePipeline::with_layout(ctx, MB_TILES, &[st, st], push, 1, "layer mb tiles")?,
             mb_neighbour: ComputePipeline::with_layout(ctx, MB_NEIGHBOUR, &[st, st], push, 1, "layer mb neighbour")?,
             mb_gather: ComputePipeline::with_layout(ctx, MB_GATHER, &[st, st, st, st, st], push, 1, "layer mb gather")?,
-            luma: ComputePipeline::with_layout(ctx, LUMA, &[st, st, st, sb], 56, 1, "layer luma")?,
-            composite: ComputePipeline::with_layout(ctx, COMPOSITE, &[st, st, st, st, sb, st], 64, 1, "composite")?,
+            luma: ComputePipeline::with_layout(
+                ctx,
+                LUMA,
+                &[st, st, st, sb],
+                size_of::<LumaPush>() as u32,
+                1,
+                "layer luma",
+            )?,
+            composite: ComputePipeline::with_layout(
+                ctx,
+                COMPOSITE,
+                &[st, st, st, st, sb, st],
+                size_of::<CompositePush>() as u32,
+                1,
+                "composite",
+            )?,
             // Both eyes' rectangles stacked: at most the full eye, twice as tall.
             grain: GrainRecorder::new(ctx, w as usize, 2 * h as usize, grain_nodes)?,
             params: crate::gpu::Buffer::new(
@@ -534,11 +566,13 @@ impl<'a> LayerEffects<'a> {
             source = 2;
         }
         stamp(STAMP_MB);
+        let gain4 = fx.colour_gain.map_or([1.0, 1.0, 1.0, 0.0], |g| [g[0], g[1], g[2], 1.0]);
         let mut cp = CompositePush {
             rect: [to4(rects[0]), to4(rects[1])],
             size: [self.width as i32, self.height as i32],
             use_fx: source,
             straight_alpha: self.settings.straight_alpha as i32,
+            gain: gain4,
             ..Default::default()
         };
         if let Some((nodes, range)) = noise_table {
@@ -554,6 +588,8 @@ impl<'a> LayerEffects<'a> {
                 use_fx: source,
                 height: nh,
                 seed: [seed as u32, (seed >> 32) as u32],
+                pad: [0; 2],
+                gain: gain4,
             };
             self.luma.record(
                 cmd,

@@ -512,20 +512,39 @@ pub fn motion_blur_layer(
     out
 }
 
+/// The camera's colour gain (`model::Colour::gains_or_one`, linear light) on one
+/// premultiplied encoded (sRGB) pixel: its straight colour decoded, multiplied,
+/// re-encoded and clamped to [0, 1]; unchanged where alpha ≤ 1e-3
+/// (`shaders/colour_gain.glsl`).
+pub fn gain_encoded(c: [f32; 4], gain: [f32; 3]) -> [f32; 4] {
+    if c[3] <= 1e-3 {
+        return c;
+    }
+    let encode = |v: f32| if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+    let g: [f32; 3] = std::array::from_fn(|k| {
+        let u = (c[k] / c[3]).clamp(0.0, 1.0);
+        encode((crate::image::yuv::srgb_to_linear(u) * gain[k]).clamp(0.0, 1.0)) * c[3]
+    });
+    [g[0], g[1], g[2], c[3]]
+}
+
 /// Luma (Rec. 601) of the un-premultiplied virtual colour over `rect`, row-major
-/// `rect.w × rect.h` (`layer_luma.comp`); 0 where alpha ≤ 1e-3.
-pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect) -> Vec<f32> {
+/// `rect.w × rect.h` (`layer_luma.comp`), after the camera's colour `gain` where
+/// given; 0 where alpha ≤ 1e-3.
+pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect, gain: Option<[f32; 3]>) -> Vec<f32> {
     let mut out = Vec::with_capacity(rect.area());
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
             let c = colour[y as usize * width + x as usize];
+            let c = gain.map_or(c, |g| gain_encoded(c, g));
             out.push(if c[3] > 1e-3 { (0..3).map(|i| LUMA_WEIGHTS[i] * c[i] / c[3]).sum() } else { 0.0 });
         }
     }
     out
 }
 
-/// `composite.comp` for one eye: out = bg·(1 − α) + C + α·n (n: planar RGB grain
+/// `composite.comp` for one eye: out = bg·(1 − α) + G(C) + α·n (G: the camera's
+/// colour `gain` where given, `gain_encoded`; n: planar RGB grain
 /// of `rect`'s size, or none), alpha = bg.a·(1 − α) + α (premultiplied "over"),
 /// colour clamped to [0, alpha]; the virtual layer is `fx` (or
 /// `raw`) inside `rect` and empty outside it. `straight_alpha`: the colour is
@@ -540,6 +559,7 @@ pub fn composite(
     width: usize,
     rect: Rect,
     straight_alpha: bool,
+    gain: Option<[f32; 3]>,
 ) -> Vec<[f32; 4]> {
     let plane = rect.area();
     (0..background.len())
@@ -553,6 +573,7 @@ pub fn composite(
                 Some(f) => f[i],
                 None => raw[i],
             };
+            let c = gain.map_or(c, |g| gain_encoded(c, g));
             let a = c[3].clamp(0.0, 1.0);
             let mut rgb: [f32; 3] = std::array::from_fn(|k| background[i][k] * (1.0 - a) + c[k]);
             if let (Some(n), true, true) = (noise, inside, a > 0.0) {

@@ -7,7 +7,9 @@
 //! are also vendored for the CI subset (`tests/real_scenes.rs`).
 //! With a mirror of the PolyU real-world noisy image dataset it first runs `cargo
 //! bench --bench real_noise` on its crops (`target/bench/real_noise.md`);
-//! `--noise-only` stops there.
+//! `--noise-only` stops there. Before it (not with `--noise-only`), white balance
+//! on real photographs with a measured illuminant (`colour_corpus`,
+//! `target/bench/colour.md`); `--colour-only` stops after that.
 //!
 //! The split is fixed here: the `held-out` scenes are never looked at while tuning an
 //! estimator (only their aggregate is read, to report it).
@@ -167,9 +169,18 @@ const SCENES: &[SceneDef] = &[
     },
 ];
 
-pub fn run(target: &Path, mirrors: &Path, quick: bool, noise_only: bool) -> Result<()> {
+pub fn run(target: &Path, mirrors: &Path, quick: bool, noise_only: bool, colour_only: bool) -> Result<()> {
     let bench = target.join("bench");
     std::fs::create_dir_all(&bench)?;
+    if !noise_only {
+        if let Some(out) = crate::colour_corpus::run_colour(target, mirrors)? {
+            std::fs::write(bench.join("colour.md"), out).context("writing target/bench/colour.md")?;
+            eprintln!("results in {}", bench.join("colour.md").display());
+        }
+    }
+    if colour_only {
+        return Ok(());
+    }
     if let Some(out) = run_real_noise(target, mirrors)? {
         std::fs::write(bench.join("real_noise.md"), out).context("writing target/bench/real_noise.md")?;
         eprintln!("results in {}", bench.join("real_noise.md").display());

@@ -172,6 +172,7 @@ pub fn run(args: FitArgs) -> Result<()> {
     let opts = FitOptions {
         tier: super::tier(args.tier),
         effects: super::effects(&args.only),
+        colour: super::colour_wanted(&args.only),
         fast_effort: args.fast_effort,
         ..Default::default()
     };

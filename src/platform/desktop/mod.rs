@@ -41,6 +41,13 @@ pub enum EffectArg {
     Noise,
     MotionBlur,
     DepthOfField,
+    /// White balance and exposure (`model::Colour`).
+    Colour,
+}
+
+/// Whether `--only` asks for the colour term (all effects without it).
+pub fn colour_wanted(only: &Option<Vec<EffectArg>>) -> bool {
+    only.as_ref().map_or(true, |l| l.contains(&EffectArg::Colour))
 }
 
 #[derive(Clone, Copy, ValueEnum)]

@@ -187,6 +187,13 @@ impl Calibrator {
         if on[1] != agg.motion_blur.present {
             agg.motion_blur.present = on[1] && agg.motion_blur.exposure.is_some();
         }
+        // A view that cannot show the illuminant (one colour fills it, all
+        // clipped) keeps the last colour read: not identifiable is not absent.
+        if agg.colour.illuminant.is_none() {
+            if let Some(p) = prev.as_ref().filter(|p| p.colour.illuminant.is_some()) {
+                agg.colour = p.colour.clone();
+            }
+        }
         if on[2] != agg.depth_of_field.present {
             match (&prev, on[2] && dp == 0) {
                 (Some(p), true) => agg.depth_of_field = p.depth_of_field.clone(),
