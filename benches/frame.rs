@@ -54,6 +54,16 @@ fn model() -> CameraModel {
         kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("bench"),
     };
+    // FRAME_BENCH_COLOUR=1: with the demo camera's white balance and exposure
+    // (`model::Colour`, applied in the luma and composite passes).
+    if std::env::var("FRAME_BENCH_COLOUR").is_ok_and(|v| v == "1") {
+        m.colour = blind_augment::model::Colour {
+            present: true,
+            illuminant: Some([1.22, 0.946, 0.70]),
+            exposure: Some(0.63),
+            diagnostics: Diagnostics::not_fitted("bench"),
+        };
+    }
     m
 }
 

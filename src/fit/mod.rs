@@ -123,7 +123,9 @@ pub struct FitOptions {
     pub tier: Option<Tier>,
     pub effects: Effects,
     /// Fit the colour term (`model::Colour`, `colour::fit_colour`): the frame alone
-    /// whatever the tier; `--only` without `colour` leaves it not fitted.
+    /// whatever the tier. Off by default: the worker fits it once per update, not
+    /// in each of its per-effect fits; the `fit` command turns it on (unless
+    /// `--only` leaves `colour` out).
     pub colour: bool,
     /// Largest noise sample stride at level 0 in pixels, halved per level (paper: 32);
     /// small frames use a finer one to keep ~1000 samples.
@@ -210,7 +212,7 @@ impl Default for FitOptions {
         Self {
             tier: None,
             effects: Effects::ALL,
-            colour: true,
+            colour: false,
             noise_stride_px: noise::DEFAULT_STRIDE_PX,
             dof_node_spacing_px: dof::DEFAULT_NODE_SPACING_PX,
             dof_max_sigma_px: crate::model::MAX_DOF_SIGMA_PX,
@@ -669,15 +671,26 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     // the wall time on several cores is the slowest effect, not the sum.
     // Tiers (and missing-reference errors) only for the effects asked for.
     let noise_luma = blind_reads_luma.then_some(&luma);
-    let ((noise, mb), dof) = rayon::join(
-        || rayon::join(|| fit_noise(inp, opts, noise_tier, noise_luma), || fit_motion_blur(inp, opts, mb_tier, &luma)),
-        || fit_depth_of_field(inp, opts, dof_tier, &luma),
+    // The colour term reads the frame alone and joins them (4.6 ms at 1280×960).
+    let (((noise, mb), dof), colour) = rayon::join(
+        || {
+            rayon::join(
+                || {
+                    rayon::join(
+                        || fit_noise(inp, opts, noise_tier, noise_luma),
+                        || fit_motion_blur(inp, opts, mb_tier, &luma),
+                    )
+                },
+                || fit_depth_of_field(inp, opts, dof_tier, &luma),
+            )
+        },
+        || opts.colour.then(|| colour::fit_colour(inp.image)),
     );
     (model.noise, plots.noise) = noise;
     (model.motion_blur, plots.motion_blur) = mb;
     (model.depth_of_field, plots.depth_of_field) = dof;
-    if opts.colour {
-        model.colour = colour::fit_colour(inp.image);
+    if let Some(c) = colour {
+        model.colour = c;
     }
     // The luma, built with the input check, has its build time added to the fit
     // stage that would otherwise build it (~0 there with the luma prebuilt): the

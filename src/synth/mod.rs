@@ -23,7 +23,8 @@ pub use rng::gaussian;
 use crate::image::{Flow, Plane, Rgb};
 use crate::model::CameraModel;
 
-/// Apply every present effect of `model` to `clean`, in the paper's order.
+/// Apply every present effect of `model` to `clean`, in the camera's order: the
+/// paper's (DoF, motion blur, noise) with the ISP's colour before the noise.
 /// `depth` is needed when DoF is present and `flow` when MB is present; without
 /// them that effect is skipped (logged). Output is unclipped.
 pub fn apply_camera_model(
@@ -49,8 +50,30 @@ pub fn apply_camera_model(
             }
         }
     }
+    // The ISP after the optics: white balance and exposure (`model::Colour`), then
+    // the noise.
+    if model.colour.present {
+        img = add_colour(&img, model.colour.gains_or_one());
+    }
     if model.noise.present {
         img = add_noise(&img, &model.noise, seed);
     }
     img
+}
+
+/// The camera's white balance and exposure on an encoded (sRGB) frame: each value
+/// decoded to linear light, multiplied by its channel's gain and re-encoded,
+/// unclipped (negative values stay on the curve's linear segment, values above 1 on
+/// its power law), as `apply_camera_model` leaves clipping to the caller. The
+/// render pass's twin is `layer::gain_encoded` (which clips: it writes a display).
+pub fn add_colour(img: &Rgb, gains: [f32; 3]) -> Rgb {
+    let decode = |v: f32| if v < 0.0 { v / 12.92 } else { crate::image::yuv::srgb_to_linear(v) };
+    let encode = |v: f32| if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+    let mut out = img.clone();
+    for (ch, g) in out.channels.iter_mut().zip(gains) {
+        for v in ch.iter_mut() {
+            *v = encode(decode(*v) * g);
+        }
+    }
+    out
 }

@@ -87,6 +87,15 @@ fn truth_model(w: usize, h: usize, depth: &Plane) -> CameraModel {
         kernel: blind_augment::model::DofKernel::Gaussian,
         diagnostics: Diagnostics::not_fitted("ground truth"),
     };
+    // A warm room its white balance left half-corrected (about halfway from D65
+    // to tungsten), exposed two thirds of a stop under middle grey: the virtual
+    // object's authored colours must take both.
+    m.colour = blind_augment::model::Colour {
+        present: true,
+        illuminant: Some([1.22, 0.946, 0.70]),
+        exposure: Some(0.63),
+        diagnostics: Diagnostics::not_fitted("ground truth"),
+    };
     m
 }
 
@@ -143,6 +152,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
     accurate.noise = noise.model.noise.clone();
     accurate.motion_blur = mb.model.motion_blur.clone();
     accurate.depth_of_field = dof.model.depth_of_field.clone();
+    // Colour is read from the frame alone in every tier (as the fast fit reads it).
+    accurate.colour = blind_augment::fit::colour::fit_colour(&i_all);
     accurate.reference.frame_interval_s = truth.reference.frame_interval_s;
     let acc_out = FitOutput {
         model: accurate.clone(),
@@ -159,7 +170,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         flow: Some(&flow),
         ..FitInputs::new(&i_all)
     };
-    let fast_out = fit(&fast_inputs, &FitOptions::default())?;
+    let fast_out = fit(&fast_inputs, &FitOptions { colour: true, ..Default::default() })?;
 
     for (name, m) in
         [("truth.json", &truth), ("camera_accurate.json", &accurate), ("camera_fast.json", &fast_out.model)]
@@ -318,6 +329,26 @@ fn report(truth: &CameraModel, acc: &CameraModel, fast: &CameraModel, depth: &Pl
             d.diagnostics.stderr.map_or("".into(), |s| format!("{s:.3}")),
             d.diagnostics.status_str(),
             d.diagnostics.fit_time_s * 1e3
+        );
+    }
+    let _ = writeln!(r, "\n## Colour: white balance and exposure (the frame alone in every tier)\n");
+    let _ = writeln!(r, "| | illuminant R, G, B (luma 1) | exposure | cast error | ± | status | fit time |\n|---|---|---|---|---|---|---|");
+    let truth_ill = truth.colour.illuminant.map(|i| i.map(f64::from));
+    for (name, m) in [("truth", truth), ("fast", fast)] {
+        let c = &m.colour;
+        let _ = writeln!(
+            r,
+            "| {name} | {} | {} | {} | {} | {} | {:.1} ms |",
+            c.illuminant.map_or("n/a".into(), |i| format!("{:.3}, {:.3}, {:.3}", i[0], i[1], i[2])),
+            c.exposure.map_or("n/a".into(), |e| format!("{e:.3}")),
+            match (c.illuminant, truth_ill) {
+                (Some(i), Some(t)) =>
+                    format!("{:.2}°", blind_augment::fit::colour::angular_error_deg(i.map(f64::from), t)),
+                _ => "".into(),
+            },
+            c.diagnostics.stderr.map_or("".into(), |s| format!("{s:.1}°")),
+            c.diagnostics.status_str(),
+            c.diagnostics.fit_time_s * 1e3
         );
     }
     let _ = writeln!(r, "\n## Noise: std that `synth` adds to a flat grey of luma Y (R, G, B)\n");
@@ -514,6 +545,23 @@ fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &Camera
         r,
         "| grain | {} (the last live model's noise at the object's luma) |",
         if fx.noise { "on" } else { "off" }
+    );
+    let _ = writeln!(
+        r,
+        "| colour | {} |",
+        match fx.colour_gain {
+            Some(g) => format!(
+                "linear gains R, G, B = {:.3}, {:.3}, {:.3} (the last live model's white balance × exposure; truth {})",
+                g[0],
+                g[1],
+                g[2],
+                {
+                    let t = truth.colour.gains_or_one();
+                    format!("{:.3}, {:.3}, {:.3}", t[0], t[1], t[2])
+                }
+            ),
+            None => "none (no colour term in the last live model)".into(),
+        }
     );
     let _ = writeln!(
         r,

@@ -244,6 +244,17 @@ pub fn summarize(m: &blind_augment::model::CameraModel) {
     eprintln!("  motion blur:    {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
     let d = &m.depth_of_field.diagnostics;
     eprintln!("  depth of field: {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
+    let c = &m.colour;
+    let gains = c.gains_or_one();
+    eprintln!(
+        "  colour:         {:<17} gains R, G, B {:.3}, {:.3}, {:.3}; {} ({:.1} ms)",
+        c.diagnostics.status_str(),
+        gains[0],
+        gains[1],
+        gains[2],
+        c.diagnostics.reason,
+        c.diagnostics.fit_time_s * 1e3
+    );
 }
 
 pub fn write_plots(dir: &Path, out: &FitOutput) -> Result<()> {

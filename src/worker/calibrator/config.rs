@@ -100,6 +100,13 @@ pub struct CalibratorConfig {
     /// (`FitOptions::fast_effort`, [0.25, 1]): speed for accuracy, measured in
     /// BENCHMARKS.md ("The fast tier's effort").
     pub fast_effort: f32,
+    /// Fit the colour term (`fit::colour::fit_colour`, the frame alone whatever the
+    /// tier; 4.6 ms at 1280×960) ...
+    pub colour: bool,
+    /// ... on the first update at least this long (video s) after the last colour
+    /// fit: 0.25 s keeps 4 fits in each 1 s window, so a change is followed within
+    /// 1 s, at a quarter of the cost per update of fitting every update at 0.1 s.
+    pub colour_refit_s: f64,
 }
 
 impl CalibratorConfig {
@@ -154,6 +161,8 @@ impl CalibratorConfig {
             sharp_max_age_s: 3.0,
             noise_strip_px: Some(NOISE_STRIP_PX),
             fast_effort: 1.0,
+            colour: true,
+            colour_refit_s: 0.25,
         }
     }
 }

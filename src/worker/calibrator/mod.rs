@@ -146,6 +146,8 @@ pub struct Calibrator {
     /// Whether the last update refitted noise with a neighbour (the fast tier's
     /// burst alternates noise with the other effects: `fit_frame`).
     noise_last_update: bool,
+    /// Video time of the last colour fit (`CalibratorConfig::colour_refit_s`).
+    colour_last_t_s: Option<f64>,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -219,6 +221,7 @@ impl Calibrator {
             exposure_history: VecDeque::new(),
             exposure_suspect: None,
             noise_last_update: false,
+            colour_last_t_s: None,
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -784,6 +787,17 @@ impl Calibrator {
         self.stages.push("fit.noise", model.noise.diagnostics.fit_time_s);
         self.stages.push("fit.motion_blur", model.motion_blur.diagnostics.fit_time_s);
         self.stages.push("fit.depth_of_field", model.depth_of_field.diagnostics.fit_time_s);
+        // Colour at its own cadence: a camera's AE/AWB moves over ~0.5 s, and the
+        // window's median follows a change within 1 s at one fit per 0.25 s.
+        let t_s = current.frame.t_s;
+        if self.cfg.colour
+            && self.colour_last_t_s.map_or(true, |l| t_s < l || t_s - l >= self.cfg.colour_refit_s - 1e-9)
+        {
+            let t = Instant::now();
+            model.colour = fit::colour::fit_colour(&current.frame.image);
+            self.stages.add("fit.colour", t);
+            self.colour_last_t_s = Some(t_s);
+        }
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
         model.validate().ok().map(|_| (model, noise_lags))
