@@ -634,3 +634,48 @@ pub fn space_warp(
     }
     (vectors, depth)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Rgb;
+
+    /// The render pass's colour gain (`gain_encoded`, on premultiplied layer colour)
+    /// and the camera's (`synth::add_colour`, on a frame) are one operation where
+    /// nothing clips: an opaque pixel agrees to 1e-6 (f32 rounding of the same
+    /// formulas), a half-transparent one after un-premultiplying; clipped values
+    /// stay at 1 in the pass (it writes a display), above it in the frame's twin.
+    #[test]
+    fn the_layer_gain_is_the_frames_colour_gain() {
+        let gains = [1.3f32, 0.9, 0.55];
+        let values = [0.0f32, 0.02, 0.1, 0.35, 0.6, 0.8];
+        let frame = Rgb { width: values.len(), height: 1, channels: std::array::from_fn(|_| values.to_vec()) };
+        let graded = crate::synth::add_colour(&frame, gains);
+        for (i, &v) in values.iter().enumerate() {
+            for a in [1.0f32, 0.5] {
+                let out = gain_encoded([v * a, v * a, v * a, a], gains);
+                for c in 0..3 {
+                    let expect = graded.channels[c][i].min(1.0);
+                    assert!(
+                        (out[c] / a - expect).abs() < 1e-6,
+                        "value {v}, alpha {a}, channel {c}: {} vs {expect}",
+                        out[c] / a
+                    );
+                }
+                assert_eq!(out[3], a);
+            }
+        }
+        // Transparent pixels pass through; the luma reads the gained colour.
+        assert_eq!(gain_encoded([0.0; 4], gains), [0.0; 4]);
+        let layer = [[0.5f32, 0.5, 0.5, 1.0]];
+        let rect = Rect { x: 0, y: 0, w: 1, h: 1 };
+        // One stop down: the luma the grain is read at falls with the colour shown.
+        let down = [0.5f32; 3];
+        let plain = layer_luma(&layer, 1, rect, None)[0];
+        let graded_luma = layer_luma(&layer, 1, rect, Some(down))[0];
+        let g = gain_encoded(layer[0], down);
+        let expect: f32 = (0..3).map(|c| crate::image::LUMA_WEIGHTS[c] * g[c]).sum();
+        assert!((graded_luma - expect).abs() < 1e-6, "{graded_luma} vs {expect}");
+        assert!(plain - graded_luma > 0.1, "one stop down moved the luma from {plain} to {graded_luma}");
+    }
+}
