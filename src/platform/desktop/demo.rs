@@ -705,20 +705,27 @@ impl LiveCalibration {
         );
         let _ = writeln!(
             md,
-            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) |\n|---|---|---|---|---|",
+            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error |\n|---|---|---|---|---|---|",
             truth.motion_blur.exposure_or_zero()
         );
+        // The published illuminant against the true camera's (degrees); none while
+        // the worker has not read one.
+        let cast_error = |m: &CameraModel| -> Option<f64> {
+            let (i, t) = (m.colour.illuminant?, truth.colour.illuminant?);
+            Some(blind_augment::fit::colour::angular_error_deg(i.map(f64::from), t.map(f64::from)))
+        };
         let mut points: Vec<(f64, f64)> = vec![];
         for (t, snap) in &seen {
             let m = &snap.model;
             let _ = writeln!(
                 md,
-                "| {} | {t:.2} s | {} | {} | {} |",
+                "| {} | {t:.2} s | {} | {} | {} | {} |",
                 snap.generation,
                 m.motion_blur.exposure.map_or("—".into(), |l| format!("{l:.3}")),
                 noise_relative_error(&m.noise, &truth.noise).map_or("—".into(), |e| format!("{:.1}%", 100.0 * e)),
                 dof_rmse_px(&m.depth_of_field, &truth.depth_of_field, &depths)
-                    .map_or("—".into(), |e| format!("{e:.3}"))
+                    .map_or("—".into(), |e| format!("{e:.3}")),
+                cast_error(m).map_or("—".into(), |e| format!("{e:.1}°"))
             );
             points.push((*t, exposure_error(m, truth) as f64));
         }
@@ -727,6 +734,8 @@ impl LiveCalibration {
             .iter()
             .filter_map(|(t, s)| noise_relative_error(&s.model.noise, &truth.noise).map(|e| (*t, e as f64)))
             .collect();
+        let colour_pts: Vec<(f64, f64)> =
+            seen.iter().filter_map(|(t, s)| cast_error(&s.model).map(|e| (*t, e))).collect();
         let panels = [
             blind_augment::plots::Panel {
                 title: "live calibration: |λ − λ_true| of the model the renderer could use".into(),
@@ -748,6 +757,18 @@ impl LiveCalibration {
                     label: "published".into(),
                     points: noise_pts,
                     colour: plotters::style::RGBColor(220, 50, 47),
+                    dots: true,
+                }],
+                log_x: false,
+            },
+            blind_augment::plots::Panel {
+                title: "live calibration: white balance, angle to the true illuminant".into(),
+                x_desc: "video time (s)".into(),
+                y_desc: "degrees".into(),
+                series: vec![blind_augment::plots::Series {
+                    label: "published".into(),
+                    points: colour_pts,
+                    colour: plotters::style::RGBColor(133, 153, 0),
                     dots: true,
                 }],
                 log_x: false,
