@@ -671,7 +671,7 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     // the wall time on several cores is the slowest effect, not the sum.
     // Tiers (and missing-reference errors) only for the effects asked for.
     let noise_luma = blind_reads_luma.then_some(&luma);
-    // The colour term reads the frame alone and joins them (4.6 ms at 1280×960).
+    // The colour term reads the frame alone and joins them (5.6 ms at 1280×960).
     let (((noise, mb), dof), colour) = rayon::join(
         || {
             rayon::join(

@@ -101,7 +101,7 @@ pub struct CalibratorConfig {
     /// BENCHMARKS.md ("The fast tier's effort").
     pub fast_effort: f32,
     /// Fit the colour term (`fit::colour::fit_colour`, the frame alone whatever the
-    /// tier; 4.6 ms at 1280×960) ...
+    /// tier; 5.6 ms at 1280×960) ...
     pub colour: bool,
     /// ... on the first update at least this long (video s) after the last colour
     /// fit: 0.25 s keeps 4 fits in each 1 s window, so a change is followed within
