@@ -197,14 +197,17 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
             std::array::from_fn(|c| median(colour.iter().filter_map(|m| m.colour.illuminant.map(|i| i[c])).collect()));
         let y: f32 = (0..3).map(|c| crate::image::LUMA_WEIGHTS[c] * ill[c]).sum();
         let present = colour.iter().filter(|m| m.colour.present).count();
-        let pick = colour.last().expect("not empty");
-        out.colour = pick.colour.clone();
-        out.colour.illuminant = (y > 0.0).then(|| ill.map(|v| v / y));
-        out.colour.exposure = Some(median(colour.iter().filter_map(|m| m.colour.exposure).collect()));
-        out.colour.present = 2 * present > colour.len() && out.colour.illuminant.is_some();
+        let illuminant = (y > 0.0).then(|| ill.map(|v| v / y));
+        let is_present = 2 * present > colour.len() && illuminant.is_some();
         let ds: Vec<&Diagnostics> = colour.iter().map(|m| &m.colour.diagnostics).collect();
-        out.colour.diagnostics = summary(&ds, present, fitted(|m| &m.colour.diagnostics));
-        out.colour.diagnostics.status = if out.colour.present { Status::Present } else { Status::Absent };
+        let mut diagnostics = summary(&ds, present, fitted(|m| &m.colour.diagnostics));
+        diagnostics.status = if is_present { Status::Present } else { Status::Absent };
+        out.colour = crate::model::Colour {
+            present: is_present,
+            illuminant,
+            exposure: Some(median(colour.iter().filter_map(|m| m.colour.exposure).collect())),
+            diagnostics,
+        };
     } else if let Some(last) = models.last() {
         out.colour = last.colour.clone();
     }
