@@ -1,7 +1,8 @@
 #version 450
 // Composite over the background, per eye (desktop: the camera frame, opaque; the
 // headset: transparent, the compositor blends the result over passthrough):
-// out = bg·(1 − α) + G(C) + α·n, G the camera's colour gain (colour_gain.glsl), alpha = bg.a·(1 − α) + α, with C, α the (blurred) premultiplied virtual layer
+// out = bg·(1 − α) + G(C) + α·n, G the camera's colour gain times the lens's
+// falloff at the pixel (colour_gain.glsl), alpha = bg.a·(1 − α) + α, with C, α the (blurred) premultiplied virtual layer
 // and n the grain field at the virtual content's luma, faded by the blurred alpha
 // so the grain stops where the object does. Encoded (sRGB) space throughout: the
 // camera model was fitted on encoded frames. Stored premultiplied, or straight
@@ -25,6 +26,8 @@ layout(push_constant) uniform Push {
     int straight_alpha;  // 1: colour divided by the output alpha (see the end of main)
     int pad1;
     vec4 gain;           // xyz: the camera's colour gains (linear light); w > 0.5: apply
+    vec4 vignette;       // xyz: the lens's log-falloff terms; w: 1 / half-diagonal px (0: none)
+    vec4 centre;         // the eyes' principal points: xy eye 0, zw eye 1
 } p;
 
 #include "colour_gain.glsl"
@@ -44,10 +47,12 @@ void main() {
     vec4 c = !inside ? vec4(0.0)
              : (p.use_fx == 2 ? imageLoad(mb_colour, at)
                 : (p.use_fx == 1 ? imageLoad(dof_colour, at) : imageLoad(raw_colour, at)));
-    // The camera's order: optics (DoF, MB: the chain) before the ISP's white
-    // balance and exposure, then its noise.
-    if (p.gain.w > 0.5) {
-        c = colour_gain(c, p.gain.xyz);
+    // The camera's order: optics (the lens's falloff — a gain per pixel, so it
+    // commutes with the chain's blurs up to their reach over its slow variation —
+    // DoF, MB: the chain) before the ISP's white balance and exposure, then its
+    // noise. Falloff and colour are both linear-light gains: applied as one.
+    if (pixel_gain_on(p.gain, p.vignette)) {
+        c = colour_gain(c, pixel_gain(xy, layer, p.gain, p.vignette, p.centre));
     }
     vec4 bg = imageLoad(background, ivec3(xy, layer));
     float a = clamp(c.a, 0.0, 1.0);

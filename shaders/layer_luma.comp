@@ -2,8 +2,8 @@
 // Level 0 of the grain's joint pyramid straight from the layer colour: vec4 per
 // pixel = unit white noise R, G, B (twin of synth::gaussian, fresh per frame through
 // the seed) and the luma of the virtual content (Rec. 601 on un-premultiplied colour, as
-// image::Rgb::luma) after the camera's colour gain (the grain follows the colour
-// shown). Packed: eye 0's rectangle in rows [0, row1), eye 1's in rows
+// image::Rgb::luma) after the camera's colour gain and the lens's falloff (the
+// grain follows the colour shown). Packed: eye 0's rectangle in rows [0, row1), eye 1's in rows
 // [row1, height), width = the wider rectangle. Twin: the luma step of
 // synth::layer::grain_layer and render::GrainPass's grain_init.comp.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
@@ -24,6 +24,8 @@ layout(push_constant) uniform Push {
     uint pad0;
     uint pad1;
     vec4 gain;           // the camera's colour gains, as composite.comp applies them
+    vec4 vignette;       // the lens's falloff, likewise
+    vec4 centre;
 } p;
 
 #include "colour_gain.glsl"
@@ -43,8 +45,8 @@ void main() {
         ivec3 at = ivec3(r.x + lx, r.y + ly, layer);
         vec4 c = p.use_fx == 2 ? imageLoad(mb_colour, at)
                  : (p.use_fx == 1 ? imageLoad(dof_colour, at) : imageLoad(raw_colour, at));
-        if (p.gain.w > 0.5) {
-            c = colour_gain(c, p.gain.xyz);
+        if (pixel_gain_on(p.gain, p.vignette)) {
+            c = colour_gain(c, pixel_gain(at.xy, layer, p.gain, p.vignette, p.centre));
         }
         if (c.a > 1e-3) {
             vec3 u = c.rgb / c.a;

@@ -269,7 +269,16 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
             let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             // The composite reads the chain's last output: MB's, else DoF's.
             let last = if fx.motion_blur { &out[e * n..(e + 1) * n] } else { &dof_out[e * n..(e + 1) * n] };
-            let cpu = composite(&bg8, &layers[e].colour, Some(last), None, W, full, false, fx.colour_gain);
+            let cpu = composite(
+                &bg8,
+                &layers[e].colour,
+                Some(last),
+                None,
+                W,
+                full,
+                false,
+                &fx.eye_gain(e, W as u32, H as u32),
+            );
             let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             check(&format!("{name}_composite_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
         }
@@ -412,7 +421,7 @@ fn composite_straight_alpha_matches_cpu_twin() {
                 W,
                 full,
                 straight_alpha,
-                None,
+                &EyeGain::default(),
             );
             let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             check(&format!("composite_straight{straight_alpha}_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
@@ -592,8 +601,10 @@ fn composite_colour_gain_matches_cpu_twin() {
     let mut moved = 0.0f64;
     let mut covered = 0usize;
     for e in 0..2 {
+        let eye_gain = fx.eye_gain(e, W as u32, H as u32);
+        assert_eq!(eye_gain.colour, Some(gain));
         let cpu =
-            composite(&bg8, &layers[e].colour, Some(&dof_out[e * n..(e + 1) * n]), None, W, full, false, Some(gain));
+            composite(&bg8, &layers[e].colour, Some(&dof_out[e * n..(e + 1) * n]), None, W, full, false, &eye_gain);
         let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
         check(&format!("composite_colour_gain_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
         for i in 0..n {
@@ -608,4 +619,97 @@ fn composite_colour_gain_matches_cpu_twin() {
     // Switched off in the settings: no gain, whatever the model says.
     let off = FrameEffects::from_model(&m, None, None, &LayerSettings { colour: false, ..settings });
     assert_eq!(off.colour_gain, None);
+}
+
+/// The lens's falloff (`model::Vignetting`, a strong one: the corner passes 0.30, so
+/// the test layer's content, all within r < 0.7, spans V 0.65–1) with a colour gain,
+/// in the composite against its twin (`synth::layer::composite` with
+/// `FrameEffects::eye_gain`), each eye about its own principal point: the
+/// deterministic passes' tolerance. Not vacuous: the covered pixels far from the
+/// centre move by more than 8 steps against the colour gain alone, those at the
+/// centre by under 1; off in the settings it costs nothing.
+#[test]
+fn composite_vignetting_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("composite_vignetting") else { return };
+    let layers = [test_layer(0), test_layer(1)];
+    let bg = vec![[0.3f32, 0.4, 0.5, 1.0]; W * H];
+    let rig = rig(&ctx, &layers, &bg);
+    let mut m = model(true, false, false);
+    // The camera frame is the eye buffer's size (ppr ratio 1): r = 1 at its corners.
+    (m.reference.width, m.reference.height) = (W as u32, H as u32);
+    m.colour = Colour {
+        present: true,
+        illuminant: Some([1.1, 0.97, 0.9]),
+        exposure: Some(0.9),
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    let full = Rect::full(W, H);
+    let n = W * H;
+    let settings = LayerSettings { dof_half_res: false, ..LayerSettings::default() };
+    let fxs = chain(&ctx, &rig, settings);
+    let download = || -> Vec<[f32; 4]> {
+        rig.output
+            .download()
+            .expect("download")
+            .chunks_exact(4)
+            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
+            .collect()
+    };
+    let fx = run(&ctx, &rig, &fxs, &m, 2);
+    assert_eq!(fx.vignette, None, "no vignetting term: none applied");
+    let plain = download();
+    m.vignetting = Vignetting {
+        present: true,
+        log_falloff: Some([-0.9, -0.6, 0.3]),
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    m.validate().expect("valid model");
+    let mut fx = FrameEffects::from_model(&m, None, None, fxs.settings());
+    assert!(fx.vignette.is_some(), "a present vignetting term is applied");
+    // Eyes about different principal points (an asymmetric frustum each).
+    fx.eye_centres_px = Some([[W as f32 * 0.45, H as f32 * 0.5], [W as f32 * 0.55, H as f32 * 0.48]]);
+    fx.rects = [Rect::full(W, H); 2];
+    fx.frame = 2;
+    rig.params.write(bytemuck::bytes_of(&EffectParams::from_model(&m, 1))).expect("params");
+    let mut result = Ok(());
+    ctx.submit_and_wait(|cmd| result = fxs.record(cmd, &rig.params, &fx, None)).expect("submit");
+    result.expect("record");
+    let gpu = download();
+    let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
+    let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+    let (mut far_moved, mut far, mut near_moved, mut near) = (0.0f64, 0usize, 0.0f64, 0usize);
+    for e in 0..2 {
+        let gain = fx.eye_gain(e, W as u32, H as u32);
+        let v = gain.vignette.expect("vignette");
+        let cpu = composite(&bg8, &layers[e].colour, Some(&dof_out[e * n..(e + 1) * n]), None, W, full, false, &gain);
+        let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+        check(&format!("composite_vignetting_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
+        for i in 0..n {
+            if layers[e].colour[i][3] <= 0.99 {
+                continue;
+            }
+            let moved = (0..3).map(|c| (gpu[e * n + i][c] - plain[e * n + i][c]).abs() as f64).sum::<f64>() / 3.0;
+            let g = v.gain_at(i % W, i / W);
+            if g < 0.8 {
+                far_moved += moved;
+                far += 1;
+            } else if g > 0.995 {
+                near_moved += moved;
+                near += 1;
+            }
+        }
+    }
+    // `plain` has the colour gain and no vignetting: pixels at the principal
+    // point keep their value, those far from it darken.
+    let (far_mean, near_mean) = (far_moved / far.max(1) as f64, near_moved / near.max(1) as f64);
+    assert!(far > 100 && near > 100, "{far} far, {near} near covered pixels");
+    assert!(near_mean < 1.0 / 255.0, "vignetting moved pixels at the centre by {:.2}/255", near_mean * 255.0);
+    assert!(
+        far_mean > near_mean + 8.0 / 255.0,
+        "vignetting moved far pixels by {:.1}/255, near ones by {:.1}/255",
+        far_mean * 255.0,
+        near_mean * 255.0
+    );
+    let off = FrameEffects::from_model(&m, None, None, &LayerSettings { vignetting: false, ..settings });
+    assert_eq!(off.vignette, None);
 }

@@ -33,7 +33,7 @@ fn sample_model() -> CameraModel {
 fn json_round_trip_and_schema_tag() {
     let m = sample_model();
     let text = m.to_json().expect("valid");
-    assert!(text.contains("\"schema\": \"blind-augment/camera-model/2\""));
+    assert!(text.contains("\"schema\": \"blind-augment/camera-model/3\""));
     assert!(text.contains("\"form\": \"thin_lens\""));
     assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
 }
@@ -68,6 +68,40 @@ fn version_1_files_read_and_colour_is_validated() {
         let e = CameraModel::from_json(&v.to_string()).expect_err("out of range").to_string();
         assert!(e.contains(&format!("colour.{field}")), "{e}");
     }
+}
+
+/// Version-2 files (no `vignetting`) read with vignetting not fitted; a vignetting
+/// term round-trips, and one whose falloff leaves [0.05, 2] anywhere on the frame,
+/// a non-finite coefficient or a present term without coefficients is refused,
+/// naming the field.
+#[test]
+fn version_2_files_read_and_vignetting_is_validated() {
+    let m = sample_model();
+    let mut v = serde_json::to_value(&m).expect("serialises");
+    v["schema"] = serde_json::json!("blind-augment/camera-model/2");
+    v.as_object_mut().expect("object").remove("vignetting");
+    let old = CameraModel::from_json(&v.to_string()).expect("a version-2 file parses");
+    assert_eq!(old.schema, blind_augment::model::SCHEMA);
+    assert_eq!(old.vignetting.diagnostics.status, Status::NotFitted);
+    assert_eq!(old.vignetting.applied(), None);
+    let mut c = sample_model();
+    c.vignetting = blind_augment::model::Vignetting {
+        present: true,
+        log_falloff: Some([-0.25, -0.65, 0.34]),
+        diagnostics: Diagnostics::not_fitted("x"),
+    };
+    assert_eq!(CameraModel::from_json(&c.to_json().expect("valid")).expect("parses"), c);
+    // exp(-4) = 0.018 at the corner; exp(+1) = 2.7; present without terms.
+    for bad in [serde_json::json!([-4.0, 0.0, 0.0]), serde_json::json!([1.0, 0.0, 0.0]), serde_json::Value::Null] {
+        let mut v = serde_json::to_value(&c).expect("serialises");
+        v["vignetting"]["log_falloff"] = bad.clone();
+        let e = CameraModel::from_json(&v.to_string()).expect_err("refused").to_string();
+        assert!(e.contains("vignetting"), "{bad}: {e}");
+    }
+    // JSON has no NaN: a model built in code is checked before it is written.
+    c.vignetting.log_falloff = Some([0.0, f32::NAN, 0.0]);
+    let e = c.to_json().expect_err("non-finite").to_string();
+    assert!(e.contains("vignetting.log_falloff[1]"), "{e}");
 }
 
 /// The DoF kernel shape round-trips; files written before it existed (no `kernel`)

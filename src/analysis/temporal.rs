@@ -148,6 +148,31 @@ impl<'a> Warp<'a> {
         })
     }
 
+    /// Where the surface at pixel centre `p` of the destination is in the source
+    /// (`row`'s projection and occlusion test for one point).
+    fn point(&self, p: [f32; 2]) -> Option<[f32; 2]> {
+        let (w, h, k) = (self.w, self.h, &self.k);
+        let (x, y) = (p[0] - 0.5, p[1] - 0.5);
+        if !(x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h) {
+            return None;
+        }
+        let z = self.dst_depth.get(x as usize, y as usize);
+        let ray = self.rot * Vec3::new((x - k.cx) / k.fx, (y - k.cy) / k.fy, 1.0);
+        let q = ray * z + self.t;
+        if !(z.is_finite() && z > 0.0) || q.z <= 1e-3 {
+            return None;
+        }
+        let (u, v) = (k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy);
+        if !(u >= BORDER_PX && v >= BORDER_PX && u <= w as f32 - 1.0 - BORDER_PX && v <= h as f32 - 1.0 - BORDER_PX) {
+            return None;
+        }
+        let zs = self.src_depth.get((u + 0.5) as usize, (v + 0.5) as usize);
+        if zs.is_finite() && zs < q.z * (1.0 - OCCLUSION_TOLERANCE) {
+            return None;
+        }
+        Some([u + 0.5, v + 0.5])
+    }
+
     /// Row `y` of the warped source into `rgb` and `ok` (each `w` long); pixels that
     /// do not hold are left as they are, `ok` false.
     fn row(&self, y: usize, rgb: [&mut [f32]; 3], ok: &mut [bool]) {
@@ -188,6 +213,21 @@ impl<'a> Warp<'a> {
             }
         }
     }
+}
+
+/// Where the surfaces at `points` (pixel centres of `dst`) are seen in `src`, by pose
+/// and metric depth as `align` warps: the pairs (point in `dst`, position in `src`)
+/// that hold (inside `src` by the bicubic border, not occluded there). `None` where
+/// either frame lacks a pose or metric depth or the sizes differ. What the
+/// vignetting fit (`fit::vignetting`) reads: the same surface at two image radii.
+pub fn correspond(
+    src: &Analysed,
+    dst: &Analysed,
+    k: &Intrinsics,
+    points: &[[f32; 2]],
+) -> Option<Vec<([f32; 2], [f32; 2])>> {
+    let warp = Warp::new(src, dst, k)?;
+    Some(points.iter().filter_map(|&p| warp.point(p).map(|q| (p, q))).collect())
 }
 
 /// Largest difference in sparse-grid motion between two frames (px per interval).

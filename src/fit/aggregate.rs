@@ -211,6 +211,11 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
     } else if let Some(last) = models.last() {
         out.colour = last.colour.clone();
     }
+    // Vignetting is fitted over its own window of frame pairs (the worker's
+    // `vignetting` module): the newest reading stands.
+    if let Some(m) = models.iter().rev().find(|m| m.vignetting.diagnostics.status != Status::NotFitted) {
+        out.vignetting = m.vignetting.clone();
+    }
     out.validate().map_err(|e| FitError::Option { option: "aggregate", problem: e.to_string() })?;
     Ok(out)
 }

@@ -310,7 +310,7 @@ const LUT_INTERVALS: usize = 4096;
 
 /// The sRGB decoding table: every pixel of the frame is decoded, and `powf` per
 /// value would cost more than the rest of the fit.
-fn srgb_lut() -> &'static [f32] {
+pub(crate) fn srgb_lut() -> &'static [f32] {
     static LUT: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
     LUT.get_or_init(|| {
         (0..=LUT_INTERVALS).map(|i| crate::image::yuv::srgb_to_linear(i as f32 / LUT_INTERVALS as f32)).collect()
@@ -320,7 +320,7 @@ fn srgb_lut() -> &'static [f32] {
 /// sRGB decoding by table, linear between its 4097 nodes (≤ 2e-5 off the curve,
 /// below an 8-bit input's step); values outside [0, 1] clamp, NaN stays NaN.
 #[inline]
-fn srgb_decode_with(lut: &[f32], v: f32) -> f32 {
+pub(crate) fn srgb_decode_with(lut: &[f32], v: f32) -> f32 {
     if v.is_nan() {
         return v;
     }

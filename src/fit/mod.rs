@@ -19,6 +19,7 @@ mod motion_blur;
 mod noise;
 pub mod noise_correlation;
 pub mod streak_spectrum;
+pub mod vignetting;
 
 pub use aggregate::aggregate_models;
 pub(crate) use aggregate::median;

@@ -87,6 +87,15 @@ pub fn srgb_to_linear(v: f32) -> f32 {
     }
 }
 
+/// The sRGB encoding of linear light (IEC 61966-2-1), `srgb_to_linear`'s inverse.
+pub fn linear_to_srgb(v: f32) -> f32 {
+    if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 fn check(plane: char, p: &YuvPlane<'_>, cols: usize, rows: usize) -> Result<(), YuvError> {
     // The last row need not be padded to the full row stride (Android's buffers
     // often end right after the last sample).

@@ -1,6 +1,7 @@
 //! Plain data shared by the renderer and its CPU twins: the per-eye pixel
-//! rectangles effect work is bounded by, the MB tile grid over them, and the grain
-//! synthesis table a snapshot carries to the GPU.
+//! rectangles effect work is bounded by, the MB tile grid over them, the grain
+//! synthesis table a snapshot carries to the GPU, and the per-pixel gain (colour
+//! and vignetting) the composite applies.
 
 /// A pixel rectangle (the screen bounds effect work is limited to).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -101,5 +102,47 @@ mod tests {
             Rect { x: 288, y: 176, w: 12, h: 24 }
         );
         assert_eq!(covering_rect(&[Rect::default(), Rect::default()], 16, 300, 200), Rect::default());
+    }
+}
+
+/// The lens's falloff as one eye buffer sees it (`model::Vignetting` mapped into
+/// the eye's pixels): r = |p − `centre_px`| · `inv_half_diag_px`, held at 1 past
+/// the camera's corner (the fitted and validated range).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EyeVignette {
+    pub log_falloff: [f32; 3],
+    pub centre_px: [f32; 2],
+    pub inv_half_diag_px: f32,
+}
+
+impl EyeVignette {
+    /// V at the centre of pixel (x, y) (`shaders/colour_gain.glsl`'s
+    /// `vignette_gain`, the same f32 arithmetic).
+    pub fn gain_at(&self, x: usize, y: usize) -> f32 {
+        let dx = (x as f32 + 0.5 - self.centre_px[0]) * self.inv_half_diag_px;
+        let dy = (y as f32 + 0.5 - self.centre_px[1]) * self.inv_half_diag_px;
+        let r2 = (dx * dx + dy * dy).min(1.0);
+        let a = self.log_falloff;
+        (r2 * (a[0] + r2 * (a[1] + r2 * a[2]))).exp()
+    }
+}
+
+/// The linear-light gain the composite multiplies one eye's virtual colour by: the
+/// camera's colour gains (`model::Colour`) times the lens's falloff at the pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EyeGain {
+    pub colour: Option<[f32; 3]>,
+    pub vignette: Option<EyeVignette>,
+}
+
+impl EyeGain {
+    /// The gain at pixel (x, y); `None` where neither term applies (the authored
+    /// colour passes untouched).
+    pub fn at(&self, x: usize, y: usize) -> Option<[f32; 3]> {
+        if self.colour.is_none() && self.vignette.is_none() {
+            return None;
+        }
+        let v = self.vignette.map_or(1.0, |v| v.gain_at(x, y));
+        Some(self.colour.unwrap_or([1.0; 3]).map(|g| g * v))
     }
 }

@@ -1,6 +1,6 @@
 //! The camera model: plain data, one versioned JSON document
-//! (`"schema": "blind-augment/camera-model/2"`; version 1 documents, which have no
-//! `colour`, still read), with validation on load so that no NaN, Inf or
+//! (`"schema": "blind-augment/camera-model/3"`; version 1 documents, which have no
+//! `colour`, and version 2, which have no `vignetting`, still read), with validation on load so that no NaN, Inf or
 //! out-of-range parameter can reach a renderer.
 //!
 //! Every effect carries `present` (the renderer skips absent effects) and
@@ -8,17 +8,23 @@
 
 pub mod compare;
 pub mod geometry;
-pub use geometry::{covering_rect, half_rect, tile_rect, GrainTable, Rect};
+pub use geometry::{covering_rect, half_rect, tile_rect, EyeGain, EyeVignette, GrainTable, Rect};
 pub mod kernels;
 mod validate;
 
 use serde::{Deserialize, Serialize};
 pub use validate::ModelError;
 
-pub const SCHEMA: &str = "blind-augment/camera-model/2";
-/// Schemas `CameraModel::from_json` reads: version 1 is version 2 without `colour`
-/// (read as not fitted); files are always written as `SCHEMA`.
-pub const READABLE_SCHEMAS: [&str; 2] = ["blind-augment/camera-model/1", SCHEMA];
+pub const SCHEMA: &str = "blind-augment/camera-model/3";
+/// Schemas `CameraModel::from_json` reads: version 1 is version 2 without `colour`,
+/// version 2 is version 3 without `vignetting` (each read as not fitted); files are
+/// always written as `SCHEMA`.
+pub const READABLE_SCHEMAS: [&str; 3] = ["blind-augment/camera-model/1", "blind-augment/camera-model/2", SCHEMA];
+/// Bounds of the vignetting gain V(r) over the frame (r in [0, 1]): a lens that
+/// passes under 1/20 of the centre's light at its corner is outside any headset
+/// camera (lensfun's 19 920 "pa" profiles: the darkest corner passes 0.13), and a
+/// corner brighter than twice the centre is an ISP's over-correction no camera ships.
+pub const VIGNETTING_GAIN_RANGE: [f32; 2] = [0.05, 2.0];
 /// Largest linear-light gain `Colour::gains` may apply to a channel (and smallest
 /// its reciprocal): six stops either way, beyond any auto-exposure's reach between
 /// a lit room and the virtual content's authored level.
@@ -64,8 +70,32 @@ pub struct CameraModel {
     /// absent from version-1 files (read as not fitted).
     #[serde(default = "Colour::not_fitted")]
     pub colour: Colour,
+    /// The lens's radial falloff; absent from version-1 and -2 files (read as not
+    /// fitted).
+    #[serde(default = "Vignetting::not_fitted")]
+    pub vignetting: Vignetting,
 }
 
+/// The lens's radial falloff of light (and what of it the ISP's shading correction
+/// leaves): a virtual surface's linear-light colour at normalised radius r is
+/// multiplied by V(r) = exp(a1·r² + a2·r⁴ + a3·r⁶). r is the distance from the frame's
+/// centre over its half-diagonal (1 at the corners), lensfun's convention for its
+/// "pa" profiles (V = 1 + k1·r² + k2·r⁴ + k3·r⁶, r = 1 at the corner of the
+/// calibration frame: lensfun `mod-color.cpp`, `rescale_polynomial_coefficients`).
+/// The log-polynomial makes the fit linear in frame-to-frame log-ratios of the same
+/// surface (`fit::vignetting`). Applied before every other effect (the optics'
+/// order: falloff, then defocus and motion blur; then the ISP).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Vignetting {
+    pub present: bool,
+    /// [a1, a2, a3] of log V(r) = a1·r² + a2·r⁴ + a3·r⁶ (lensfun's three even
+    /// terms, in the log: 0.2% of light from its profiles where two terms leave
+    /// 1.2%). `null` when not identifiable.
+    pub log_falloff: Option<[f32; 3]>,
+    /// `diagnostics.stderr`: one-sigma uncertainty of the corner's falloff 1 − V(1).
+    pub diagnostics: Diagnostics,
+}
 /// The camera's rendering of a neutral surface under the room's light, relative to
 /// the virtual content's neutral (ARCore's colour correction and pixel intensity
 /// are the same quantities): a virtual surface's linear-light colour is multiplied
@@ -469,6 +499,34 @@ impl Colour {
     }
 }
 
+impl Vignetting {
+    pub fn absent(diagnostics: Diagnostics) -> Self {
+        Self { present: false, log_falloff: None, diagnostics }
+    }
+
+    pub fn not_fitted() -> Self {
+        Self::absent(Diagnostics::not_fitted("not fitted"))
+    }
+
+    /// Normalised radius of a pixel position in a `w`×`h` frame (pixel centres at
+    /// +0.5): its distance from the frame's centre over the half-diagonal.
+    pub fn radius(w: usize, h: usize, x: f32, y: f32) -> f32 {
+        let (cx, cy) = (w as f32 * 0.5, h as f32 * 0.5);
+        (x - cx).hypot(y - cy) / cx.hypot(cy)
+    }
+
+    /// V(r) of `log_falloff` (r: centre-to-corner normalised radius).
+    pub fn gain_at(log_falloff: [f32; 3], r: f32) -> f32 {
+        let r2 = r * r;
+        (r2 * (log_falloff[0] + r2 * (log_falloff[1] + r2 * log_falloff[2]))).exp()
+    }
+
+    /// The coefficients the renderer applies: `None` when absent or unknown.
+    pub fn applied(&self) -> Option<[f32; 3]> {
+        self.log_falloff.filter(|_| self.present)
+    }
+}
+
 impl CameraModel {
     /// A model with every effect absent, for the given reference frame size.
     pub fn empty(width: u32, height: u32) -> Self {
@@ -479,6 +537,7 @@ impl CameraModel {
             motion_blur: MotionBlur::absent(Diagnostics::not_fitted("not fitted")),
             depth_of_field: DepthOfField::absent(DepthUnits::MetricM, Diagnostics::not_fitted("not fitted")),
             colour: Colour::not_fitted(),
+            vignetting: Vignetting::not_fitted(),
         }
     }
 

@@ -62,7 +62,38 @@ impl CameraModel {
         self.validate_noise()?;
         self.validate_motion_blur()?;
         self.validate_dof()?;
-        self.validate_colour()
+        self.validate_colour()?;
+        self.validate_vignetting()
+    }
+
+    fn validate_vignetting(&self) -> Result<(), ModelError> {
+        let v = &self.vignetting;
+        check_diagnostics("vignetting", &v.diagnostics)?;
+        if let Some(a) = v.log_falloff {
+            for (k, c) in a.iter().enumerate() {
+                if !c.is_finite() {
+                    return Err(bad(format!("vignetting.log_falloff[{k}]"), format!("must be finite, got {c}")));
+                }
+            }
+            // What reaches the GPU is V(r) over the frame: bounded at every radius
+            // (a quartic's extremes lie between r = 0 and 1 or at them; 65 radii
+            // bound it to well under 1% between samples for coefficients this size).
+            let [lo, hi] = VIGNETTING_GAIN_RANGE;
+            for i in 0..=64 {
+                let r = i as f32 / 64.0;
+                let g = Vignetting::gain_at(a, r);
+                if !(lo..=hi).contains(&g) {
+                    return Err(bad(
+                        "vignetting.log_falloff",
+                        format!("V(r) = {g} at r = {r} is outside [{lo}, {hi}] (coefficients {a:?})"),
+                    ));
+                }
+            }
+        }
+        if v.present && v.log_falloff.is_none() {
+            return Err(bad("vignetting", "log_falloff must be set when present is true"));
+        }
+        Ok(())
     }
 
     fn validate_colour(&self) -> Result<(), ModelError> {

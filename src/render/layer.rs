@@ -17,7 +17,7 @@
 use super::grain::GrainRecorder;
 use super::params::EffectParams;
 use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, QueryPool, Resource, EYES};
-use crate::model::{half_rect, tile_rect, Rect};
+use crate::model::{half_rect, tile_rect, EyeGain, EyeVignette, Rect};
 use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
@@ -81,8 +81,14 @@ struct LumaPush {
     pad: [u32; 2],
     /// xyz: the camera's colour gains (`FrameEffects::colour_gain`); w: 1 to apply.
     gain: [f32; 4],
+    /// xyz: the lens's log-falloff terms (`FrameEffects::vignette`); w: 1 / the
+    /// camera's half-diagonal in eye pixels, 0 = no vignetting.
+    vignette: [f32; 4],
+    /// The eyes' principal points (px): xy eye 0, zw eye 1.
+    centre: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<LumaPush>() == 80);
+const _: () = assert!(std::mem::size_of::<LumaPush>() == 112);
+const _: () = assert!(std::mem::offset_of!(LumaPush, vignette) == 80);
 const _: () = assert!(std::mem::offset_of!(LumaPush, seed) == 48);
 const _: () = assert!(std::mem::offset_of!(LumaPush, gain) == 64);
 
@@ -97,10 +103,13 @@ struct CompositePush {
     row1: i32,
     straight_alpha: i32,
     pad: i32,
-    /// As `LumaPush::gain`.
+    /// As `LumaPush::gain`, `vignette` and `centre`.
     gain: [f32; 4],
+    vignette: [f32; 4],
+    centre: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<CompositePush>() == 80);
+const _: () = assert!(std::mem::size_of::<CompositePush>() == 112);
+const _: () = assert!(std::mem::offset_of!(CompositePush, vignette) == 80);
 const _: () = assert!(std::mem::offset_of!(CompositePush, straight_alpha) == 56);
 const _: () = assert!(std::mem::offset_of!(CompositePush, gain) == 64);
 
@@ -128,6 +137,9 @@ pub struct LayerSettings {
     /// Apply the camera's white balance and exposure (`model::Colour`; off = the
     /// authored colours even where the model has them).
     pub colour: bool,
+    /// Apply the lens's vignetting (`model::Vignetting`; off = none even where the
+    /// model has it).
+    pub vignetting: bool,
     /// Store the composite with straight (unpremultiplied) alpha: the colour divided
     /// by the output alpha. The headset's projection layer uses it with
     /// XR_COMPOSITION_LAYER_UNPREMULTIPLIED_ALPHA_BIT, so the compositor, which
@@ -151,6 +163,7 @@ impl Default for LayerSettings {
             render_interval_s: 1.0 / 45.0,
             grain: true,
             colour: true,
+            vignetting: true,
             straight_alpha: false,
         }
     }
@@ -168,6 +181,14 @@ pub struct FrameEffects {
     /// The camera's per-channel colour gain (linear light) where the model has one
     /// and the settings apply it; `None`: the authored colours, at no cost.
     pub colour_gain: Option<[f32; 3]>,
+    /// The lens's falloff where the model has it and the settings apply it: its
+    /// log terms and 1 / the camera's half-diagonal in eye pixels. `None`: no cost.
+    pub vignette: Option<([f32; 3], f32)>,
+    /// Each eye's principal point in its buffer (px), where the passthrough
+    /// camera's optical axis lands: `gbuffer::Eye::centre_px` (the XR view's
+    /// asymmetric frustum; `StereoRenderer::render_to` sets it). `None`: the
+    /// buffer's centre (the desktop, whose background is the camera frame).
+    pub eye_centres_px: Option<[[f32; 2]; 2]>,
     /// Eye-buffer / camera `pixels_per_radian`.
     pub ppr_ratio: f32,
     /// Exposure time over the render frame interval (λ · camera interval / render
@@ -238,11 +259,33 @@ impl FrameEffects {
             colour_gain: (model.colour.present && settings.colour)
                 .then(|| model.colour.gains_or_one())
                 .filter(|g| g.iter().all(|v| v.is_finite() && *v > 0.0) && *g != [1.0; 3]),
+            vignette: model.vignetting.applied().filter(|_| settings.vignetting).and_then(|a| {
+                // The camera's half-diagonal (px) in eye pixels: the ratio of
+                // the two pixels per radian.
+                let half_diag = 0.5 * (model.reference.width as f32).hypot(model.reference.height as f32);
+                let inv = 1.0 / (half_diag * ppr_ratio);
+                (inv.is_finite() && inv > 0.0).then_some((a, inv))
+            }),
+            eye_centres_px: None,
             ppr_ratio,
             exposure_ratio: if exposure_ratio.is_finite() { exposure_ratio } else { 0.0 },
             dof_radius_px,
             rects: [Rect::default(); 2],
             frame: 0,
+        }
+    }
+
+    /// The per-pixel gain of eye `eye` in a `width × height` buffer (the composite's
+    /// colour times vignetting; `synth::layer::composite`'s argument).
+    pub fn eye_gain(&self, eye: usize, width: u32, height: u32) -> EyeGain {
+        let centres = self.eye_centres_px.unwrap_or([[width as f32 * 0.5, height as f32 * 0.5]; 2]);
+        EyeGain {
+            colour: self.colour_gain,
+            vignette: self.vignette.map(|(log_falloff, inv_half_diag_px)| EyeVignette {
+                log_falloff,
+                centre_px: centres[eye.min(1)],
+                inv_half_diag_px,
+            }),
         }
     }
 
@@ -257,6 +300,11 @@ impl FrameEffects {
         }
         m
     }
+}
+
+/// Eye `eye`'s principal point (px) as the composite applies it.
+fn self_centre(fx: &FrameEffects, eye: usize, width: u32, height: u32) -> [f32; 2] {
+    fx.eye_gain(eye, width, height).vignette.map_or([0.0; 2], |v| v.centre_px)
 }
 
 pub struct LayerEffects<'a> {
@@ -567,12 +615,17 @@ impl<'a> LayerEffects<'a> {
         }
         stamp(STAMP_MB);
         let gain4 = fx.colour_gain.map_or([1.0, 1.0, 1.0, 0.0], |g| [g[0], g[1], g[2], 1.0]);
+        let vignette4 = fx.vignette.map_or([0.0; 4], |(a, inv)| [a[0], a[1], a[2], inv]);
+        let [c0, c1] = [0, 1].map(|e| self_centre(fx, e, self.width, self.height));
+        let centre4 = [c0[0], c0[1], c1[0], c1[1]];
         let mut cp = CompositePush {
             rect: [to4(rects[0]), to4(rects[1])],
             size: [self.width as i32, self.height as i32],
             use_fx: source,
             straight_alpha: self.settings.straight_alpha as i32,
             gain: gain4,
+            vignette: vignette4,
+            centre: centre4,
             ..Default::default()
         };
         if let Some((nodes, range)) = noise_table {
@@ -590,6 +643,8 @@ impl<'a> LayerEffects<'a> {
                 seed: [seed as u32, (seed >> 32) as u32],
                 pad: [0; 2],
                 gain: gain4,
+                vignette: vignette4,
+                centre: centre4,
             };
             self.luma.record(
                 cmd,

@@ -311,6 +311,9 @@ impl<'a> StereoRenderer<'a> {
         fx.dof &= enabled.dof;
         fx.motion_blur &= enabled.motion_blur;
         fx.noise &= enabled.noise;
+        // The lens's falloff is about the passthrough camera's optical axis, which
+        // lands on each eye's principal point (the view's asymmetric frustum).
+        fx.eye_centres_px = Some([g.eyes[0].centre_px, g.eyes[1].centre_px]);
         fx.frame = self.frame;
         self.frame = self.frame.wrapping_add(1);
         fx.rects =

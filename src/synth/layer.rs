@@ -7,7 +7,7 @@
 use crate::image::LUMA_WEIGHTS;
 use crate::model::kernels::{disc_tap, DISC_MIN_SIGMA_PX};
 pub use crate::model::{half_rect, tile_rect, Rect};
-use crate::model::{DepthOfField, DepthUnits, DofKernel, MAX_DOF_SIGMA_PX};
+use crate::model::{DepthOfField, DepthUnits, DofKernel, EyeGain, MAX_DOF_SIGMA_PX};
 
 /// One eye of the virtual layer: premultiplied RGBA and (motion x, motion y in px
 /// per render frame, depth in m, coverage) per pixel, row-major.
@@ -529,22 +529,23 @@ pub fn gain_encoded(c: [f32; 4], gain: [f32; 3]) -> [f32; 4] {
 }
 
 /// Luma (Rec. 601) of the un-premultiplied virtual colour over `rect`, row-major
-/// `rect.w × rect.h` (`layer_luma.comp`), after the camera's colour `gain` where
-/// given; 0 where alpha ≤ 1e-3.
-pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect, gain: Option<[f32; 3]>) -> Vec<f32> {
+/// `rect.w × rect.h` (`layer_luma.comp`), after the per-pixel `gain` (the camera's
+/// colour and the lens's falloff) where it applies; 0 where alpha ≤ 1e-3.
+pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect, gain: &EyeGain) -> Vec<f32> {
     let mut out = Vec::with_capacity(rect.area());
     for y in rect.y..rect.y + rect.h {
         for x in rect.x..rect.x + rect.w {
             let c = colour[y as usize * width + x as usize];
-            let c = gain.map_or(c, |g| gain_encoded(c, g));
+            let c = gain.at(x as usize, y as usize).map_or(c, |g| gain_encoded(c, g));
             out.push(if c[3] > 1e-3 { (0..3).map(|i| LUMA_WEIGHTS[i] * c[i] / c[3]).sum() } else { 0.0 });
         }
     }
     out
 }
 
-/// `composite.comp` for one eye: out = bg·(1 − α) + G(C) + α·n (G: the camera's
-/// colour `gain` where given, `gain_encoded`; n: planar RGB grain
+/// `composite.comp` for one eye: out = bg·(1 − α) + G(C) + α·n (G: the per-pixel
+/// `gain` — the camera's colour times the lens's falloff — where it applies,
+/// `gain_encoded`; n: planar RGB grain
 /// of `rect`'s size, or none), alpha = bg.a·(1 − α) + α (premultiplied "over"),
 /// colour clamped to [0, alpha]; the virtual layer is `fx` (or
 /// `raw`) inside `rect` and empty outside it. `straight_alpha`: the colour is
@@ -559,7 +560,7 @@ pub fn composite(
     width: usize,
     rect: Rect,
     straight_alpha: bool,
-    gain: Option<[f32; 3]>,
+    gain: &EyeGain,
 ) -> Vec<[f32; 4]> {
     let plane = rect.area();
     (0..background.len())
@@ -573,7 +574,7 @@ pub fn composite(
                 Some(f) => f[i],
                 None => raw[i],
             };
-            let c = gain.map_or(c, |g| gain_encoded(c, g));
+            let c = gain.at(x as usize, y as usize).map_or(c, |g| gain_encoded(c, g));
             let a = c[3].clamp(0.0, 1.0);
             let mut rgb: [f32; 3] = std::array::from_fn(|k| background[i][k] * (1.0 - a) + c[k]);
             if let (Some(n), true, true) = (noise, inside, a > 0.0) {
@@ -671,8 +672,8 @@ mod tests {
         let rect = Rect { x: 0, y: 0, w: 1, h: 1 };
         // One stop down: the luma the grain is read at falls with the colour shown.
         let down = [0.5f32; 3];
-        let plain = layer_luma(&layer, 1, rect, None)[0];
-        let graded_luma = layer_luma(&layer, 1, rect, Some(down))[0];
+        let plain = layer_luma(&layer, 1, rect, &EyeGain::default())[0];
+        let graded_luma = layer_luma(&layer, 1, rect, &EyeGain { colour: Some(down), vignette: None })[0];
         let g = gain_encoded(layer[0], down);
         let expect: f32 = (0..3).map(|c| crate::image::LUMA_WEIGHTS[c] * g[c]).sum();
         assert!((graded_luma - expect).abs() < 1e-6, "{graded_luma} vs {expect}");

@@ -24,7 +24,8 @@ use crate::image::{Flow, Plane, Rgb};
 use crate::model::CameraModel;
 
 /// Apply every present effect of `model` to `clean`, in the camera's order: the
-/// paper's (DoF, motion blur, noise) with the ISP's colour before the noise.
+/// lens's vignetting, then the paper's (DoF, motion blur, noise) with the ISP's
+/// colour before the noise.
 /// `depth` is needed when DoF is present and `flow` when MB is present; without
 /// them that effect is skipped (logged). Output is unclipped.
 pub fn apply_camera_model(
@@ -35,6 +36,9 @@ pub fn apply_camera_model(
     seed: u64,
 ) -> Rgb {
     let mut img = clean.clone();
+    if let Some(a) = model.vignetting.applied() {
+        img = add_vignetting(&img, a);
+    }
     if model.depth_of_field.present {
         match depth {
             Some(z) => img = add_dof(&img, z, &model.depth_of_field),
@@ -59,6 +63,27 @@ pub fn apply_camera_model(
         img = add_noise(&img, &model.noise, seed);
     }
     img
+}
+
+/// The lens's falloff on an encoded (sRGB) frame: each pixel decoded to linear
+/// light, multiplied by V(r) (`model::Vignetting`; r from the frame's centre over
+/// its half-diagonal, at pixel centres) and re-encoded, unclipped as `add_colour`.
+/// The render pass's twin is `layer::vignette_gain`.
+pub fn add_vignetting(img: &Rgb, log_falloff: [f32; 3]) -> Rgb {
+    let (w, h) = (img.width, img.height);
+    let decode = |v: f32| if v < 0.0 { v / 12.92 } else { crate::image::yuv::srgb_to_linear(v) };
+    let mut out = img.clone();
+    for y in 0..h {
+        for x in 0..w {
+            let r = crate::model::Vignetting::radius(w, h, x as f32 + 0.5, y as f32 + 0.5);
+            let g = crate::model::Vignetting::gain_at(log_falloff, r);
+            for ch in out.channels.iter_mut() {
+                let v = &mut ch[y * w + x];
+                *v = crate::image::yuv::linear_to_srgb(decode(*v) * g);
+            }
+        }
+    }
+    out
 }
 
 /// The camera's white balance and exposure on an encoded (sRGB) frame: each value

@@ -161,6 +161,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let mut cfg = CalibratorConfig::new(tier, 1.0 / args.fps as f64, intrinsics);
     cfg.effects = super::effects(&args.only);
     cfg.colour = super::colour_wanted(&args.only);
+    cfg.vignetting = super::vignetting_wanted(&args.only);
     cfg.fast_effort = args.fast_effort;
     let mut cal = Calibrator::new(cfg, providers)?;
     let mut timeline = match &args.timeline {

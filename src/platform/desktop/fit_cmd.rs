@@ -255,6 +255,15 @@ pub fn summarize(m: &blind_augment::model::CameraModel) {
         c.diagnostics.reason,
         c.diagnostics.fit_time_s * 1e3
     );
+    let v = &m.vignetting;
+    let corner = v.applied().map_or(1.0, |a| blind_augment::model::Vignetting::gain_at(a, 1.0));
+    eprintln!(
+        "  vignetting:     {:<17} corner V {:.3}; {} ({:.1} ms)",
+        v.diagnostics.status_str(),
+        corner,
+        v.diagnostics.reason,
+        v.diagnostics.fit_time_s * 1e3
+    );
 }
 
 pub fn write_plots(dir: &Path, out: &FitOutput) -> Result<()> {

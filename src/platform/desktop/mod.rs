@@ -43,6 +43,14 @@ pub enum EffectArg {
     DepthOfField,
     /// White balance and exposure (`model::Colour`).
     Colour,
+    /// The lens's falloff (`model::Vignetting`; `calibrate` with poses and metric
+    /// depth only: it needs the same surfaces seen at two image radii).
+    Vignetting,
+}
+
+/// Whether `--only` asks for the vignetting term (all effects without it).
+pub fn vignetting_wanted(only: &Option<Vec<EffectArg>>) -> bool {
+    only.as_ref().map_or(true, |l| l.contains(&EffectArg::Vignetting))
 }
 
 /// Whether `--only` asks for the colour term (all effects without it).

@@ -194,6 +194,12 @@ impl Calibrator {
                 agg.colour = p.colour.clone();
             }
         }
+        // Vignetting likewise: a head at rest shows no surface at two radii.
+        if agg.vignetting.log_falloff.is_none() {
+            if let Some(p) = prev.as_ref().filter(|p| p.vignetting.log_falloff.is_some()) {
+                agg.vignetting = p.vignetting.clone();
+            }
+        }
         if on[2] != agg.depth_of_field.present {
             match (&prev, on[2] && dp == 0) {
                 (Some(p), true) => agg.depth_of_field = p.depth_of_field.clone(),

@@ -107,6 +107,12 @@ pub struct CalibratorConfig {
     /// fit: 0.25 s keeps 4 fits in each 1 s window, so a change is followed within
     /// 1 s, at a quarter of the cost per update of fitting every update at 0.1 s.
     pub colour_refit_s: f64,
+    /// Fit the vignetting term (`fit::vignetting`, from frame pairs matched by pose
+    /// and depth: needs intrinsics, poses and metric depth) ...
+    pub vignetting: bool,
+    /// ... pairing frames this far apart (video s): at a turning head's 20–60°/s,
+    /// 0.25 s moves surfaces a tenth to a third of the frame.
+    pub vignetting_refit_s: f64,
 }
 
 impl CalibratorConfig {
@@ -163,6 +169,8 @@ impl CalibratorConfig {
             fast_effort: 1.0,
             colour: true,
             colour_refit_s: 0.25,
+            vignetting: true,
+            vignetting_refit_s: 0.25,
         }
     }
 }

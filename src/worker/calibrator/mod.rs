@@ -38,6 +38,7 @@ mod mb_pool;
 mod noise_fit;
 mod report;
 mod tnr;
+mod vignetting;
 
 pub use config::{CalibrationTier, CalibratorConfig, Providers, MIN_STRIP_ROWS, NOISE_STRIP_PX};
 use report::Stages;
@@ -148,6 +149,7 @@ pub struct Calibrator {
     noise_last_update: bool,
     /// Video time of the last colour fit (`CalibratorConfig::colour_refit_s`).
     colour_last_t_s: Option<f64>,
+    vignetting: vignetting::VignettingVideo,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -222,6 +224,7 @@ impl Calibrator {
             exposure_suspect: None,
             noise_last_update: false,
             colour_last_t_s: None,
+            vignetting: Default::default(),
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -797,6 +800,11 @@ impl Calibrator {
             model.colour = fit::colour::fit_colour(&current.frame.image);
             self.stages.add("fit.colour", t);
             self.colour_last_t_s = Some(t_s);
+        }
+        let t = Instant::now();
+        if let Some(v) = self.fit_vignetting_at(current) {
+            model.vignetting = v;
+            self.stages.add("fit.vignetting", t);
         }
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
