@@ -64,6 +64,16 @@ fn model() -> CameraModel {
             diagnostics: Diagnostics::not_fitted("bench"),
         };
     }
+    // FRAME_BENCH_VIGNETTING=1: with the demo camera's lens falloff (corner V 0.70;
+    // `model::Vignetting`, applied with the colour gain in the luma and composite
+    // passes).
+    if std::env::var("FRAME_BENCH_VIGNETTING").is_ok_and(|v| v == "1") {
+        m.vignetting = blind_augment::model::Vignetting {
+            present: true,
+            log_falloff: Some([-0.2, -0.3, 0.14]),
+            diagnostics: Diagnostics::not_fitted("bench"),
+        };
+    }
     m
 }
 

@@ -27,39 +27,8 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use blind_augment::synth::sequence::motorcycle;
 use blind_augment::worker::CalibrationTier;
-use common::scenes::{
-    self, name_hash, run, spec_for, without_defocus, Entry, RunResult, CHANGE_S, FPS, FRAMES, HEIGHT, WIDTH,
-};
-
-fn load(manifest: &str) -> Vec<Entry> {
-    let text = std::fs::read_to_string(manifest).unwrap_or_else(|e| panic!("{manifest}: {e}"));
-    let mut out = vec![];
-    match motorcycle() {
-        Ok(scene) => out.push(Entry {
-            k: name_hash("middlebury2014-motorcycle"),
-            id: "middlebury2014-motorcycle".into(),
-            held_out: false,
-            source: "bundled (assets/)".into(),
-            scene,
-        }),
-        Err(e) => eprintln!("bundled Motorcycle: {e}"),
-    }
-    for line in text.lines().filter(|l| !l.starts_with('#') && !l.trim().is_empty()) {
-        let c: Vec<&str> = line.split('\t').collect();
-        let [id, split, source, image, depth, read, focal] = c[..] else {
-            eprintln!("manifest line {line:?}: not 7 columns; skipped");
-            continue;
-        };
-        let focal: f32 = focal.parse().unwrap_or(f32::NAN);
-        match scenes::entry(id, split == "held-out", source, image, depth, read, focal) {
-            Ok(e) => out.push(e),
-            Err(e) => eprintln!("{id}: {e}; skipped"),
-        }
-    }
-    out
-}
+use common::scenes::{load, run, spec_for, without_defocus, RunResult, CHANGE_S, FPS, FRAMES, HEIGHT, WIDTH};
 
 /// The blind δ(Z) against the applied defocus over the scene's own softness: per
 /// depth the run without the applied defocus gives the own softness (the median of

@@ -102,6 +102,37 @@ pub fn entry(
     Ok(Entry { k: name_hash(id), id: id.into(), held_out, source: source.into(), scene })
 }
 
+/// The scenes of a bench manifest (`cargo xtask bench-quality` writes it: id, split,
+/// source, image, depth, read, focal_px per line), after the bundled Motorcycle
+/// (a tuning scene); lines that do not load are named and skipped.
+pub fn load(manifest: &str) -> Vec<Entry> {
+    let text = std::fs::read_to_string(manifest).unwrap_or_else(|e| panic!("{manifest}: {e}"));
+    let mut out = vec![];
+    match blind_augment::synth::sequence::motorcycle() {
+        Ok(scene) => out.push(Entry {
+            k: name_hash("middlebury2014-motorcycle"),
+            id: "middlebury2014-motorcycle".into(),
+            held_out: false,
+            source: "bundled (assets/)".into(),
+            scene,
+        }),
+        Err(e) => eprintln!("bundled Motorcycle: {e}"),
+    }
+    for line in text.lines().filter(|l| !l.starts_with('#') && !l.trim().is_empty()) {
+        let c: Vec<&str> = line.split('\t').collect();
+        let [id, split, source, image, depth, read, focal] = c[..] else {
+            eprintln!("manifest line {line:?}: not 7 columns; skipped");
+            continue;
+        };
+        let focal: f32 = focal.parse().unwrap_or(f32::NAN);
+        match entry(id, split == "held-out", source, image, depth, read, focal) {
+            Ok(e) => out.push(e),
+            Err(e) => eprintln!("{id}: {e}; skipped"),
+        }
+    }
+    out
+}
+
 /// The run's camera: λ and noise before and after the change vary with the scene's
 /// index across a headset camera's range; δ(Z) a thin lens focused at the scene's
 /// median depth reaching ~1.5 px at its depth extremes.

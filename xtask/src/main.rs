@@ -162,10 +162,11 @@ fn main() -> Result<()> {
                 args.iter().any(|a| a == "--quick"),
                 args.iter().any(|a| a == "--noise-only"),
                 args.iter().any(|a| a == "--colour-only"),
+                args.iter().any(|a| a == "--vignetting-only"),
             ),
-            None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] [--noise-only] [--colour-only] (bare git mirrors as owner+name/repo)"),
+            None => bail!("usage: cargo xtask bench-quality MIRRORS [--quick] [--noise-only] [--colour-only] [--vignetting-only] (bare git mirrors as owner+name/repo)"),
         },
-        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | pull-recording [DEST] | train-models | gltf-corpus MIRRORS [--validator DIR] | bench-quality MIRRORS [--quick] [--noise-only] [--colour-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
+        other => bail!("usage: cargo xtask bench | bench-xr | assets | xr-runtime [--release] | apk [--release] | install [--release] | pull-recording [DEST] | train-models | gltf-corpus MIRRORS [--validator DIR] | bench-quality MIRRORS [--quick] [--noise-only] [--colour-only] [--vignetting-only] (got {other:?}; `bench-xr` runs the XR part of bench alone)"),
     }
 }
 

@@ -169,10 +169,17 @@ const SCENES: &[SceneDef] = &[
     },
 ];
 
-pub fn run(target: &Path, mirrors: &Path, quick: bool, noise_only: bool, colour_only: bool) -> Result<()> {
+pub fn run(
+    target: &Path,
+    mirrors: &Path,
+    quick: bool,
+    noise_only: bool,
+    colour_only: bool,
+    vignetting_only: bool,
+) -> Result<()> {
     let bench = target.join("bench");
     std::fs::create_dir_all(&bench)?;
-    if !noise_only {
+    if !noise_only && !vignetting_only {
         if let Some(out) = crate::colour_corpus::run_colour(target, mirrors)? {
             std::fs::write(bench.join("colour.md"), out).context("writing target/bench/colour.md")?;
             eprintln!("results in {}", bench.join("colour.md").display());
@@ -181,9 +188,11 @@ pub fn run(target: &Path, mirrors: &Path, quick: bool, noise_only: bool, colour_
     if colour_only {
         return Ok(());
     }
-    if let Some(out) = run_real_noise(target, mirrors)? {
-        std::fs::write(bench.join("real_noise.md"), out).context("writing target/bench/real_noise.md")?;
-        eprintln!("results in {}", bench.join("real_noise.md").display());
+    if !vignetting_only {
+        if let Some(out) = run_real_noise(target, mirrors)? {
+            std::fs::write(bench.join("real_noise.md"), out).context("writing target/bench/real_noise.md")?;
+            eprintln!("results in {}", bench.join("real_noise.md").display());
+        }
     }
     if noise_only {
         return Ok(());
@@ -248,10 +257,44 @@ pub fn run(target: &Path, mirrors: &Path, quick: bool, noise_only: bool, colour_
     if quick {
         std::env::set_var("BENCH_SCENES_QUICK", "1");
     }
+    if let Some(out) = run_vignetting(target, mirrors)? {
+        std::fs::write(bench.join("vignetting.md"), out).context("writing target/bench/vignetting.md")?;
+        eprintln!("results in {}", bench.join("vignetting.md").display());
+    }
+    if vignetting_only {
+        return Ok(());
+    }
     let out = crate::cargo(&["bench", "--bench", "scenes"])?;
     std::fs::write(bench.join("scenes.md"), out).context("writing target/bench/scenes.md")?;
     eprintln!("results in {}", bench.join("scenes.md").display());
     Ok(())
+}
+
+/// The lens database with measured vignetting profiles (lensfun's `data/db`).
+const LENSFUN_REPO: &str = "lensfun/lensfun";
+
+/// Extracts lensfun's database XML into `target/bench-lensfun/` and runs `cargo
+/// bench --bench vignetting` on the scenes already in `BENCH_SCENES`; `None` without
+/// the mirror.
+fn run_vignetting(target: &Path, mirrors: &Path) -> Result<Option<String>> {
+    let git_dir = mirrors.join(LENSFUN_REPO.replace('/', "+")).join("repo");
+    if !git_dir.exists() {
+        eprintln!("skipped vignetting: no mirror of {LENSFUN_REPO} at {}", git_dir.display());
+        return Ok(None);
+    }
+    let dir = target.join("bench-lensfun");
+    let _ = std::fs::remove_dir_all(&dir);
+    let listing =
+        String::from_utf8(crate::gltf_corpus::git(&git_dir, &["ls-tree", "-r", "--name-only", "HEAD", "data/db"])?)?;
+    let files: Vec<&str> = listing.lines().filter(|p| p.ends_with(".xml")).collect();
+    let missing = crate::gltf_corpus::extract(&git_dir, &files, &dir)?;
+    if !missing.is_empty() {
+        eprintln!("lensfun: {} files missing from the mirror", missing.len());
+    }
+    let commit = String::from_utf8(crate::gltf_corpus::git(&git_dir, &["rev-parse", "HEAD"])?)?;
+    eprintln!("lensfun {} ({} files) in {}", &commit.trim()[..12.min(commit.trim().len())], files.len(), dir.display());
+    std::env::set_var("BENCH_LENSFUN", dir.join("data/db"));
+    Ok(Some(crate::cargo(&["bench", "--bench", "vignetting"])?))
 }
 
 /// The PolyU real-world noisy image dataset's held-out scenes (camera_ISO_scene, as

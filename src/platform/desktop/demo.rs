@@ -96,6 +96,13 @@ fn truth_model(w: usize, h: usize, depth: &Plane) -> CameraModel {
         exposure: Some(0.63),
         diagnostics: Diagnostics::not_fitted("ground truth"),
     };
+    // A lens whose corners pass 70% of the centre's light (lensfun's median "pa"
+    // profile passes 71%): the object darkens towards the frame's edges like the room.
+    m.vignetting = blind_augment::model::Vignetting {
+        present: true,
+        log_falloff: Some([-0.2, -0.3, 0.14]),
+        diagnostics: Diagnostics::not_fitted("ground truth"),
+    };
     m
 }
 
@@ -154,6 +161,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
     accurate.depth_of_field = dof.model.depth_of_field.clone();
     // Colour is read from the frame alone in every tier (as the fast fit reads it).
     accurate.colour = blind_augment::fit::colour::fit_colour(&i_all);
+    // Vignetting needs video (the same surfaces at two radii): the live worker below
+    // fits it; one frame cannot.
+    accurate.vignetting = blind_augment::model::Vignetting::not_fitted();
     accurate.reference.frame_interval_s = truth.reference.frame_interval_s;
     let acc_out = FitOutput {
         model: accurate.clone(),
@@ -565,6 +575,19 @@ fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &Camera
     );
     let _ = writeln!(
         r,
+        "| vignetting | {} |",
+        match fx.vignette {
+            Some((a, _)) => format!(
+                "corner V = {:.3} about each eye's principal point (the last live model's; truth {:.3})",
+                blind_augment::model::Vignetting::gain_at(a, 1.0),
+                corner_v(truth).unwrap_or(1.0)
+            ),
+            None =>
+                format!("none (the last live model's vignetting is {})", fitted.vignetting.diagnostics.status_str()),
+        }
+    );
+    let _ = writeln!(
+        r,
         "\nWall time per frame (render + GPU wait + readback, both eyes): naive {:.1} ms, matched {:.1} ms on {} — a software rasteriser when that is lavapipe; see BENCHMARKS.md for GPU-timed passes.",
         stats.naive_ms / stats.frames as f64,
         stats.matched_ms / stats.frames as f64,
@@ -597,6 +620,12 @@ struct LiveCalibration {
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     started: std::time::Instant,
     producer: std::thread::JoinHandle<(blind_augment::worker::WorkerStats, Seen)>,
+}
+
+/// V(1), the corner's share of the centre's light, of a model's vignetting terms
+/// (present or not).
+fn corner_v(m: &CameraModel) -> Option<f32> {
+    m.vignetting.log_falloff.map(|a| blind_augment::model::Vignetting::gain_at(a, 1.0))
 }
 
 struct LiveReport {
@@ -705,8 +734,9 @@ impl LiveCalibration {
         );
         let _ = writeln!(
             md,
-            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error |\n|---|---|---|---|---|---|",
-            truth.motion_blur.exposure_or_zero()
+            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error | corner V (truth {:.2}) |\n|---|---|---|---|---|---|---|",
+            truth.motion_blur.exposure_or_zero(),
+            corner_v(truth).unwrap_or(1.0)
         );
         // The published illuminant against the true camera's (degrees); none while
         // the worker has not read one.
@@ -719,13 +749,17 @@ impl LiveCalibration {
             let m = &snap.model;
             let _ = writeln!(
                 md,
-                "| {} | {t:.2} s | {} | {} | {} | {} |",
+                "| {} | {t:.2} s | {} | {} | {} | {} | {} |",
                 snap.generation,
                 m.motion_blur.exposure.map_or("—".into(), |l| format!("{l:.3}")),
                 noise_relative_error(&m.noise, &truth.noise).map_or("—".into(), |e| format!("{:.1}%", 100.0 * e)),
                 dof_rmse_px(&m.depth_of_field, &truth.depth_of_field, &depths)
                     .map_or("—".into(), |e| format!("{e:.3}")),
-                cast_error(m).map_or("—".into(), |e| format!("{e:.1}°"))
+                cast_error(m).map_or("—".into(), |e| format!("{e:.1}°")),
+                match (m.vignetting.present, corner_v(m)) {
+                    (true, Some(v)) => format!("{v:.3}"),
+                    _ => m.vignetting.diagnostics.status_str().into(),
+                }
             );
             points.push((*t, exposure_error(m, truth) as f64));
         }
