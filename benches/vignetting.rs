@@ -15,7 +15,8 @@
 //!   small falloff's relative error amounts to);
 //! * present: the share of publications with the falloff present (the rest not
 //!   identifiable or absent);
-//! * false present: on the run without vignetting, the share published present.
+//! * false present: on the run without vignetting, the share published present, and
+//!   absent (the rest not identifiable: a faint falloff not told from none).
 //!
 //! Also, without video: how far the model's three log terms can follow each profile
 //! at all (the best least-squares fit of ln V over the frame's pixels).
@@ -157,6 +158,7 @@ fn curve_error(p: &Profile, a: [f32; 3]) -> f32 {
 }
 
 struct Run {
+    absent: f32,
     curve_err: Option<f32>,
     abs_err: Option<f32>,
     present: f32,
@@ -174,7 +176,7 @@ fn run(e: &Entry, spec: &SequenceSpec, lens: Option<&Profile>) -> Run {
     // `BENCH_VIGNETTING_TRACE=1`: each tuning scene's publications to stderr.
     let trace = std::env::var_os("BENCH_VIGNETTING_TRACE").is_some();
     cal.push_poses(&[pose(spec, 0), pose(spec, 1)]).expect("poses");
-    let (mut errs, mut abs, mut scored, mut present, mut first) = (vec![], vec![], 0, 0, None);
+    let (mut errs, mut abs, mut scored, mut present, mut absent, mut first) = (vec![], vec![], 0, 0, 0, None);
     for i in 0..spec.frames {
         cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
         let mut fr = frame(&spec.frame(&e.scene, i));
@@ -203,6 +205,7 @@ fn run(e: &Entry, spec: &SequenceSpec, lens: Option<&Profile>) -> Run {
                 continue;
             }
             scored += 1;
+            absent += (v.diagnostics.status == blind_augment::model::Status::Absent) as usize;
             if let (true, Some(a), Some(p)) = (v.present, v.log_falloff, lens) {
                 present += 1;
                 errs.push(curve_error(p, a));
@@ -215,6 +218,7 @@ fn run(e: &Entry, spec: &SequenceSpec, lens: Option<&Profile>) -> Run {
     errs.sort_by(f32::total_cmp);
     abs.sort_by(f32::total_cmp);
     Run {
+        absent: absent as f32 / scored.max(1) as f32,
         curve_err: (!errs.is_empty()).then(|| errs[errs.len() / 2]),
         abs_err: (!abs.is_empty()).then(|| abs[abs.len() / 2]),
         present: present as f32 / scored.max(1) as f32,
@@ -276,7 +280,7 @@ fn main() {
         entries.iter().filter(|e| e.held_out).count()
     );
     println!("Tuning scenes:\n");
-    println!("| scene | lens | corner falloff | curve error | \\|ΔV\\| | present | first present (s) | false present |\n|---|---|---|---|---|---|---|---|");
+    println!("| scene | lens | corner falloff | curve error | \\|ΔV\\| | present | first present (s) | without it: present / absent |\n|---|---|---|---|---|---|---|---|");
     let mut rows: Vec<(bool, Run, Run)> = vec![];
     for e in &entries {
         let pool = if e.held_out { &held } else { &tuning };
@@ -294,7 +298,7 @@ fn main() {
         );
         if !e.held_out {
             println!(
-                "| {} | {} {} mm f/{} | {:.3} | {} | {} | {:.2} | {} | {:.2} |",
+                "| {} | {} {} mm f/{} | {:.3} | {} | {} | {:.2} | {} | {:.2} / {:.2} |",
                 e.id,
                 lens.lens.replace('|', "/"),
                 lens.focal_mm,
@@ -305,27 +309,30 @@ fn main() {
                 with.present,
                 with.first_present_s.map_or("—".into(), |t| format!("{t:.2}")),
                 without.present,
+                without.absent,
             );
         }
         rows.push((e.held_out, with, without));
     }
     println!("\nPer split: median / p90 / worst of the runs' values.\n");
-    println!("| split | runs | curve error | \\|ΔV\\| | present (median / p10 / lowest) | false present | runs never present | first present (s) |\n|---|---|---|---|---|---|---|---|");
+    println!("| split | runs | curve error | \\|ΔV\\| | present (median / p10 / lowest) | false present | absent without it (median / p10 / lowest) | runs never present | first present (s) |\n|---|---|---|---|---|---|---|---|---|");
     for split in [false, true] {
         let rs: Vec<&(bool, Run, Run)> = rows.iter().filter(|r| r.0 == split).collect();
         let err: Vec<f32> = rs.iter().filter_map(|r| r.1.curve_err).collect();
         let pres: Vec<f32> = rs.iter().map(|r| r.1.present).collect();
         let fals: Vec<f32> = rs.iter().map(|r| r.2.present).collect();
+        let abs_without: Vec<f32> = rs.iter().map(|r| r.2.absent).collect();
         let abs: Vec<f32> = rs.iter().filter_map(|r| r.1.abs_err).collect();
         let first: Vec<f32> = rs.iter().filter_map(|r| r.1.first_present_s.map(|t| t as f32)).collect();
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             if split { "held-out" } else { "tuning" },
             rs.len(),
             stats(&err),
             stats(&abs),
             stats_low(&pres),
             stats(&fals),
+            stats_low(&abs_without),
             rs.iter().filter(|r| r.1.first_present_s.is_none()).count(),
             stats(&first)
         );

@@ -348,17 +348,24 @@ pub fn fit_vignetting(pairs: &[&[Row]]) -> Vignetting {
         ));
     }
     let reason = format!("corner falloff {f:.3} ± {stderr:.3} (1σ, jackknife over {n_pairs} frame pairs)");
+    let diagnostics = |status| diag(status, reason.clone(), Some(stderr), Some(before), Some(after), used);
     if f.abs() > PRESENT_SIGMAS * stderr && f.abs() >= MIN_VISIBLE_FALLOFF {
-        Vignetting {
-            present: true,
-            log_falloff: Some(values),
-            diagnostics: diag(Status::Present, reason, Some(stderr), Some(before), Some(after), used),
-        }
-    } else {
-        let mut v = Vignetting::absent(diag(Status::Absent, reason, Some(stderr), Some(before), Some(after), used));
-        v.log_falloff = Some(values);
-        v
+        return Vignetting { present: true, log_falloff: Some(values), diagnostics: diagnostics(Status::Present) };
     }
+    // Absent only on evidence: the falloff below the visible level at 2σ. Between
+    // the two the frames cannot tell a faint falloff from none.
+    let status = if f.abs() + 2.0 * stderr <= MIN_VISIBLE_FALLOFF { Status::Absent } else { Status::NotIdentifiable };
+    let mut v = Vignetting::absent(diagnostics(status));
+    if status == Status::NotIdentifiable {
+        v.diagnostics.reason += &format!(
+            ": neither over {PRESENT_SIGMAS}σ and {MIN_VISIBLE_FALLOFF} nor under {MIN_VISIBLE_FALLOFF} at 2σ"
+        );
+    }
+    // The terms read are kept (not applied) where absent: the evidence for it.
+    if status == Status::Absent {
+        v.log_falloff = Some(values);
+    }
+    v
 }
 
 #[cfg(test)]

@@ -604,11 +604,12 @@ fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &Camera
     Ok(r)
 }
 
-/// Frames of live video the demo's worker sees (3 s at 30 Hz).
-const LIVE_FRAMES: usize = 90;
-/// Video time at which the render starts (after the start-up burst) and between
-/// rendered frames.
-const LIVE_RENDER_START_S: f64 = 1.0;
+/// Frames of live video the demo's worker sees (5 s at 30 Hz).
+const LIVE_FRAMES: usize = 150;
+/// Video time at which the render starts and between rendered frames: after the
+/// start-up burst, and after the vignetting's first frame pairs (six pairs 0.25 s
+/// apart while the head moves: about 2 s of this path).
+const LIVE_RENDER_START_S: f64 = 2.5;
 const LIVE_RENDER_STEP_S: f64 = 0.25;
 
 /// The snapshots the camera thread saw published, with the video time it saw each.
