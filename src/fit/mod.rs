@@ -10,6 +10,7 @@
 //! the test stated in its module.
 
 mod aggregate;
+pub mod chromatic;
 pub mod colour;
 mod curve;
 pub mod defocus_spectrum;

@@ -38,7 +38,10 @@ pub const MIN_VISIBLE_FALLOFF: f64 = 0.03;
 /// jackknife over frame pairs that share surfaces understates the spread a little.
 pub const PRESENT_SIGMAS: f64 = 3.0;
 /// A sample box is flat where its halves' means differ by at most this fraction of
-/// its mean, horizontally and vertically, in both frames.
+/// its mean, horizontally and vertically, in both frames. At 0.06 (with boxes half
+/// the spacing) the motorcycle sequence at 320×240 kept 1–5% of its grid, the
+/// halves' noise alone failing it; Tukey's weights take what the looser gate lets
+/// through.
 const FLATNESS: f32 = 0.15;
 /// Box means below this linear luma carry too little signal (quantisation, noise
 /// floor); any encoded value above `CLIP` may be clipped.

@@ -86,6 +86,30 @@ pub fn add_vignetting(img: &Rgb, log_falloff: [f32; 3]) -> Rgb {
     out
 }
 
+/// Lateral chromatic aberration on a frame: red and blue are green's image scaled
+/// by `scale` = [s_R, s_B] about the frame's centre (lensfun's "linear" TCA model),
+/// each resampled by Catmull–Rom at (p − c)/s + c, clamped at the borders. The
+/// CPU reference `fit::chromatic` is measured against.
+pub fn add_lateral_ca(img: &Rgb, scale: [f32; 2]) -> Rgb {
+    let (w, h) = (img.width, img.height);
+    let (cx, cy) = ((w as f32 - 1.0) * 0.5, (h as f32 - 1.0) * 0.5);
+    let mut out = img.clone();
+    for (k, c) in [0usize, 2].into_iter().enumerate() {
+        let s = scale[k];
+        if !(s.is_finite() && s > 0.0) || s == 1.0 {
+            continue;
+        }
+        let src = Plane::from_vec(w, h, img.channels[c].clone());
+        for y in 0..h {
+            for x in 0..w {
+                let (sx, sy) = (cx + (x as f32 - cx) / s, cy + (y as f32 - cy) / s);
+                out.channels[c][y * w + x] = crate::image::sample_bicubic(&src, sx, sy);
+            }
+        }
+    }
+    out
+}
+
 /// The camera's white balance and exposure on an encoded (sRGB) frame: each value
 /// decoded to linear light, multiplied by its channel's gain and re-encoded,
 /// unclipped (negative values stay on the curve's linear segment, values above 1 on

@@ -13,9 +13,10 @@ use crate::fit::vignetting::{self, Row};
 /// Frame pairs pooled: the last this many seconds of video (32 pairs at one per
 /// 0.25 s).
 pub(super) const VIGNETTING_WINDOW_S: f64 = 8.0;
-/// Rows kept per pair: a grid-ordered subsample past this many (the fit's cost
-/// grows with the rows; 400 per pair hold the corner falloff to ~0.003 on the
-/// calibration video).
+/// Rows kept per pair: a grid-ordered subsample past this many. At 320×240 a pair
+/// keeps 15–120 of its 1 131 boxes (`tests/vignetting_sequence.rs`), under the cap;
+/// at 1280×960 the cap bounds the window's IRLS to 12 800 rows (the refit's
+/// 1.5–2.6 ms there, BENCHMARKS.md "Vignetting").
 const MAX_ROWS_PER_PAIR: usize = 400;
 /// A pair whose samples moved in r² by less than this RMS shows no falloff
 /// difference (a head at rest): not kept.

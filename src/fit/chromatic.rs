@@ -1,0 +1,280 @@
+//! Lateral chromatic aberration read blindly from one frame: a lens that focuses red
+//! and blue at other magnifications than green images channel c as green's image
+//! scaled by s_c about the optical centre (lensfun's "linear" TCA model, r_c = s_c·r;
+//! its "poly3" profiles are this term plus small cubic ones). Near an edge in an
+//! achromatic-enough scene channel c is locally an affine copy of green, so for
+//! small shifts
+//!
+//!   C(p) ≈ a·G(p) + b − a·(s_c − 1)·r·∂_r G(p),
+//!
+//! r the pixel's distance from the centre and ∂_r the derivative along the radius:
+//! a least-squares fit of C on (G, r·∂_r G, 1) over a small window reads s_c − 1 as
+//! −coefficient / a (the fringe's sign and size, whatever the edge's colours). Each
+//! window gives one reading with its own variance; the frame's estimate is their
+//! inverse-variance mean under Tukey's biweight, its error a jackknife over 4×4
+//! tiles (edges in one region share a texture's bias). The same linearisation is
+//! what registration by optical flow does per channel (Lucas–Kanade), restricted to
+//! the one parameter a radial magnification has.
+//!
+//! Readings come only from windows where green has a strong edge whose normal is
+//! mostly radial (a tangential edge does not move under a radial scale) and outside
+//! the frame's central quarter (the shift grows with r). Not wired into the camera
+//! model yet (no schema term, worker or render pass): measured by
+//! `tests/chromatic.rs` (BENCHMARKS.md "Lateral chromatic aberration"). The tile
+//! jackknife's σ (0.001–0.009 px there) understates the error (up to 0.02 px on
+//! greyscale photographs): presence will need a floor.
+
+use crate::image::Rgb;
+
+/// Window half-side (px): 5×5 windows.
+const HALF: usize = 2;
+/// Candidate grid step (px).
+const STEP: usize = 3;
+/// Readings start this far out (fraction of the half-diagonal).
+const MIN_RADIUS: f32 = 0.25;
+/// Green's radial derivative at a candidate: at least this (encoded units per px) ...
+const MIN_RADIAL_GRADIENT: f32 = 0.02;
+/// ... and at least this share of the gradient's magnitude.
+const MIN_RADIAL_SHARE: f32 = 0.7;
+/// Gain of C against G a window must show (an edge in both channels, same sense).
+const GAIN_RANGE: [f64; 2] = [0.2, 5.0];
+/// Tukey biweight cut-off in standardised residuals.
+const TUKEY_C: f64 = 4.685;
+/// Fewest readings for an estimate.
+pub const MIN_READINGS: usize = 50;
+/// Most windows read (a grid-ordered subsample beyond): 3 000 hold the corner shift
+/// to ~0.01 px on the vendored photographs, and cost grows with them.
+const MAX_WINDOWS: usize = 3000;
+
+/// One channel's estimate: s − 1 and its one-sigma error (jackknife over tiles).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScaleEstimate {
+    pub scale_minus_one: f64,
+    pub stderr: f64,
+    pub readings: usize,
+}
+
+/// Gauss–Newton passes at most: each resamples the channel by the scale read so far
+/// and reads what is left (the linearisation holds for shifts well under an edge's
+/// width); they stop once a pass moves the corner by ≤ 0.005 px. One pass read a
+/// 0.6 px shift on the greyscale rocket as 0.78 px, three as 0.65–0.68, six as
+/// 0.58–0.59 (`tests/chromatic.rs`).
+const PASSES: usize = 6;
+
+/// s_R − 1 and s_B − 1 of `image` (encoded, any size), each `None` where the frame
+/// has under `MIN_READINGS` usable edges.
+pub fn estimate(image: &Rgb) -> [Option<ScaleEstimate>; 2] {
+    let (w, h) = (image.width, image.height);
+    let g = &image.channels[1];
+    let (cx, cy) = ((w as f32 - 1.0) * 0.5, (h as f32 - 1.0) * 0.5);
+    let half_diag = cx.hypot(cy).max(1.0);
+    let m = HALF + 1;
+    if w <= 2 * m + 1 || h <= 2 * m + 1 {
+        return [None, None];
+    }
+    let at = |c: &[f32], x: usize, y: usize| c[y * w + x];
+    // Green's radial derivative at (x, y) (central differences), its gradient's
+    // magnitude and the radius.
+    let radial = |x: usize, y: usize| -> (f32, f32, f32) {
+        let gx = 0.5 * (at(g, x + 1, y) - at(g, x - 1, y));
+        let gy = 0.5 * (at(g, x, y + 1) - at(g, x, y - 1));
+        let (dx, dy) = (x as f32 - cx, y as f32 - cy);
+        let rad = dx.hypot(dy).max(1e-6);
+        ((gx * dx + gy * dy) / rad, gx.hypot(gy), rad)
+    };
+    // Candidate windows: strong, mostly radial green edges away from the centre.
+    let mut centres: Vec<(usize, usize, u8)> = vec![];
+    for y in (m..h - m).step_by(STEP) {
+        for x in (m..w - m).step_by(STEP) {
+            let (gr, mag, rad) = radial(x, y);
+            if rad >= MIN_RADIUS * half_diag && gr.abs() >= MIN_RADIAL_GRADIENT && gr.abs() >= MIN_RADIAL_SHARE * mag {
+                centres.push((x, y, ((4 * y / h).min(3) * 4 + (4 * x / w).min(3)) as u8));
+            }
+        }
+    }
+    if centres.len() > MAX_WINDOWS {
+        let step = centres.len().div_ceil(MAX_WINDOWS);
+        centres = centres.into_iter().step_by(step).collect();
+    }
+    // Each window's green and r·∂_r G, once (the passes resample only C).
+    const N: usize = (2 * HALF + 1) * (2 * HALF + 1);
+    let windows: Vec<([f32; N], [f32; N])> = centres
+        .iter()
+        .map(|&(x, y, _)| {
+            let mut gv = [0.0f32; N];
+            let mut dv = [0.0f32; N];
+            for (i, (wx, wy)) in
+                (y - HALF..=y + HALF).flat_map(|wy| (x - HALF..=x + HALF).map(move |wx| (wx, wy))).enumerate()
+            {
+                let (gr, _, rad) = radial(wx, wy);
+                gv[i] = at(g, wx, wy);
+                dv[i] = rad * gr;
+            }
+            (gv, dv)
+        })
+        .collect();
+    [0usize, 2].map(|c| {
+        let plane = crate::image::Plane::from_vec(w, h, image.channels[c].clone());
+        let mut scale = 1.0f64;
+        for pass in 0..PASSES {
+            let s = scale as f32;
+            let readings: Vec<Reading> = centres
+                .iter()
+                .zip(&windows)
+                .map(|(&(x, y, tile), (gv, dv))| {
+                    // The channel with the scale read so far undone: C(c + s·(p − c)).
+                    let mut cv = [0.0f32; N];
+                    for (i, (wx, wy)) in
+                        (y - HALF..=y + HALF).flat_map(|wy| (x - HALF..=x + HALF).map(move |wx| (wx, wy))).enumerate()
+                    {
+                        cv[i] =
+                            crate::image::sample_bicubic(&plane, cx + s * (wx as f32 - cx), cy + s * (wy as f32 - cy));
+                    }
+                    window_reading(&cv, gv, dv, tile)
+                })
+                .filter(|r| r.var.is_finite())
+                .collect();
+            let m = combine_mean(&readings)?;
+            scale *= 1.0 + m;
+            // The error from the last pass's readings (their jackknife over tiles).
+            if m.abs() * half_diag as f64 <= 0.005 || pass + 1 == PASSES {
+                let stderr = jackknife(&readings)?;
+                return Some(ScaleEstimate { scale_minus_one: scale - 1.0, stderr, readings: readings.len() });
+            }
+        }
+        None
+    })
+}
+
+/// One window's reading of s − 1, its variance and its tile.
+#[derive(Clone, Copy, Debug)]
+struct Reading {
+    value: f64,
+    var: f64,
+    tile: u8,
+}
+
+impl Reading {
+    const NONE: Reading = Reading { value: 0.0, var: f64::INFINITY, tile: 0 };
+}
+
+/// The least-squares reading of one channel's window values `cv` against green's
+/// `gv` and r·∂_r G `dv`.
+fn window_reading(cv: &[f32], gv: &[f32], dv: &[f32], tile: u8) -> Reading {
+    // Normal equations of C ~ [G, r·∂_r G, 1].
+    let mut n = [[0.0f64; 3]; 3];
+    let mut v = [0.0f64; 3];
+    let mut yy = 0.0f64;
+    let count = cv.len() as f64;
+    for ((&t, &gi), &di) in cv.iter().zip(gv).zip(dv) {
+        let row = [gi as f64, di as f64, 1.0];
+        let t = t as f64;
+        if !(row.iter().all(|v| v.is_finite()) && t.is_finite()) {
+            return Reading::NONE;
+        }
+        for i in 0..3 {
+            v[i] += row[i] * t;
+            for j in 0..3 {
+                n[i][j] += row[i] * row[j];
+            }
+        }
+        yy += t * t;
+    }
+    let Some(inv) = invert3(n) else { return Reading::NONE };
+    let coef: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| inv[i][j] * v[j]).sum());
+    let a = coef[0];
+    if !(GAIN_RANGE[0]..=GAIN_RANGE[1]).contains(&a) {
+        return Reading::NONE;
+    }
+    // Residual variance: yᵀy − coefᵀ·Xᵀy over n − 3.
+    let rss = (yy - (0..3).map(|i| coef[i] * v[i]).sum::<f64>()).max(0.0);
+    // An 8-bit step's variance as the floor: a noise-free window is not exact.
+    let s2 = (rss / (count - 3.0)).max(1.0 / (12.0 * 255.0 * 255.0));
+    let value = -coef[1] / a;
+    let var = s2 * inv[1][1] / (a * a);
+    if value.is_finite() && var.is_finite() && var > 0.0 {
+        Reading { value, var, tile }
+    } else {
+        Reading::NONE
+    }
+}
+
+fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let scale = m[0][0].abs() * m[1][1].abs() * m[2][2].abs();
+    if !(det.is_finite() && det.abs() > 1e-12 * scale.max(1e-300)) {
+        return None;
+    }
+    let c = |i: usize, j: usize| {
+        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
+        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
+        m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0]
+    };
+    // inverse[i][j] = cofactor[j][i] / det (the cyclic form carries the signs).
+    Some(std::array::from_fn(|i| std::array::from_fn(|j| c(j, i) / det)))
+}
+
+/// Tukey-weighted inverse-variance mean of the readings (`None` under
+/// `MIN_READINGS`).
+fn combine_mean(readings: &[Reading]) -> Option<f64> {
+    if readings.len() < MIN_READINGS {
+        return None;
+    }
+    weighted_mean(&readings.iter().collect::<Vec<_>>())
+}
+
+/// Jackknife over the 16 tiles of `combine_mean`: leave out each tile that holds
+/// readings (an empty tile's "leave-out" is the whole estimate again and would
+/// shrink the spread).
+fn jackknife(readings: &[Reading]) -> Option<f64> {
+    let loo: Vec<f64> = (0..16u8)
+        .filter(|t| readings.iter().any(|r| r.tile == *t))
+        .filter_map(|t| weighted_mean(&readings.iter().filter(|r| r.tile != t).collect::<Vec<_>>()))
+        .collect();
+    let k = loo.len() as f64;
+    if k < 2.0 {
+        return None;
+    }
+    let mean = loo.iter().sum::<f64>() / k;
+    Some(((k - 1.0) / k * loo.iter().map(|v| (v - mean).powi(2)).sum::<f64>()).sqrt())
+}
+
+/// From the weighted median, Tukey iterations on standardised residuals (each
+/// reading's own σ times a common scale from their MAD).
+fn weighted_mean(rs: &[&Reading]) -> Option<f64> {
+    if rs.is_empty() {
+        return None;
+    }
+    let mut sorted: Vec<(f64, f64)> = rs.iter().map(|r| (r.value, 1.0 / r.var)).collect();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = sorted.iter().map(|s| s.1).sum();
+    let mut acc = 0.0;
+    let mut m = sorted[sorted.len() / 2].0;
+    for s in &sorted {
+        acc += s.1;
+        if acc >= 0.5 * total {
+            m = s.0;
+            break;
+        }
+    }
+    for _ in 0..10 {
+        let mut z: Vec<f64> = rs.iter().map(|r| ((r.value - m) / r.var.sqrt()).abs()).collect();
+        let mid = z.len() / 2;
+        let scale = (1.4826 * *z.select_nth_unstable_by(mid, f64::total_cmp).1).max(1e-9);
+        let (mut sw, mut swx) = (0.0, 0.0);
+        for r in rs {
+            let u = (r.value - m) / (r.var.sqrt() * scale * TUKEY_C);
+            if u.abs() < 1.0 {
+                let wt = (1.0 - u * u).powi(2) / r.var;
+                sw += wt;
+                swx += wt * r.value;
+            }
+        }
+        if sw <= 0.0 {
+            return None;
+        }
+        m = swx / sw;
+    }
+    m.is_finite().then_some(m)
+}
