@@ -274,8 +274,8 @@ pub fn run(
 const LENSFUN_REPO: &str = "lensfun/lensfun";
 
 /// Extracts lensfun's database XML into `target/bench-lensfun/` and runs `cargo
-/// bench --bench vignetting` on the scenes already in `BENCH_SCENES`; `None` without
-/// the mirror.
+/// bench --bench chromatic`, then `--bench vignetting` on the scenes already in
+/// `BENCH_SCENES`; `None` without the mirror.
 fn run_vignetting(target: &Path, mirrors: &Path) -> Result<Option<String>> {
     let git_dir = mirrors.join(LENSFUN_REPO.replace('/', "+")).join("repo");
     if !git_dir.exists() {
@@ -294,7 +294,12 @@ fn run_vignetting(target: &Path, mirrors: &Path) -> Result<Option<String>> {
     let commit = String::from_utf8(crate::gltf_corpus::git(&git_dir, &["rev-parse", "HEAD"])?)?;
     eprintln!("lensfun {} ({} files) in {}", &commit.trim()[..12.min(commit.trim().len())], files.len(), dir.display());
     std::env::set_var("BENCH_LENSFUN", dir.join("data/db"));
-    Ok(Some(crate::cargo(&["bench", "--bench", "vignetting"])?))
+    // Lateral chromatic aberration on the same database's TCA profiles (the vendored
+    // photographs; seconds), then vignetting on the scenes.
+    let mut out = crate::cargo(&["bench", "--bench", "chromatic"])?;
+    out += "\n";
+    out += &crate::cargo(&["bench", "--bench", "vignetting"])?;
+    Ok(Some(out))
 }
 
 /// The PolyU real-world noisy image dataset's held-out scenes (camera_ISO_scene, as

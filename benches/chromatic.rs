@@ -1,0 +1,162 @@
+//! Lateral chromatic aberration on known answers made elsewhere: real lenses'
+//! measured transverse chromatic aberration (lensfun's TCA profiles: "poly3"'s
+//! linear terms vr, vb — its cubic terms are 1–2 orders smaller — and "linear"'s kr,
+//! kb) applied to the vendored photographs at the corner shifts a 1280×960 camera
+//! would show ((v − 1)·800 px), 8-bit quantised with noise σ 0.01; `fit::chromatic`
+//! on each. Greyscale copies have no aberration of their own (the truth is the
+//! applied one); on the colour photographs the applied shift is read as the
+//! difference from the photograph read without it. Run: `cargo xtask bench-quality
+//! MIRRORS --vignetting-only` (extracts lensfun's database, sets `BENCH_LENSFUN`);
+//! prints Markdown for BENCHMARKS.md.
+//!
+//! Lenses are split as in `benches/vignetting.rs` (a third held out by a hash of the
+//! lens name); 40 profiles of each split, evenly through the database's order.
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use blind_augment::fit::chromatic::estimate;
+use blind_augment::image::{Rgb, LUMA_WEIGHTS};
+use blind_augment::synth::add_lateral_ca;
+use common::scenes::name_hash;
+
+/// A 1280×960 frame's half-diagonal (px): the corner shifts the profiles are shown at.
+const HALF_DIAG_1280_PX: f32 = 800.0;
+const PER_SPLIT: usize = 40;
+const PHOTOS: [&str; 3] = ["astronaut.png", "chelsea.png", "rocket.jpg"];
+
+struct Tca {
+    lens: String,
+    focal_mm: f32,
+    v: [f32; 2],
+}
+
+fn attr(line: &str, name: &str) -> Option<f32> {
+    let at = line.find(&format!(" {name}=\""))? + name.len() + 3;
+    line[at..].split('"').next()?.parse().ok()
+}
+
+fn profiles(dir: &str) -> Vec<Tca> {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{dir}: {e}"))
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "xml"))
+        .collect();
+    files.sort();
+    let mut out: Vec<Tca> = vec![];
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap_or_default();
+        let (mut lens, mut in_lens) = (String::new(), false);
+        for line in text.lines().map(str::trim) {
+            if line.starts_with("<lens>") {
+                in_lens = true;
+                lens.clear();
+            } else if in_lens && lens.is_empty() && line.starts_with("<model>") {
+                lens = line.trim_start_matches("<model>").trim_end_matches("</model>").to_string();
+            } else if line.starts_with("</lens>") {
+                in_lens = false;
+            } else if in_lens && line.starts_with("<tca") {
+                let v = if line.contains("model=\"poly3\"") {
+                    attr(line, "vr").zip(attr(line, "vb"))
+                } else if line.contains("model=\"linear\"") {
+                    attr(line, "kr").zip(attr(line, "kb"))
+                } else {
+                    None
+                };
+                let (Some((vr, vb)), Some(focal_mm)) = (v, attr(line, "focal")) else { continue };
+                if (vr - 1.0).abs() <= 0.01 && (vb - 1.0).abs() <= 0.01 {
+                    out.push(Tca { lens: lens.clone(), focal_mm, v: [vr, vb] });
+                }
+            }
+        }
+    }
+    out
+}
+
+fn grey(img: &Rgb) -> Rgb {
+    let mut out = img.clone();
+    for i in 0..img.width * img.height {
+        let y: f32 = (0..3).map(|c| LUMA_WEIGHTS[c] * img.channels[c][i]).sum();
+        (0..3).for_each(|c| out.channels[c][i] = y);
+    }
+    out
+}
+
+fn camera(img: &Rgb) -> Rgb {
+    let mut out = img.clone();
+    for (c, ch) in out.channels.iter_mut().enumerate() {
+        for (i, v) in ch.iter_mut().enumerate() {
+            let (x, y) = ((i % img.width) as u32, (i / img.width) as u32);
+            *v = ((*v + 0.01 * blind_augment::synth::gaussian(x, y, c as u32, 5)).clamp(0.0, 1.0) * 255.0).round()
+                / 255.0;
+        }
+    }
+    out
+}
+
+fn stats(v: &[f32]) -> String {
+    if v.is_empty() {
+        return "— / — / —".into();
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f32::total_cmp);
+    let q = |p: f32| v[((v.len() - 1) as f32 * p).round() as usize];
+    format!("{:.3} / {:.3} / {:.3}", q(0.5), q(0.9), v[v.len() - 1])
+}
+
+fn main() {
+    let Some(dir) = std::env::var_os("BENCH_LENSFUN") else {
+        eprintln!("BENCH_LENSFUN is not set: run `cargo xtask bench-quality MIRRORS --vignetting-only`");
+        return;
+    };
+    let all = profiles(&dir.to_string_lossy());
+    let pick = |held: bool| -> Vec<&Tca> {
+        let pool: Vec<&Tca> = all.iter().filter(|p| (name_hash(&p.lens) % 3 == 0) == held).collect();
+        let step = (pool.len() / PER_SPLIT).max(1);
+        pool.into_iter().step_by(step).take(PER_SPLIT).collect()
+    };
+    let shifts: Vec<f32> = all.iter().flat_map(|p| p.v.map(|v| ((v - 1.0) * HALF_DIAG_1280_PX).abs())).collect();
+    println!("### Lateral chromatic aberration on measured lenses\n");
+    println!(
+        "{} lensfun TCA profiles (lens, focal length); their corner shifts at 1280×960, |v − 1|·800 px, median / p90 / largest: {}. {PER_SPLIT} per split, on {} photographs (greyscale copy and colour), σ 0.01, 8-bit.\n",
+        all.len(),
+        stats(&shifts),
+        PHOTOS.len()
+    );
+    println!("| split | scene | readings | \\|error\\| of the corner shift (px) | relative error where the shift ≥ 0.2 px |\n|---|---|---|---|---|");
+    let photos: Vec<(String, Rgb)> = PHOTOS.iter().map(|n| (n.to_string(), common::photo(n))).collect();
+    for held in [false, true] {
+        let lenses = pick(held);
+        for colour in [false, true] {
+            let (mut abs, mut rel) = (vec![], vec![]);
+            for (_, photo) in &photos {
+                let base = if colour { photo.clone() } else { grey(photo) };
+                let half_diag = 0.5 * (base.width as f32 - 1.0).hypot(base.height as f32 - 1.0);
+                let own = estimate(&camera(&base));
+                for p in &lenses {
+                    let want = p.v.map(|v| (v - 1.0) * HALF_DIAG_1280_PX);
+                    let scale = want.map(|s| 1.0 + s / half_diag);
+                    let got = estimate(&camera(&add_lateral_ca(&base, scale)));
+                    for k in 0..2 {
+                        let (Some(g), Some(o)) = (got[k], own[k]) else { continue };
+                        let read = ((g.scale_minus_one - if colour { o.scale_minus_one } else { 0.0 })
+                            * half_diag as f64) as f32;
+                        let e = (read - want[k]).abs();
+                        abs.push(e);
+                        if want[k].abs() >= 0.2 {
+                            rel.push(e / want[k].abs());
+                        }
+                    }
+                }
+            }
+            println!(
+                "| {} | {} | {} | {} | {} |",
+                if held { "held-out" } else { "tuning" },
+                if colour { "colour, minus its own" } else { "greyscale" },
+                abs.len(),
+                stats(&abs),
+                stats(&rel)
+            );
+        }
+    }
+}
