@@ -64,7 +64,8 @@ fn profiles(dir: &str) -> Vec<Tca> {
                     None
                 };
                 let (Some((vr, vb)), Some(focal_mm)) = (v, attr(line, "focal")) else { continue };
-                if (vr - 1.0).abs() <= 0.01 && (vb - 1.0).abs() <= 0.01 {
+                let dup = out.iter().any(|q| q.lens == lens && q.focal_mm == focal_mm);
+                if (vr - 1.0).abs() <= 0.01 && (vb - 1.0).abs() <= 0.01 && !dup {
                     out.push(Tca { lens: lens.clone(), focal_mm, v: [vr, vb] });
                 }
             }
