@@ -58,10 +58,9 @@ pub struct ScaleEstimate {
 /// Gauss–Newton passes at most: each resamples the channel by the scale read so far
 /// and reads what is left (the linearisation holds for shifts well under an edge's
 /// width); they stop once a pass moves the corner by ≤ 0.005 px. With 3 000
-/// windows one pass read a
-/// 0.6 px red shift on the rocket photograph as 0.99 px (its own aberration ~0.1);
-/// three left the greyscale rocket at 0.65–0.68 px, six at 0.58–0.59
-/// (`tests/chromatic.rs`).
+/// windows one pass read a 0.6 px red shift on the rocket photograph as 0.99 px (its
+/// own aberration ~0.1); three left the greyscale rocket at 0.65–0.68 px, six at
+/// 0.58–0.59 (`tests/chromatic.rs`).
 const PASSES: usize = 6;
 
 /// s_R − 1 and s_B − 1 of `image` (encoded, any size), each `None` where the frame
