@@ -79,8 +79,9 @@ pub fn sample_points(w: usize, h: usize) -> Vec<[f32; 2]> {
     xs.flat_map(|x| ys.iter().map(move |&y| [x as f32 + 0.5, y as f32 + 0.5])).collect()
 }
 
-/// Mean linear luma of the box centred on pixel (x, y) (every other pixel), and
-/// whether it is flat; `None` where it leaves the frame, is clipped or dark.
+/// Mean linear luma of the box centred on pixel (x, y), read at every
+/// max(2, half/4)-th pixel (9×9 taps at 1280×960, 5×5 at 320×240); `None` where it
+/// leaves the frame, is clipped or dark, or is not flat (`FLATNESS`).
 fn box_mean(img: &Rgb, x: f32, y: f32, half: usize, lut: &[f32]) -> Option<f32> {
     let (w, h) = (img.width as isize, img.height as isize);
     let (cx, cy) = (x.floor() as isize, y.floor() as isize);
