@@ -18,7 +18,9 @@ mod common;
 use blind_augment::fit::chromatic::estimate;
 use blind_augment::image::{Rgb, LUMA_WEIGHTS};
 use blind_augment::synth::add_lateral_ca;
+use common::lensfun::{attr, entries};
 use common::scenes::name_hash;
+use common::summary;
 
 /// A 1280×960 frame's half-diagonal (px): the corner shifts the profiles are shown at.
 const HALF_DIAG_1280_PX: f32 = 800.0;
@@ -31,44 +33,20 @@ struct Tca {
     v: [f32; 2],
 }
 
-fn attr(line: &str, name: &str) -> Option<f32> {
-    let at = line.find(&format!(" {name}=\""))? + name.len() + 3;
-    line[at..].split('"').next()?.parse().ok()
-}
-
 fn profiles(dir: &str) -> Vec<Tca> {
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap_or_else(|e| panic!("{dir}: {e}"))
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "xml"))
-        .collect();
-    files.sort();
     let mut out: Vec<Tca> = vec![];
-    for f in files {
-        let text = std::fs::read_to_string(&f).unwrap_or_default();
-        let (mut lens, mut in_lens) = (String::new(), false);
-        for line in text.lines().map(str::trim) {
-            if line.starts_with("<lens>") {
-                in_lens = true;
-                lens.clear();
-            } else if in_lens && lens.is_empty() && line.starts_with("<model>") {
-                lens = line.trim_start_matches("<model>").trim_end_matches("</model>").to_string();
-            } else if line.starts_with("</lens>") {
-                in_lens = false;
-            } else if in_lens && line.starts_with("<tca") {
-                let v = if line.contains("model=\"poly3\"") {
-                    attr(line, "vr").zip(attr(line, "vb"))
-                } else if line.contains("model=\"linear\"") {
-                    attr(line, "kr").zip(attr(line, "kb"))
-                } else {
-                    None
-                };
-                let (Some((vr, vb)), Some(focal_mm)) = (v, attr(line, "focal")) else { continue };
-                let dup = out.iter().any(|q| q.lens == lens && q.focal_mm == focal_mm);
-                if (vr - 1.0).abs() <= 0.01 && (vb - 1.0).abs() <= 0.01 && !dup {
-                    out.push(Tca { lens: lens.clone(), focal_mm, v: [vr, vb] });
-                }
-            }
+    for (lens, line) in entries(dir, "tca") {
+        let v = if line.contains("model=\"poly3\"") {
+            attr(&line, "vr").zip(attr(&line, "vb"))
+        } else if line.contains("model=\"linear\"") {
+            attr(&line, "kr").zip(attr(&line, "kb"))
+        } else {
+            None
+        };
+        let (Some((vr, vb)), Some(focal_mm)) = (v, attr(&line, "focal")) else { continue };
+        let dup = out.iter().any(|q| q.lens == lens && q.focal_mm == focal_mm);
+        if (vr - 1.0).abs() <= 0.01 && (vb - 1.0).abs() <= 0.01 && !dup {
+            out.push(Tca { lens, focal_mm, v: [vr, vb] });
         }
     }
     out
@@ -95,16 +73,6 @@ fn camera(img: &Rgb) -> Rgb {
     out
 }
 
-fn stats(v: &[f32]) -> String {
-    if v.is_empty() {
-        return "— / — / —".into();
-    }
-    let mut v = v.to_vec();
-    v.sort_by(f32::total_cmp);
-    let q = |p: f32| v[((v.len() - 1) as f32 * p).round() as usize];
-    format!("{:.3} / {:.3} / {:.3}", q(0.5), q(0.9), v[v.len() - 1])
-}
-
 fn main() {
     let Some(dir) = std::env::var_os("BENCH_LENSFUN") else {
         eprintln!("BENCH_LENSFUN is not set: run `cargo xtask bench-quality MIRRORS --vignetting-only`");
@@ -121,7 +89,7 @@ fn main() {
     println!(
         "{} lensfun TCA profiles (lens, focal length); their corner shifts at 1280×960, |v − 1|·800 px, median / p90 / largest: {}. {PER_SPLIT} per split, on {} photographs (greyscale copy and colour), σ 0.01, 8-bit.\n",
         all.len(),
-        stats(&shifts),
+        summary(&shifts),
         PHOTOS.len()
     );
     println!("| split | scene | readings | \\|error\\| of the corner shift (px) | relative error where the shift ≥ 0.2 px |\n|---|---|---|---|---|");
@@ -155,8 +123,8 @@ fn main() {
                 if held { "held-out" } else { "tuning" },
                 if colour { "colour, minus its own" } else { "greyscale" },
                 abs.len(),
-                stats(&abs),
-                stats(&rel)
+                summary(&abs),
+                summary(&rel)
             );
         }
     }

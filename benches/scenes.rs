@@ -29,6 +29,7 @@ mod common;
 
 use blind_augment::worker::CalibrationTier;
 use common::scenes::{load, run, spec_for, without_defocus, RunResult, CHANGE_S, FPS, FRAMES, HEIGHT, WIDTH};
+use common::summary;
 
 /// The blind δ(Z) against the applied defocus over the scene's own softness: per
 /// depth the run without the applied defocus gives the own softness (the median of
@@ -54,16 +55,6 @@ fn dof_increment(r: &RunResult, free: &RunResult) -> Option<(f32, f32)> {
         })
         .collect();
     Some((med(rms), med(own)))
-}
-
-fn stats(v: &[f32]) -> String {
-    if v.is_empty() {
-        return "— / — / —".into();
-    }
-    let mut v = v.to_vec();
-    v.sort_by(f32::total_cmp);
-    let q = |p: f32| v[((v.len() - 1) as f32 * p).round() as usize];
-    format!("{:.3} / {:.3} / {:.3}", q(0.5), q(0.9), v[v.len() - 1])
 }
 
 fn main() {
@@ -148,10 +139,10 @@ fn main() {
                 "| {} | {name} | {} | {} | {} | {} | {} | {} | {} |",
                 if split { "held-out" } else { "tuning" },
                 rs.len(),
-                stats(&lam),
-                stats(&noi),
-                stats(&dof),
-                stats(&fol),
+                summary(&lam),
+                summary(&noi),
+                summary(&dof),
+                summary(&fol),
                 rs.iter().filter(|r| r.follow_s.is_none()).count(),
                 rs.iter().filter(|r| r.drops > 0).count()
             );

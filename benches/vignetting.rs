@@ -29,7 +29,9 @@ use blind_augment::model::Vignetting;
 use blind_augment::synth::sequence::SequenceSpec;
 use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
 use common::calibration::{frame, pose};
+use common::lensfun::{attr, entries};
 use common::scenes::{load, name_hash, spec_for, Entry, FPS, HEIGHT, WIDTH};
+use common::summary;
 
 /// Frames per run: 10 s at 30 fps. A lens does not change, so the runs are longer
 /// than `benches/scenes.rs`'s: these head paths turn by 3° at most and rest 1.5 s
@@ -57,49 +59,27 @@ impl Profile {
     }
 }
 
-fn attr(line: &str, name: &str) -> Option<f32> {
-    let at = line.find(&format!(" {name}=\""))? + name.len() + 3;
-    line[at..].split('"').next()?.parse().ok()
-}
-
 /// Every "pa" vignetting entry of the database's XML files under `dir` whose falloff
 /// the model can hold (V in [0.05, 2] and non-increasing on [0, 1]: a real lens's
 /// falloff; a handful of entries rise towards the corner), one per distinct
 /// (lens, focal length, aperture) — the nearest-focus distance only.
 fn profiles(dir: &str) -> Vec<Profile> {
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap_or_else(|e| panic!("{dir}: {e}"))
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "xml"))
-        .collect();
-    files.sort();
     let mut out: Vec<Profile> = vec![];
-    for f in files {
-        let text = std::fs::read_to_string(&f).unwrap_or_default();
-        let mut lens = String::new();
-        let mut in_lens = false;
-        for line in text.lines().map(str::trim) {
-            if line.starts_with("<lens>") {
-                in_lens = true;
-                lens.clear();
-            } else if in_lens && lens.is_empty() && line.starts_with("<model>") {
-                lens = line.trim_start_matches("<model>").trim_end_matches("</model>").to_string();
-            } else if line.starts_with("</lens>") {
-                in_lens = false;
-            } else if in_lens && line.starts_with("<vignetting") && line.contains("model=\"pa\"") {
-                let (Some(focal_mm), Some(aperture), Some(k1), Some(k2), Some(k3)) =
-                    (attr(line, "focal"), attr(line, "aperture"), attr(line, "k1"), attr(line, "k2"), attr(line, "k3"))
-                else {
-                    continue;
-                };
-                let p = Profile { lens: lens.clone(), focal_mm, aperture, k: [k1, k2, k3] };
-                let vs: Vec<f32> = (0..=64).map(|i| p.v(i as f32 / 64.0)).collect();
-                let ok = vs.iter().all(|v| (0.05..=2.0).contains(v)) && vs.windows(2).all(|w| w[1] <= w[0] + 1e-4);
-                let dup = out.iter().any(|q| q.lens == p.lens && q.focal_mm == p.focal_mm && q.aperture == p.aperture);
-                if ok && !dup {
-                    out.push(p);
-                }
-            }
+    for (lens, line) in entries(dir, "vignetting") {
+        if !line.contains("model=\"pa\"") {
+            continue;
+        }
+        let (Some(focal_mm), Some(aperture), Some(k1), Some(k2), Some(k3)) =
+            (attr(&line, "focal"), attr(&line, "aperture"), attr(&line, "k1"), attr(&line, "k2"), attr(&line, "k3"))
+        else {
+            continue;
+        };
+        let p = Profile { lens, focal_mm, aperture, k: [k1, k2, k3] };
+        let vs: Vec<f32> = (0..=64).map(|i| p.v(i as f32 / 64.0)).collect();
+        let ok = vs.iter().all(|v| (0.05..=2.0).contains(v)) && vs.windows(2).all(|w| w[1] <= w[0] + 1e-4);
+        let dup = out.iter().any(|q| q.lens == p.lens && q.focal_mm == p.focal_mm && q.aperture == p.aperture);
+        if ok && !dup {
+            out.push(p);
         }
     }
     out
@@ -226,16 +206,6 @@ fn run(e: &Entry, spec: &SequenceSpec, lens: Option<&Profile>) -> Run {
     }
 }
 
-fn stats(v: &[f32]) -> String {
-    if v.is_empty() {
-        return "— / — / —".into();
-    }
-    let mut v = v.to_vec();
-    v.sort_by(f32::total_cmp);
-    let q = |p: f32| v[((v.len() - 1) as f32 * p).round() as usize];
-    format!("{:.3} / {:.3} / {:.3}", q(0.5), q(0.9), v[v.len() - 1])
-}
-
 /// Median / p10 / lowest: for shares where lower is worse.
 fn stats_low(v: &[f32]) -> String {
     if v.is_empty() {
@@ -265,10 +235,10 @@ fn main() {
     println!("| terms | median / p90 / worst curve error |\n|---|---|");
     for terms in [2, 3] {
         let e: Vec<f32> = all.iter().map(|p| representable(p, &radii, terms)).collect();
-        println!("| {terms} | {} |", stats(&e));
+        println!("| {terms} | {} |", summary(&e));
     }
     let corners: Vec<f32> = all.iter().map(|p| 1.0 - p.v(1.0)).collect();
-    println!("\nThe profiles' corner falloff 1 − V(1): median / p90 / largest {}.\n", stats(&corners));
+    println!("\nThe profiles' corner falloff 1 − V(1): median / p90 / largest {}.\n", summary(&corners));
     let mut entries = load(&manifest.to_string_lossy());
     // One tuning scene by name (`BENCH_VIGNETTING_ONLY=Books`); never a held-out one.
     if let Ok(only) = std::env::var("BENCH_VIGNETTING_ONLY") {
@@ -328,13 +298,13 @@ fn main() {
             "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             if split { "held-out" } else { "tuning" },
             rs.len(),
-            stats(&err),
-            stats(&abs),
+            summary(&err),
+            summary(&abs),
             stats_low(&pres),
-            stats(&fals),
+            summary(&fals),
             stats_low(&abs_without),
             rs.iter().filter(|r| r.1.first_present_s.is_none()).count(),
-            stats(&first)
+            summary(&first)
         );
     }
 }

@@ -4,6 +4,7 @@
 
 pub mod calibration;
 pub mod independent;
+pub mod lensfun;
 pub mod scenes;
 pub mod vtest;
 
@@ -237,4 +238,15 @@ pub fn analysed(f: &blind_augment::synth::sequence::SequenceFrame) -> blind_augm
         world_from_camera: Some(f.world_from_camera),
         sparse_flow: None,
     }
+}
+
+/// "median / p90 / worst" of `v` (worst = largest), to three decimals.
+pub fn summary(v: &[f32]) -> String {
+    if v.is_empty() {
+        return "— / — / —".into();
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f32::total_cmp);
+    let q = |p: f32| v[((v.len() - 1) as f32 * p).round() as usize];
+    format!("{:.3} / {:.3} / {:.3}", q(0.5), q(0.9), v[v.len() - 1])
 }
