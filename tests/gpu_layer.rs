@@ -151,6 +151,16 @@ fn chain<'a>(ctx: &'a GpuContext, rig: &Rig<'a>, settings: LayerSettings) -> Lay
     .expect("chain")
 }
 
+/// The composite's 8-bit output, as [0, 1] values.
+fn output_8bit(rig: &Rig<'_>) -> Vec<[f32; 4]> {
+    rig.output
+        .download()
+        .expect("download")
+        .chunks_exact(4)
+        .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
+        .collect()
+}
+
 fn run(ctx: &GpuContext, rig: &Rig<'_>, fxs: &LayerEffects<'_>, model: &CameraModel, frame: u32) -> FrameEffects {
     let mut fx = FrameEffects::from_model(model, None, None, fxs.settings());
     fx.rects = [Rect::full(W, H); 2];
@@ -257,13 +267,7 @@ fn layer_dof_and_motion_blur_match_cpu_twins() {
             }
         }
         // Composite (no grain): 8-bit output against the twin, quantised alike.
-        let gpu: Vec<[f32; 4]> = rig
-            .output
-            .download()
-            .expect("download")
-            .chunks_exact(4)
-            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
-            .collect();
+        let gpu = output_8bit(&rig);
         for e in 0..2 {
             let n = W * H;
             let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
@@ -405,13 +409,7 @@ fn composite_straight_alpha_matches_cpu_twin() {
         let fxs = chain(&ctx, &rig, settings);
         run(&ctx, &rig, &fxs, &m, 2);
         let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
-        let gpu: Vec<[f32; 4]> = rig
-            .output
-            .download()
-            .expect("download")
-            .chunks_exact(4)
-            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
-            .collect();
+        let gpu = output_8bit(&rig);
         for e in 0..2 {
             let cpu = composite(
                 &bg,
@@ -574,17 +572,9 @@ fn composite_colour_gain_matches_cpu_twin() {
     let n = W * H;
     let settings = LayerSettings { dof_half_res: false, ..LayerSettings::default() };
     let fxs = chain(&ctx, &rig, settings);
-    let download = || -> Vec<[f32; 4]> {
-        rig.output
-            .download()
-            .expect("download")
-            .chunks_exact(4)
-            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
-            .collect()
-    };
     let fx = run(&ctx, &rig, &fxs, &m, 2);
     assert_eq!(fx.colour_gain, None, "no colour term: no gain");
-    let plain = download();
+    let plain = output_8bit(&rig);
     // A tungsten-lit room one stop under middle grey, as `fit_colour` reports one.
     m.colour = Colour {
         present: true,
@@ -595,7 +585,7 @@ fn composite_colour_gain_matches_cpu_twin() {
     m.validate().expect("valid model");
     let fx = run(&ctx, &rig, &fxs, &m, 2);
     let gain = fx.colour_gain.expect("a present colour term is applied");
-    let gpu = download();
+    let gpu = output_8bit(&rig);
     let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
     let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
     let mut moved = 0.0f64;
@@ -647,17 +637,9 @@ fn composite_vignetting_matches_cpu_twin() {
     let n = W * H;
     let settings = LayerSettings { dof_half_res: false, ..LayerSettings::default() };
     let fxs = chain(&ctx, &rig, settings);
-    let download = || -> Vec<[f32; 4]> {
-        rig.output
-            .download()
-            .expect("download")
-            .chunks_exact(4)
-            .map(|p| [p[0] as f32 / 255.0, p[1] as f32 / 255.0, p[2] as f32 / 255.0, p[3] as f32 / 255.0])
-            .collect()
-    };
     let fx = run(&ctx, &rig, &fxs, &m, 2);
     assert_eq!(fx.vignette, None, "no vignetting term: none applied");
-    let plain = download();
+    let plain = output_8bit(&rig);
     m.vignetting = Vignetting {
         present: true,
         log_falloff: Some([-0.9, -0.6, 0.3]),
@@ -674,7 +656,7 @@ fn composite_vignetting_matches_cpu_twin() {
     let mut result = Ok(());
     ctx.submit_and_wait(|cmd| result = fxs.record(cmd, &rig.params, &fx, None)).expect("submit");
     result.expect("record");
-    let gpu = download();
+    let gpu = output_8bit(&rig);
     let dof_out = from_f16_bytes(&fxs.dof_out.download().expect("download"));
     let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
     let (mut far_moved, mut far, mut near_moved, mut near) = (0.0f64, 0usize, 0.0f64, 0usize);
