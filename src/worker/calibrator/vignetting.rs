@@ -29,6 +29,9 @@ pub(super) struct VignettingVideo {
     held: Option<Arc<Analysed>>,
     pairs: VecDeque<(f64, Vec<Row>)>,
     last_t_s: Option<f64>,
+    /// The last fit and the pairs' (count, newest time) it was made from: a head at
+    /// rest adds no pair, and the same pairs give the same fit.
+    last_fit: Option<(crate::model::Vignetting, (usize, f64))>,
 }
 
 impl Calibrator {
@@ -61,7 +64,15 @@ impl Calibrator {
             }
         }
         v.pairs.retain(|p| p.0 <= t_s && p.0 > t_s - VIGNETTING_WINDOW_S);
+        let key = (v.pairs.len(), v.pairs.back().map_or(f64::NEG_INFINITY, |p| p.0));
+        if let Some((fit, k)) = &v.last_fit {
+            if *k == key {
+                return Some(fit.clone());
+            }
+        }
         let refs: Vec<&[Row]> = v.pairs.iter().map(|p| p.1.as_slice()).collect();
-        Some(vignetting::fit_vignetting(&refs))
+        let fit = vignetting::fit_vignetting(&refs);
+        v.last_fit = Some((fit.clone(), key));
+        Some(fit)
     }
 }
