@@ -24,12 +24,11 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use blind_augment::image::yuv::{linear_to_srgb, srgb_to_linear};
 use blind_augment::model::Vignetting;
 use blind_augment::synth::sequence::SequenceSpec;
 use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
 use common::calibration::{frame, pose};
-use common::lensfun::{attr, entries};
+use common::lensfun::{apply_pa, attr, entries, pa};
 use common::scenes::{load, name_hash, spec_for, Entry, FPS, HEIGHT, WIDTH};
 use common::summary;
 
@@ -51,8 +50,7 @@ struct Profile {
 
 impl Profile {
     fn v(&self, r: f32) -> f32 {
-        let r2 = r * r;
-        1.0 + r2 * (self.k[0] + r2 * (self.k[1] + r2 * self.k[2]))
+        pa(self.k, r)
     }
     fn held_out(&self) -> bool {
         name_hash(&self.lens) % 3 == 0
@@ -161,16 +159,7 @@ fn run(e: &Entry, spec: &SequenceSpec, lens: Option<&Profile>) -> Run {
         cal.push_poses(&[pose(spec, i + 2)]).expect("poses");
         let mut fr = frame(&spec.frame(&e.scene, i));
         if let Some(p) = lens {
-            let (w, h) = (fr.image.width, fr.image.height);
-            for ch in fr.image.channels.iter_mut() {
-                for y in 0..h {
-                    for x in 0..w {
-                        let v = &mut ch[y * w + x];
-                        let g = p.v(Vignetting::radius(w, h, x as f32 + 0.5, y as f32 + 0.5));
-                        *v = (linear_to_srgb(srgb_to_linear(*v) * g).clamp(0.0, 1.0) * 255.0).round() / 255.0;
-                    }
-                }
-            }
+            apply_pa(&mut fr.image, p.k);
         }
         for ev in cal.push_frame(fr).unwrap_or_default() {
             let Event::Published(u) = ev else { continue };

@@ -8,21 +8,16 @@
 
 mod common;
 
-use blind_augment::image::yuv::{linear_to_srgb, srgb_to_linear};
 use blind_augment::model::{CameraModel, Status, Vignetting};
 use blind_augment::synth::sequence::SequenceSpec;
 use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
 use common::calibration::{frame, pose, scene};
+use common::lensfun::{apply_pa, pa};
 
 /// lensfun 0.3.3 (Debian `liblensfun-data-v1`) `slr-canon.xml`, "Canon EF-S
 /// 18-55mm f/3.5-5.6 IS" at 18 mm f/4 (k1, k2, k3): the corner passes 0.57 of the
 /// centre's light.
 const LENS: [f32; 3] = [-0.3271, -0.3518, 0.2513];
-
-fn pa(k: [f32; 3], r: f32) -> f32 {
-    let r2 = r * r;
-    1.0 + k[0] * r2 + k[1] * r2 * r2 + k[2] * r2 * r2 * r2
-}
 
 fn run(lens: Option<[f32; 3]>) -> Vec<(f64, CameraModel)> {
     let spec = SequenceSpec::motorcycle(scene(), 320, 240, 150, None);
@@ -37,16 +32,7 @@ fn run(lens: Option<[f32; 3]>) -> Vec<(f64, CameraModel)> {
         cal.push_poses(&[pose(&spec, i + 2)]).expect("poses");
         let mut fr = frame(&spec.frame(scene(), i));
         if let Some(k) = lens {
-            let (w, h) = (fr.image.width, fr.image.height);
-            for ch in fr.image.channels.iter_mut() {
-                for y in 0..h {
-                    for x in 0..w {
-                        let v = &mut ch[y * w + x];
-                        let g = pa(k, Vignetting::radius(w, h, x as f32 + 0.5, y as f32 + 0.5));
-                        *v = (linear_to_srgb(srgb_to_linear(*v) * g).clamp(0.0, 1.0) * 255.0).round() / 255.0;
-                    }
-                }
-            }
+            apply_pa(&mut fr.image, k);
         }
         for e in cal.push_frame(fr).expect("valid frame") {
             if let Event::Published(u) = e {

@@ -37,3 +37,25 @@ pub fn entries(dir: &str, tag: &str) -> Vec<(String, String)> {
     }
     out
 }
+
+/// lensfun's "pa" vignetting V(r) = 1 + k1·r² + k2·r⁴ + k3·r⁶ (r = 1 at the corner).
+pub fn pa(k: [f32; 3], r: f32) -> f32 {
+    let r2 = r * r;
+    1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k[2]))
+}
+
+/// A camera frame (encoded, 8-bit) darkened by the "pa" profile `k` in linear light
+/// and quantised to 8 bits again.
+pub fn apply_pa(img: &mut blind_augment::image::Rgb, k: [f32; 3]) {
+    use blind_augment::image::yuv::{linear_to_srgb, srgb_to_linear};
+    let (w, h) = (img.width, img.height);
+    for ch in img.channels.iter_mut() {
+        for y in 0..h {
+            for x in 0..w {
+                let v = &mut ch[y * w + x];
+                let g = pa(k, blind_augment::model::Vignetting::radius(w, h, x as f32 + 0.5, y as f32 + 0.5));
+                *v = (linear_to_srgb(srgb_to_linear(*v) * g).clamp(0.0, 1.0) * 255.0).round() / 255.0;
+            }
+        }
+    }
+}
