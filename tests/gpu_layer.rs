@@ -695,3 +695,91 @@ fn composite_vignetting_matches_cpu_twin() {
     let off = FrameEffects::from_model(&m, None, None, &LayerSettings { vignetting: false, ..settings });
     assert_eq!(off.vignette, None);
 }
+
+/// The lens's lateral chromatic aberration (`model::ChromaticAberration` at the
+/// validated bound: red magnified by 1.01, blue by 0.99, so ±0.8 px at this buffer's
+/// corners) with a colour gain and vignetting, over an opaque and a transparent
+/// (the headset's) background, in the composite against its twin: the
+/// deterministic passes' tolerance. Not vacuous: green is untouched (opaque
+/// background), red and blue
+/// at the content's outer edges move by more than 8 steps on average; off in the
+/// settings it costs nothing.
+#[test]
+fn composite_chromatic_aberration_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("composite_chromatic") else { return };
+    let layers = [test_layer(0), test_layer(1)];
+    let mut m = model(false, false, false);
+    (m.reference.width, m.reference.height) = (W as u32, H as u32);
+    m.colour = Colour {
+        present: true,
+        illuminant: Some([1.1, 0.97, 0.9]),
+        exposure: Some(0.9),
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    m.vignetting =
+        Vignetting { present: true, log_falloff: Some([-0.3, -0.1, 0.05]), diagnostics: Diagnostics::not_fitted("test") };
+    let full = Rect::full(W, H);
+    let n = W * H;
+    for (bg_colour, straight) in [([0.3f32, 0.4, 0.5, 1.0], false), ([0.0f32; 4], true)] {
+        let bg = vec![bg_colour; W * H];
+        let rig = rig(&ctx, &layers, &bg);
+        let settings = LayerSettings { dof_half_res: false, straight_alpha: straight, ..LayerSettings::default() };
+        let fxs = chain(&ctx, &rig, settings);
+        let centres = [[W as f32 * 0.45, H as f32 * 0.5], [W as f32 * 0.55, H as f32 * 0.48]];
+        // Both runs with the eyes about the same (different) principal points.
+        let render = |m: &CameraModel| {
+            let mut fx = FrameEffects::from_model(m, None, None, fxs.settings());
+            fx.eye_centres_px = Some(centres);
+            fx.rects = [full; 2];
+            fx.frame = 2;
+            rig.params.write(bytemuck::bytes_of(&EffectParams::from_model(m, 1))).expect("params");
+            let mut result = Ok(());
+            ctx.submit_and_wait(|cmd| result = fxs.record(cmd, &rig.params, &fx, None)).expect("submit");
+            result.expect("record");
+            fx
+        };
+        m.chromatic_aberration = ChromaticAberration::not_fitted();
+        let fx = render(&m);
+        assert_eq!(fx.chromatic, None, "no aberration term: none applied");
+        let plain = output_8bit(&rig);
+        m.chromatic_aberration = ChromaticAberration {
+            present: true,
+            scale_minus_one: Some([0.01, -0.01]),
+            diagnostics: Diagnostics::not_fitted("test"),
+        };
+        m.validate().expect("valid model");
+        let fx = render(&m);
+        assert!(fx.chromatic.is_some(), "a present aberration term is applied");
+        let gpu = output_8bit(&rig);
+                let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+        let (mut green_moved, mut rb_moved, mut edges) = (0.0f64, 0.0f64, 0usize);
+        for e in 0..2 {
+            let gain = fx.eye_gain(e, W as u32, H as u32);
+            assert!(gain.chromatic.is_some());
+            let cpu =
+                composite(&bg8, &layers[e].colour, None, None, W, full, straight, &gain);
+            let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+            check(&format!("composite_chromatic_eye{e}_straight{straight}"), &gpu[e * n..(e + 1) * n], &cpu8);
+            // Edge pixels far from the centre: where the content's alpha steps
+            // between horizontal neighbours, outside the central half.
+            for i in 0..n {
+                let (x, y) = (i % W, i / W);
+                green_moved += (gpu[e * n + i][1] - plain[e * n + i][1]).abs() as f64;
+                let a = |x: usize| layers[e].colour[y * W + x][3];
+                let far = (x as f32 - W as f32 * 0.5).abs() > W as f32 * 0.3;
+                if far && x > 0 && x + 1 < W && (a(x + 1) - a(x - 1)).abs() > 0.5 {
+                    rb_moved += [0, 2].iter().map(|&c| (gpu[e * n + i][c] - plain[e * n + i][c]).abs() as f64).sum::<f64>()
+                        / 2.0;
+                    edges += 1;
+                }
+            }
+        }
+        // Over an opaque background green keeps its value (over a transparent one the
+        // output alpha, the largest channel's, rescales its straight colour).
+        assert!(straight || green_moved == 0.0, "the aberration moved green by {green_moved} in all");
+        let rb_mean = rb_moved / edges.max(1) as f64;
+        assert!(edges > 10 && rb_mean > 8.0 / 255.0, "{edges} far edge pixels, red/blue moved {:.1}/255", rb_mean * 255.0);
+        let off = FrameEffects::from_model(&m, None, None, &LayerSettings { chromatic_aberration: false, ..settings });
+        assert_eq!(off.chromatic, None);
+    }
+}

@@ -127,12 +127,40 @@ impl EyeVignette {
     }
 }
 
-/// The linear-light gain the composite multiplies one eye's virtual colour by: the
-/// camera's colour gains (`model::Colour`) times the lens's falloff at the pixel.
+/// The lens's lateral chromatic aberration as one eye buffer sees it
+/// (`model::ChromaticAberration` about the eye's principal point): red and blue are
+/// read at c + (p − c)/s, i.e. p + `inv_scale_minus_one`·d with d = p − c, d held
+/// at the camera's corner radius beyond it (as `EyeVignette`; a ratio of scales is
+/// the same in any pixel unit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EyeChromatic {
+    /// [1/s_R − 1, 1/s_B − 1].
+    pub inv_scale_minus_one: [f32; 2],
+    pub centre_px: [f32; 2],
+    pub inv_half_diag_px: f32,
+}
+
+impl EyeChromatic {
+    /// Where channel `k` (0 red, 1 blue) of the pixel with centre (x + ½, y + ½) is
+    /// read, in continuous pixel coordinates (`shaders/composite.comp`'s
+    /// `ca_source`, the same f32 arithmetic).
+    pub fn source(&self, k: usize, x: usize, y: usize) -> [f32; 2] {
+        let px = [x as f32 + 0.5, y as f32 + 0.5];
+        let d = [px[0] - self.centre_px[0], px[1] - self.centre_px[1]];
+        let r = (d[0] * d[0] + d[1] * d[1]).sqrt() * self.inv_half_diag_px;
+        let f = self.inv_scale_minus_one[k] / r.max(1.0);
+        [px[0] + f * d[0], px[1] + f * d[1]]
+    }
+}
+
+/// What the composite applies per pixel of one eye beyond the effect chain: the
+/// linear-light gain (the camera's colour gains, `model::Colour`, times the lens's
+/// falloff at the pixel) and the lens's lateral chromatic aberration.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EyeGain {
     pub colour: Option<[f32; 3]>,
     pub vignette: Option<EyeVignette>,
+    pub chromatic: Option<EyeChromatic>,
 }
 
 impl EyeGain {

@@ -1,25 +1,38 @@
 //! The camera model: plain data, one versioned JSON document
-//! (`"schema": "blind-augment/camera-model/3"`; version 1 documents, which have no
-//! `colour`, and version 2, which have no `vignetting`, still read), with validation on load so that no NaN, Inf or
-//! out-of-range parameter can reach a renderer.
+//! (`"schema": "blind-augment/camera-model/4"`; version 1 documents, which have no
+//! `colour`, version 2, which have no `vignetting`, and version 3, which have no
+//! `chromatic_aberration`, still read), with validation on load so that no NaN, Inf
+//! or out-of-range parameter can reach a renderer.
 //!
 //! Every effect carries `present` (the renderer skips absent effects) and
 //! `diagnostics` (how sure the estimator is, how it got there).
 
 pub mod compare;
 pub mod geometry;
-pub use geometry::{covering_rect, half_rect, tile_rect, EyeGain, EyeVignette, GrainTable, Rect};
+pub use geometry::{covering_rect, half_rect, tile_rect, EyeChromatic, EyeGain, EyeVignette, GrainTable, Rect};
 pub mod kernels;
 mod validate;
 
 use serde::{Deserialize, Serialize};
 pub use validate::ModelError;
 
-pub const SCHEMA: &str = "blind-augment/camera-model/3";
+pub const SCHEMA: &str = "blind-augment/camera-model/4";
 /// Schemas `CameraModel::from_json` reads: version 1 is version 2 without `colour`,
-/// version 2 is version 3 without `vignetting` (each read as not fitted); files are
-/// always written as `SCHEMA`.
-pub const READABLE_SCHEMAS: [&str; 3] = ["blind-augment/camera-model/1", "blind-augment/camera-model/2", SCHEMA];
+/// version 2 is version 3 without `vignetting`, version 3 is version 4 without
+/// `chromatic_aberration` (each read as not fitted); files are always written as
+/// `SCHEMA`.
+pub const READABLE_SCHEMAS: [&str; 4] = [
+    "blind-augment/camera-model/1",
+    "blind-augment/camera-model/2",
+    "blind-augment/camera-model/3",
+    SCHEMA,
+];
+/// Largest |s − 1| of a channel's lateral-aberration scale: 0.01 moves a 1280×960
+/// frame's corner by 8 px. lensfun's TCA profiles stay far inside it (their 3 588
+/// "linear"/"poly3" profiles at 1280×960: corner shifts of a few pixels at most,
+/// median 0.1 px, `benches/chromatic.rs`); past it a reading is a failed fit, not a
+/// lens.
+pub const MAX_CHROMATIC_SCALE_DEVIATION: f32 = 0.01;
 /// Bounds of the vignetting gain V(r) over the frame (r in [0, 1]): a lens that
 /// passes under 1/20 of the centre's light at its corner is outside any headset
 /// camera (lensfun's 19 920 "pa" profiles: the darkest corner passes 0.13), and a
@@ -74,6 +87,29 @@ pub struct CameraModel {
     /// fitted).
     #[serde(default = "Vignetting::not_fitted")]
     pub vignetting: Vignetting,
+    /// The lens's lateral chromatic aberration; absent from version-1 to -3 files
+    /// (read as not fitted).
+    #[serde(default = "ChromaticAberration::not_fitted")]
+    pub chromatic_aberration: ChromaticAberration,
+}
+
+/// Lateral chromatic aberration: the lens images red and blue at other
+/// magnifications than green, so channel c of a virtual surface's image is green's
+/// image scaled by s_c about the optical centre (lensfun's "linear" TCA model,
+/// r_c = s_c·r). The renderer resamples red and blue of the virtual layer at
+/// c + (p − c)/s_c. Read blindly from colour fringes at radial edges
+/// (`fit::chromatic`). Optics: applied with the falloff, before the ISP's colour
+/// and noise.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChromaticAberration {
+    pub present: bool,
+    /// [s_R − 1, s_B − 1], each within ±`MAX_CHROMATIC_SCALE_DEVIATION`. `null` when
+    /// not identifiable.
+    pub scale_minus_one: Option<[f32; 2]>,
+    /// `diagnostics.stderr`: one-sigma uncertainty of the larger channel's corner
+    /// shift, in reference-frame pixels.
+    pub diagnostics: Diagnostics,
 }
 
 /// The lens's radial falloff of light (and what of it the ISP's shading correction
@@ -527,6 +563,21 @@ impl Vignetting {
     }
 }
 
+impl ChromaticAberration {
+    pub fn absent(diagnostics: Diagnostics) -> Self {
+        Self { present: false, scale_minus_one: None, diagnostics }
+    }
+
+    pub fn not_fitted() -> Self {
+        Self::absent(Diagnostics::not_fitted("not fitted"))
+    }
+
+    /// [s_R − 1, s_B − 1] the renderer applies: `None` when absent or unknown.
+    pub fn applied(&self) -> Option<[f32; 2]> {
+        self.scale_minus_one.filter(|_| self.present)
+    }
+}
+
 impl CameraModel {
     /// A model with every effect absent, for the given reference frame size.
     pub fn empty(width: u32, height: u32) -> Self {
@@ -538,6 +589,7 @@ impl CameraModel {
             depth_of_field: DepthOfField::absent(DepthUnits::MetricM, Diagnostics::not_fitted("not fitted")),
             colour: Colour::not_fitted(),
             vignetting: Vignetting::not_fitted(),
+            chromatic_aberration: ChromaticAberration::not_fitted(),
         }
     }
 

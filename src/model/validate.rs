@@ -63,7 +63,28 @@ impl CameraModel {
         self.validate_motion_blur()?;
         self.validate_dof()?;
         self.validate_colour()?;
-        self.validate_vignetting()
+        self.validate_vignetting()?;
+        self.validate_chromatic()
+    }
+
+    fn validate_chromatic(&self) -> Result<(), ModelError> {
+        let c = &self.chromatic_aberration;
+        check_diagnostics("chromatic_aberration", &c.diagnostics)?;
+        if let Some(s) = c.scale_minus_one {
+            let m = MAX_CHROMATIC_SCALE_DEVIATION;
+            for (k, v) in s.iter().enumerate() {
+                if !(v.is_finite() && v.abs() <= m) {
+                    return Err(bad(
+                        format!("chromatic_aberration.scale_minus_one[{k}]"),
+                        format!("must be finite and within ±{m}, got {v}"),
+                    ));
+                }
+            }
+        }
+        if c.present && c.scale_minus_one.is_none() {
+            return Err(bad("chromatic_aberration", "scale_minus_one must be set when present is true"));
+        }
+        Ok(())
     }
 
     fn validate_vignetting(&self) -> Result<(), ModelError> {

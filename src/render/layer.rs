@@ -17,7 +17,7 @@
 use super::grain::GrainRecorder;
 use super::params::EffectParams;
 use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, QueryPool, Resource, EYES};
-use crate::model::{half_rect, tile_rect, EyeGain, EyeVignette, Rect};
+use crate::model::{half_rect, tile_rect, EyeChromatic, EyeGain, EyeVignette, Rect};
 use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
@@ -107,8 +107,13 @@ struct CompositePush {
     gain: [f32; 4],
     vignette: [f32; 4],
     centre: [f32; 4],
+    /// Lateral aberration (`FrameEffects::chromatic`): xy 1/s − 1 of red and blue;
+    /// z: 1 / the camera's half-diagonal in eye pixels; w: 1 to apply.
+    chroma: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<CompositePush>() == 112);
+// 128 B: Vulkan's guaranteed maxPushConstantsSize.
+const _: () = assert!(std::mem::size_of::<CompositePush>() == 128);
+const _: () = assert!(std::mem::offset_of!(CompositePush, chroma) == 112);
 const _: () = assert!(std::mem::offset_of!(CompositePush, vignette) == 80);
 const _: () = assert!(std::mem::offset_of!(CompositePush, straight_alpha) == 56);
 const _: () = assert!(std::mem::offset_of!(CompositePush, gain) == 64);
@@ -140,6 +145,9 @@ pub struct LayerSettings {
     /// Apply the lens's vignetting (`model::Vignetting`; off = none even where the
     /// model has it).
     pub vignetting: bool,
+    /// Apply the lens's lateral chromatic aberration (`model::ChromaticAberration`;
+    /// off = none even where the model has it).
+    pub chromatic_aberration: bool,
     /// Store the composite with straight (unpremultiplied) alpha: the colour divided
     /// by the output alpha. The headset's projection layer uses it with
     /// XR_COMPOSITION_LAYER_UNPREMULTIPLIED_ALPHA_BIT, so the compositor, which
@@ -164,6 +172,7 @@ impl Default for LayerSettings {
             grain: true,
             colour: true,
             vignetting: true,
+            chromatic_aberration: true,
             straight_alpha: false,
         }
     }
@@ -184,6 +193,10 @@ pub struct FrameEffects {
     /// The lens's falloff where the model has it and the settings apply it: its
     /// log terms and 1 / the camera's half-diagonal in eye pixels. `None`: no cost.
     pub vignette: Option<([f32; 3], f32)>,
+    /// The lens's lateral aberration where the model has it and the settings apply
+    /// it: [1/s_R − 1, 1/s_B − 1] and 1 / the camera's half-diagonal in eye pixels.
+    /// `None`: no cost.
+    pub chromatic: Option<([f32; 2], f32)>,
     /// Each eye's principal point in its buffer (px), where the passthrough
     /// camera's optical axis lands: `gbuffer::Eye::centre_px` (the XR view's
     /// asymmetric frustum; `StereoRenderer::render_to` sets it). `None`: the
@@ -247,6 +260,10 @@ impl FrameEffects {
             Some(t) if t > 0.0 && settings.render_interval_s > 0.0 => lambda * t / settings.render_interval_s,
             _ => 0.0,
         };
+        // The camera's half-diagonal (px) in eye pixels: the ratio of the two pixels
+        // per radian.
+        let inv_half_diag_eye_px = 1.0 / (0.5 * (model.reference.width as f32).hypot(model.reference.height as f32) * ppr_ratio);
+        let inv_half_diag_eye_px = Some(inv_half_diag_eye_px).filter(|v| v.is_finite() && *v > 0.0);
         if lambda > 0.0 && exposure_ratio == 0.0 {
             log::warn!("motion blur present but the camera frame interval is unknown: MB skipped");
         }
@@ -259,13 +276,15 @@ impl FrameEffects {
             colour_gain: (model.colour.present && settings.colour)
                 .then(|| model.colour.gains_or_one())
                 .filter(|g| g.iter().all(|v| v.is_finite() && *v > 0.0) && *g != [1.0; 3]),
-            vignette: model.vignetting.applied().filter(|_| settings.vignetting).and_then(|a| {
-                // The camera's half-diagonal (px) in eye pixels: the ratio of
-                // the two pixels per radian.
-                let half_diag = 0.5 * (model.reference.width as f32).hypot(model.reference.height as f32);
-                let inv = 1.0 / (half_diag * ppr_ratio);
-                (inv.is_finite() && inv > 0.0).then_some((a, inv))
-            }),
+            vignette: model.vignetting.applied().filter(|_| settings.vignetting).zip(inv_half_diag_eye_px),
+            // Validated scales are within 1 ± 0.01; a scale of exactly 1 costs nothing.
+            chromatic: model
+                .chromatic_aberration
+                .applied()
+                .filter(|_| settings.chromatic_aberration)
+                .map(|d| d.map(|v| 1.0 / (1.0 + v) - 1.0))
+                .filter(|d| d.iter().all(|v| v.is_finite()) && *d != [0.0; 2])
+                .zip(inv_half_diag_eye_px),
             eye_centres_px: None,
             ppr_ratio,
             exposure_ratio: if exposure_ratio.is_finite() { exposure_ratio } else { 0.0 },
@@ -286,6 +305,11 @@ impl FrameEffects {
                 centre_px: centres[eye.min(1)],
                 inv_half_diag_px,
             }),
+            chromatic: self.chromatic.map(|(inv_scale_minus_one, inv_half_diag_px)| EyeChromatic {
+                inv_scale_minus_one,
+                centre_px: centres[eye.min(1)],
+                inv_half_diag_px,
+            }),
         }
     }
 
@@ -298,13 +322,24 @@ impl FrameEffects {
         if self.motion_blur {
             m += settings.mb_tile_px;
         }
+        // Red and blue land up to |1/s − 1| · the camera's half-diagonal (eye px)
+        // from where green does: the fringe must stay inside the rectangles.
+        if let Some((d, inv)) = self.chromatic {
+            let shift = d[0].abs().max(d[1].abs()) / inv;
+            m += (shift.ceil() as i32).clamp(0, MAX_CHROMATIC_MARGIN_PX);
+        }
         m
     }
 }
 
+/// Most the aberration widens the rectangles (px): 0.01 (the validated bound) of a
+/// Quest-class eye buffer's half-diagonal is ~15 px.
+const MAX_CHROMATIC_MARGIN_PX: i32 = 32;
+
 /// Eye `eye`'s principal point (px) as the composite applies it.
 fn self_centre(fx: &FrameEffects, eye: usize, width: u32, height: u32) -> [f32; 2] {
-    fx.eye_gain(eye, width, height).vignette.map_or([0.0; 2], |v| v.centre_px)
+    let g = fx.eye_gain(eye, width, height);
+    g.vignette.map(|v| v.centre_px).or(g.chromatic.map(|c| c.centre_px)).unwrap_or([0.0; 2])
 }
 
 pub struct LayerEffects<'a> {
@@ -626,6 +661,7 @@ impl<'a> LayerEffects<'a> {
             gain: gain4,
             vignette: vignette4,
             centre: centre4,
+            chroma: fx.chromatic.map_or([0.0; 4], |(d, inv)| [d[0], d[1], inv, 1.0]),
             ..Default::default()
         };
         if let Some((nodes, range)) = noise_table {
@@ -699,5 +735,28 @@ mod tests {
         for bad in [[f32::NAN, 3.0], [3.0, 2.0]] {
             assert_eq!(FrameEffects::from_model(&m, None, Some(bad), &s).dof_radius_px, 30);
         }
+    }
+
+    /// The aberration widens the rectangles by its largest shift in eye pixels
+    /// (rounded up), so the fringe outside the content is composited: 1280×960
+    /// reference (half-diagonal 800 px), eye pixels twice as fine, red 1.002 →
+    /// |1/s − 1|·1600 = 3.19 → 4 px more; absent or switched off: no margin.
+    #[test]
+    fn chromatic_aberration_widens_the_margin() {
+        let mut m = CameraModel::empty(1280, 960);
+        m.reference.pixels_per_radian = Some(1000.0);
+        let s = LayerSettings::default();
+        let base = FrameEffects::from_model(&m, Some(2000.0), None, &s).margin_px(&s);
+        m.chromatic_aberration = crate::model::ChromaticAberration {
+            present: true,
+            scale_minus_one: Some([0.002, -0.001]),
+            diagnostics: Diagnostics::not_fitted("test"),
+        };
+        let fx = FrameEffects::from_model(&m, Some(2000.0), None, &s);
+        let (d, inv) = fx.chromatic.expect("applied");
+        assert!((d[0] - (1.0 / 1.002 - 1.0)).abs() < 1e-7 && (inv - 1.0 / 1600.0).abs() < 1e-9, "{d:?} {inv}");
+        assert_eq!(fx.margin_px(&s), base + 4);
+        let off = LayerSettings { chromatic_aberration: false, ..s };
+        assert_eq!(FrameEffects::from_model(&m, Some(2000.0), None, &off).margin_px(&off), base);
     }
 }

@@ -550,7 +550,11 @@ pub fn layer_luma(colour: &[[f32; 4]], width: usize, rect: Rect, gain: &EyeGain)
 /// colour clamped to [0, alpha]; the virtual layer is `fx` (or
 /// `raw`) inside `rect` and empty outside it. `straight_alpha`: the colour is
 /// stored divided by the output alpha (0 where that is 0), as the headset's
-/// projection layer submits it (`LayerSettings::straight_alpha`).
+/// projection layer submits it (`LayerSettings::straight_alpha`). With
+/// `gain.chromatic`, red and blue (colour and alpha) are the layer bilinearly
+/// sampled where the lens moved them from (`EyeChromatic::source`) and each
+/// channel goes "over" with its own alpha; the grain follows green's alpha and the
+/// output alpha is the largest channel's.
 #[allow(clippy::too_many_arguments)]
 pub fn composite(
     background: &[[f32; 4]],
@@ -563,20 +567,45 @@ pub fn composite(
     gain: &EyeGain,
 ) -> Vec<[f32; 4]> {
     let plane = rect.area();
+    let height = background.len() / width.max(1);
+    let layer = fx.unwrap_or(raw);
+    // The chain's output at texel (x, y): nothing outside the rectangle (the GPU's
+    // G-buffer is only written inside the rectangles, so its composite reads
+    // nothing there) or the buffer.
+    let chain = |x: i32, y: i32| -> [f32; 4] {
+        if x < 0 || y < 0 || x >= width as i32 || y >= height as i32 || !rect.contains(x, y) {
+            [0.0; 4]
+        } else {
+            layer[y as usize * width + x as usize]
+        }
+    };
     (0..background.len())
         .map(|i| {
             let (x, y) = ((i % width) as i32, (i / width) as i32);
             let inside = rect.contains(x, y);
-            // Outside the rectangle: no virtual content (the GPU's G-buffer is
-            // only written inside the rectangles, so its composite reads nothing there).
-            let c = match fx {
-                _ if !inside => [0.0; 4],
-                Some(f) => f[i],
-                None => raw[i],
+            let c = chain(x, y);
+            // Each channel's sample: green's (and every channel's without
+            // aberration) at the pixel, red's and blue's where the lens moved them from.
+            let samples: [[f32; 4]; 3] = match gain.chromatic {
+                None => [c; 3],
+                Some(ca) => {
+                    let at = |k: usize| {
+                        let [qx, qy] = ca.source(k, x as usize, y as usize);
+                        bilinear(&chain, qx, qy)
+                    };
+                    [at(0), c, at(1)]
+                }
             };
-            let c = gain.at(x as usize, y as usize).map_or(c, |g| gain_encoded(c, g));
+            let g = gain.at(x as usize, y as usize);
+            let mut rgb = [0.0f32; 3];
+            let mut a_max = 0.0f32;
+            for k in 0..3 {
+                let s = g.map_or(samples[k], |g| gain_encoded(samples[k], g));
+                let a_k = s[3].clamp(0.0, 1.0);
+                a_max = a_max.max(a_k);
+                rgb[k] = background[i][k] * (1.0 - a_k) + s[k];
+            }
             let a = c[3].clamp(0.0, 1.0);
-            let mut rgb: [f32; 3] = std::array::from_fn(|k| background[i][k] * (1.0 - a) + c[k]);
             if let (Some(n), true, true) = (noise, inside, a > 0.0) {
                 let j = ((y - rect.y) * rect.w + (x - rect.x)) as usize;
                 for k in 0..3 {
@@ -585,7 +614,7 @@ pub fn composite(
             }
             // Premultiplied "over": opaque over an opaque background; the virtual
             // alpha over a transparent one (the headset's passthrough layer).
-            let ao = (background[i][3] * (1.0 - a) + a).clamp(0.0, 1.0);
+            let ao = (background[i][3] * (1.0 - a_max) + a_max).clamp(0.0, 1.0);
             let pm = rgb.map(|v| v.clamp(0.0, ao));
             let out = if !straight_alpha {
                 pm
@@ -597,6 +626,21 @@ pub fn composite(
             [out[0], out[1], out[2], ao]
         })
         .collect()
+}
+
+/// Bilinear sample of `texel` at continuous pixel coordinates (qx, qy) (texel
+/// centres at +½), in `composite.comp`'s `bilinear` order of operations.
+fn bilinear(texel: &impl Fn(i32, i32) -> [f32; 4], qx: f32, qy: f32) -> [f32; 4] {
+    let (ux, uy) = (qx - 0.5, qy - 0.5);
+    let (x0, y0) = (ux.floor(), uy.floor());
+    let (fx, fy) = (ux - x0, uy - y0);
+    let (x0, y0) = (x0 as i32, y0 as i32);
+    let (c00, c10, c01, c11) = (texel(x0, y0), texel(x0 + 1, y0), texel(x0, y0 + 1), texel(x0 + 1, y0 + 1));
+    std::array::from_fn(|k| {
+        let top = c00[k] + fx * (c10[k] - c00[k]);
+        let bottom = c01[k] + fx * (c11[k] - c01[k]);
+        top + fy * (bottom - top)
+    })
 }
 
 /// `spacewarp.comp` for one eye: XR_FB_space_warp's motion vectors (NDC per render
@@ -673,7 +717,7 @@ mod tests {
         // One stop down: the luma the grain is read at falls with the colour shown.
         let down = [0.5f32; 3];
         let plain = layer_luma(&layer, 1, rect, &EyeGain::default())[0];
-        let graded_luma = layer_luma(&layer, 1, rect, &EyeGain { colour: Some(down), vignette: None })[0];
+        let graded_luma = layer_luma(&layer, 1, rect, &EyeGain { colour: Some(down), ..Default::default() })[0];
         let g = gain_encoded(layer[0], down);
         let expect: f32 = (0..3).map(|c| crate::image::LUMA_WEIGHTS[c] * g[c]).sum();
         assert!((graded_luma - expect).abs() < 1e-6, "{graded_luma} vs {expect}");

@@ -39,6 +39,9 @@ pub fn apply_camera_model(
     if let Some(a) = model.vignetting.applied() {
         img = add_vignetting(&img, a);
     }
+    if let Some(d) = model.chromatic_aberration.applied() {
+        img = add_lateral_ca(&img, d.map(|v| 1.0 + v));
+    }
     if model.depth_of_field.present {
         match depth {
             Some(z) => img = add_dof(&img, z, &model.depth_of_field),
