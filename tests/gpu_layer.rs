@@ -716,8 +716,11 @@ fn composite_chromatic_aberration_matches_cpu_twin() {
         exposure: Some(0.9),
         diagnostics: Diagnostics::not_fitted("test"),
     };
-    m.vignetting =
-        Vignetting { present: true, log_falloff: Some([-0.3, -0.1, 0.05]), diagnostics: Diagnostics::not_fitted("test") };
+    m.vignetting = Vignetting {
+        present: true,
+        log_falloff: Some([-0.3, -0.1, 0.05]),
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
     let full = Rect::full(W, H);
     let n = W * H;
     for (bg_colour, straight) in [([0.3f32, 0.4, 0.5, 1.0], false), ([0.0f32; 4], true)] {
@@ -751,13 +754,12 @@ fn composite_chromatic_aberration_matches_cpu_twin() {
         let fx = render(&m);
         assert!(fx.chromatic.is_some(), "a present aberration term is applied");
         let gpu = output_8bit(&rig);
-                let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+        let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
         let (mut green_moved, mut rb_moved, mut edges) = (0.0f64, 0.0f64, 0usize);
         for e in 0..2 {
             let gain = fx.eye_gain(e, W as u32, H as u32);
             assert!(gain.chromatic.is_some());
-            let cpu =
-                composite(&bg8, &layers[e].colour, None, None, W, full, straight, &gain);
+            let cpu = composite(&bg8, &layers[e].colour, None, None, W, full, straight, &gain);
             let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
             check(&format!("composite_chromatic_eye{e}_straight{straight}"), &gpu[e * n..(e + 1) * n], &cpu8);
             // Edge pixels far from the centre: where the content's alpha steps
@@ -768,8 +770,9 @@ fn composite_chromatic_aberration_matches_cpu_twin() {
                 let a = |x: usize| layers[e].colour[y * W + x][3];
                 let far = (x as f32 - W as f32 * 0.5).abs() > W as f32 * 0.3;
                 if far && x > 0 && x + 1 < W && (a(x + 1) - a(x - 1)).abs() > 0.5 {
-                    rb_moved += [0, 2].iter().map(|&c| (gpu[e * n + i][c] - plain[e * n + i][c]).abs() as f64).sum::<f64>()
-                        / 2.0;
+                    rb_moved +=
+                        [0, 2].iter().map(|&c| (gpu[e * n + i][c] - plain[e * n + i][c]).abs() as f64).sum::<f64>()
+                            / 2.0;
                     edges += 1;
                 }
             }
@@ -778,7 +781,11 @@ fn composite_chromatic_aberration_matches_cpu_twin() {
         // output alpha, the largest channel's, rescales its straight colour).
         assert!(straight || green_moved == 0.0, "the aberration moved green by {green_moved} in all");
         let rb_mean = rb_moved / edges.max(1) as f64;
-        assert!(edges > 10 && rb_mean > 8.0 / 255.0, "{edges} far edge pixels, red/blue moved {:.1}/255", rb_mean * 255.0);
+        assert!(
+            edges > 10 && rb_mean > 8.0 / 255.0,
+            "{edges} far edge pixels, red/blue moved {:.1}/255",
+            rb_mean * 255.0
+        );
         let off = FrameEffects::from_model(&m, None, None, &LayerSettings { chromatic_aberration: false, ..settings });
         assert_eq!(off.chromatic, None);
     }

@@ -216,6 +216,10 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
     if let Some(m) = models.iter().rev().find(|m| m.vignetting.diagnostics.status != Status::NotFitted) {
         out.vignetting = m.vignetting.clone();
     }
+    // The aberration likewise (the worker's `chromatic` module pools its frames).
+    if let Some(m) = models.iter().rev().find(|m| m.chromatic_aberration.diagnostics.status != Status::NotFitted) {
+        out.chromatic_aberration = m.chromatic_aberration.clone();
+    }
     out.validate().map_err(|e| FitError::Option { option: "aggregate", problem: e.to_string() })?;
     Ok(out)
 }

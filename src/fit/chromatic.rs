@@ -18,13 +18,16 @@
 //!
 //! Readings come only from windows where green has a strong edge whose normal is
 //! mostly radial (a tangential edge does not move under a radial scale) and outside
-//! the frame's central quarter (the shift grows with r). Not wired into the camera
-//! model yet (no schema term, worker or render pass): measured by
-//! `tests/chromatic.rs` (BENCHMARKS.md "Lateral chromatic aberration"). The tile
-//! jackknife's σ (0.001–0.009 px there) understates the error (up to 0.02 px on
-//! greyscale photographs): presence will need a floor.
+//! the frame's central quarter (the shift grows with r). Measured by
+//! `tests/chromatic.rs` and `benches/chromatic.rs` (BENCHMARKS.md "Lateral
+//! chromatic aberration"). The worker reads a few hundred windows per frame at a
+//! slow cadence and pools the frames' estimates (`pool`) into the model's term,
+//! present / absent / not identifiable. The tile jackknife's σ (0.001–0.009 px on
+//! the test photographs) understates the error (up to 0.02 px there): `pool` floors
+//! it.
 
 use crate::image::Rgb;
+use crate::model::{ChromaticAberration, Diagnostics, Status, MAX_CHROMATIC_SCALE_DEVIATION};
 
 /// Window half-side (px): 5×5 windows.
 const HALF: usize = 2;
@@ -66,6 +69,12 @@ const PASSES: usize = 6;
 /// s_R − 1 and s_B − 1 of `image` (encoded, any size), each `None` where the frame
 /// has under `MIN_READINGS` usable edges.
 pub fn estimate(image: &Rgb) -> [Option<ScaleEstimate>; 2] {
+    estimate_with(image, MAX_WINDOWS)
+}
+
+/// `estimate` reading at most `max_windows` windows (the worker's per-frame budget).
+pub fn estimate_with(image: &Rgb, max_windows: usize) -> [Option<ScaleEstimate>; 2] {
+    let max_windows = max_windows.max(MIN_READINGS);
     let (w, h) = (image.width, image.height);
     let g = &image.channels[1];
     let (cx, cy) = ((w as f32 - 1.0) * 0.5, (h as f32 - 1.0) * 0.5);
@@ -94,8 +103,8 @@ pub fn estimate(image: &Rgb) -> [Option<ScaleEstimate>; 2] {
             }
         }
     }
-    if centres.len() > MAX_WINDOWS {
-        let step = centres.len().div_ceil(MAX_WINDOWS);
+    if centres.len() > max_windows {
+        let step = centres.len().div_ceil(max_windows);
         centres = centres.into_iter().step_by(step).collect();
     }
     // Each window's green and r·∂_r G, once (the passes resample only C).
@@ -146,6 +155,107 @@ pub fn estimate(image: &Rgb) -> [Option<ScaleEstimate>; 2] {
         }
         None
     })
+}
+
+/// Floor of a frame's corner-shift σ (px): the tile jackknife states 0.001–0.009
+/// px where the errors on greyscale photographs reach 0.02 (`tests/chromatic.rs`),
+/// so no frame, and no pool of frames of one scene (their texture biases are
+/// shared), is taken as surer than this.
+pub const STDERR_FLOOR_PX: f64 = 0.01;
+/// A corner shift under this (reference-frame px) is not modelled: a tenth of a
+/// pixel's fringe is under one 8-bit step on all but the hardest edges. lensfun's
+/// profiles at 1280×960 shift the corner by 0.1 px at the median
+/// (`benches/chromatic.rs`).
+pub const MIN_VISIBLE_SHIFT_PX: f64 = 0.1;
+/// Present beyond this many σ (and `MIN_VISIBLE_SHIFT_PX`).
+pub const PRESENT_SIGMAS: f64 = 3.0;
+/// Fewest frames with an estimate for a reading.
+pub const MIN_FRAMES: usize = 3;
+
+/// The term from frames' estimates (`estimate_with`, oldest first) of a frame whose
+/// half-diagonal is `half_diag_px`: per channel the inverse-variance mean (each σ
+/// floored at `STDERR_FLOOR_PX`), its σ inflated by the frames' excess scatter
+/// (Birge ratio) and floored again. Present where a channel's corner shift is over
+/// `PRESENT_SIGMAS`·σ and `MIN_VISIBLE_SHIFT_PX`; absent where both are under
+/// `MIN_VISIBLE_SHIFT_PX` at 2σ (the scales read kept, not applied); not
+/// identifiable otherwise, under `MIN_FRAMES` frames with edges, or outside the
+/// model's range.
+pub fn pool(frames: &[[Option<ScaleEstimate>; 2]], half_diag_px: f64) -> ChromaticAberration {
+    let started = std::time::Instant::now();
+    let floor = STDERR_FLOOR_PX / half_diag_px.max(1.0);
+    let channel = |k: usize| -> Option<(f64, f64, usize)> {
+        let e: Vec<(f64, f64)> = frames
+            .iter()
+            .filter_map(|f| f[k])
+            .filter(|e| e.scale_minus_one.is_finite() && e.stderr.is_finite())
+            .map(|e| (e.scale_minus_one, e.stderr.max(floor)))
+            .collect();
+        if e.len() < MIN_FRAMES {
+            return None;
+        }
+        let sw: f64 = e.iter().map(|(_, s)| 1.0 / (s * s)).sum();
+        let m = e.iter().map(|(v, s)| v / (s * s)).sum::<f64>() / sw;
+        let chi2 = e.iter().map(|(v, s)| ((v - m) / s).powi(2)).sum::<f64>();
+        let birge = (chi2 / (e.len() - 1) as f64).max(1.0).sqrt();
+        Some((m, (birge / sw.sqrt()).max(floor), e.len()))
+    };
+    let (r, b) = (channel(0), channel(1));
+    let samples = r.map_or(0, |c| c.2).max(b.map_or(0, |c| c.2)) as u64;
+    let diag = |status, reason: String, stderr: Option<f64>| Diagnostics {
+        status,
+        reason,
+        method: "video".into(),
+        residual_before: None,
+        residual_after: None,
+        samples_used: samples,
+        fit_time_s: started.elapsed().as_secs_f64(),
+        stderr,
+        stages_s: Default::default(),
+    };
+    let (Some(r), Some(b)) = (r, b) else {
+        return ChromaticAberration::absent(diag(
+            Status::NotIdentifiable,
+            format!("under {MIN_FRAMES} frames with enough strong radial edges in red and blue"),
+            None,
+        ));
+    };
+    // Corner shifts (px) and their σ.
+    let shift = [r, b].map(|(m, s, _)| (m * half_diag_px, s * half_diag_px));
+    let stderr_px = shift[0].1.max(shift[1].1);
+    let values = [r.0 as f32, b.0 as f32];
+    let reason = format!(
+        "corner shift red {:+.3} ± {:.3} px, blue {:+.3} ± {:.3} px (1σ, {} and {} frames)",
+        shift[0].0, shift[0].1, shift[1].0, shift[1].1, r.2, b.2
+    );
+    if values.iter().any(|v| !(v.is_finite() && v.abs() <= MAX_CHROMATIC_SCALE_DEVIATION)) {
+        return ChromaticAberration::absent(diag(
+            Status::NotIdentifiable,
+            format!("{reason}: outside the model's range"),
+            Some(stderr_px),
+        ));
+    }
+    let seen = |(d, s): (f64, f64)| d.abs() > PRESENT_SIGMAS * s && d.abs() >= MIN_VISIBLE_SHIFT_PX;
+    if shift.iter().any(|c| seen(*c)) {
+        return ChromaticAberration {
+            present: true,
+            scale_minus_one: Some(values),
+            diagnostics: diag(Status::Present, reason, Some(stderr_px)),
+        };
+    }
+    // Absent only on evidence: both fringes below the visible level at 2σ.
+    if shift.iter().all(|(d, s)| d.abs() + 2.0 * s <= MIN_VISIBLE_SHIFT_PX) {
+        let mut c = ChromaticAberration::absent(diag(Status::Absent, reason, Some(stderr_px)));
+        c.scale_minus_one = Some(values);
+        return c;
+    }
+    ChromaticAberration::absent(diag(
+        Status::NotIdentifiable,
+        format!(
+            "{reason}: neither over {PRESENT_SIGMAS}σ and {MIN_VISIBLE_SHIFT_PX} px nor under \
+             {MIN_VISIBLE_SHIFT_PX} px at 2σ"
+        ),
+        Some(stderr_px),
+    ))
 }
 
 /// One window's reading of s − 1, its variance and its tile.
@@ -279,4 +389,57 @@ fn weighted_mean(rs: &[&Reading]) -> Option<f64> {
         m = swx / sw;
     }
     m.is_finite().then_some(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frames(values_px: &[f64], stderr_px: f64, half_diag_px: f64) -> Vec<[Option<ScaleEstimate>; 2]> {
+        values_px
+            .iter()
+            .map(|v| {
+                let e = ScaleEstimate {
+                    scale_minus_one: v / half_diag_px,
+                    stderr: stderr_px / half_diag_px,
+                    readings: 200,
+                };
+                [Some(e), Some(ScaleEstimate { scale_minus_one: -e.scale_minus_one, ..e })]
+            })
+            .collect()
+    }
+
+    /// The three states from frames' estimates at an 800 px half-diagonal: a 0.16 px
+    /// fringe read consistently is present (its scales kept exactly: the mean of
+    /// equal values); 0.01 px is absent (0.01 + 2·0.01 floor ≤ 0.1); two frames, or
+    /// frames scattering 0 / 0.2 px (Birge-inflated σ 0.038 px: the scatter's
+    /// standard error), or a reading past the
+    /// model's range are not identifiable.
+    #[test]
+    fn pooled_frames_give_the_three_states() {
+        let hd = 800.0;
+        let c = pool(&frames(&[0.16; 8], 0.002, hd), hd);
+        assert_eq!(c.diagnostics.status, Status::Present, "{}", c.diagnostics.reason);
+        let s = c.applied().expect("applied");
+        assert!((s[0] as f64 * hd - 0.16).abs() < 1e-4 && (s[1] as f64 * hd + 0.16).abs() < 1e-4, "{s:?}");
+        // The floor, not the frames' own 0.002 px, is the stated σ.
+        assert!((c.diagnostics.stderr.unwrap() - STDERR_FLOOR_PX).abs() < 1e-9);
+
+        let c = pool(&frames(&[0.01; 8], 0.002, hd), hd);
+        assert_eq!(c.diagnostics.status, Status::Absent, "{}", c.diagnostics.reason);
+        assert!(!c.present && c.scale_minus_one.is_some() && c.applied().is_none());
+
+        let c = pool(&frames(&[0.16; 2], 0.002, hd), hd);
+        assert_eq!(c.diagnostics.status, Status::NotIdentifiable);
+        assert!(c.scale_minus_one.is_none());
+
+        let c = pool(&frames(&[0.0, 0.2, 0.0, 0.2, 0.0, 0.2, 0.0, 0.2], 0.002, hd), hd);
+        assert_eq!(c.diagnostics.status, Status::NotIdentifiable, "{}", c.diagnostics.reason);
+        // The scatter's standard error: 0.107 px / √8.
+        assert!((c.diagnostics.stderr.unwrap() - 0.107 / 8f64.sqrt()).abs() < 0.002, "{:?}", c.diagnostics.stderr);
+
+        let c = pool(&frames(&[0.02 * hd; 8], 0.002, hd), hd);
+        assert_eq!(c.diagnostics.status, Status::NotIdentifiable, "{}", c.diagnostics.reason);
+        assert!(c.scale_minus_one.is_none());
+    }
 }

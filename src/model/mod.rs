@@ -21,12 +21,8 @@ pub const SCHEMA: &str = "blind-augment/camera-model/4";
 /// version 2 is version 3 without `vignetting`, version 3 is version 4 without
 /// `chromatic_aberration` (each read as not fitted); files are always written as
 /// `SCHEMA`.
-pub const READABLE_SCHEMAS: [&str; 4] = [
-    "blind-augment/camera-model/1",
-    "blind-augment/camera-model/2",
-    "blind-augment/camera-model/3",
-    SCHEMA,
-];
+pub const READABLE_SCHEMAS: [&str; 4] =
+    ["blind-augment/camera-model/1", "blind-augment/camera-model/2", "blind-augment/camera-model/3", SCHEMA];
 /// Largest |s − 1| of a channel's lateral-aberration scale: 0.01 moves a 1280×960
 /// frame's corner by 8 px. lensfun's TCA profiles stay far inside it (their 3 588
 /// "linear"/"poly3" profiles at 1280×960: corner shifts of a few pixels at most,

@@ -262,7 +262,8 @@ impl FrameEffects {
         };
         // The camera's half-diagonal (px) in eye pixels: the ratio of the two pixels
         // per radian.
-        let inv_half_diag_eye_px = 1.0 / (0.5 * (model.reference.width as f32).hypot(model.reference.height as f32) * ppr_ratio);
+        let inv_half_diag_eye_px =
+            1.0 / (0.5 * (model.reference.width as f32).hypot(model.reference.height as f32) * ppr_ratio);
         let inv_half_diag_eye_px = Some(inv_half_diag_eye_px).filter(|v| v.is_finite() && *v > 0.0);
         if lambda > 0.0 && exposure_ratio == 0.0 {
             log::warn!("motion blur present but the camera frame interval is unknown: MB skipped");

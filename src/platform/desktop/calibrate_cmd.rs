@@ -162,6 +162,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     cfg.effects = super::effects(&args.only);
     cfg.colour = super::colour_wanted(&args.only);
     cfg.vignetting = super::vignetting_wanted(&args.only);
+    cfg.chromatic_aberration = super::chromatic_wanted(&args.only);
     cfg.fast_effort = args.fast_effort;
     let mut cal = Calibrator::new(cfg, providers)?;
     let mut timeline = match &args.timeline {

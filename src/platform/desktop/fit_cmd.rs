@@ -264,6 +264,9 @@ pub fn summarize(m: &blind_augment::model::CameraModel) {
         v.diagnostics.reason,
         v.diagnostics.fit_time_s * 1e3
     );
+    let c = &m.chromatic_aberration;
+    let d = &c.diagnostics;
+    eprintln!("  aberration:     {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
 }
 
 pub fn write_plots(dir: &Path, out: &FitOutput) -> Result<()> {

@@ -46,6 +46,14 @@ pub enum EffectArg {
     /// The lens's falloff (`model::Vignetting`; `calibrate` with poses and metric
     /// depth only: it needs the same surfaces seen at two image radii).
     Vignetting,
+    /// The lens's lateral chromatic aberration (`model::ChromaticAberration`;
+    /// `calibrate` only: it pools several frames' fringes).
+    ChromaticAberration,
+}
+
+/// Whether `--only` asks for the aberration term (all effects without it).
+pub fn chromatic_wanted(only: &Option<Vec<EffectArg>>) -> bool {
+    only.as_ref().map_or(true, |l| l.contains(&EffectArg::ChromaticAberration))
 }
 
 /// Whether `--only` asks for the vignetting term (all effects without it).

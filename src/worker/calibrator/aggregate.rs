@@ -200,6 +200,12 @@ impl Calibrator {
                 agg.vignetting = p.vignetting.clone();
             }
         }
+        // The aberration likewise: a view without radial edges shows no fringe.
+        if agg.chromatic_aberration.scale_minus_one.is_none() {
+            if let Some(p) = prev.as_ref().filter(|p| p.chromatic_aberration.scale_minus_one.is_some()) {
+                agg.chromatic_aberration = p.chromatic_aberration.clone();
+            }
+        }
         if on[2] != agg.depth_of_field.present {
             match (&prev, on[2] && dp == 0) {
                 (Some(p), true) => agg.depth_of_field = p.depth_of_field.clone(),

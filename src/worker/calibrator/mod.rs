@@ -32,6 +32,7 @@
 
 mod aggregate;
 mod change;
+mod chromatic;
 mod config;
 mod dof_pool;
 mod mb_pool;
@@ -150,6 +151,7 @@ pub struct Calibrator {
     /// Video time of the last colour fit (`CalibratorConfig::colour_refit_s`).
     colour_last_t_s: Option<f64>,
     vignetting: vignetting::VignettingVideo,
+    chromatic: chromatic::ChromaticVideo,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -225,6 +227,7 @@ impl Calibrator {
             noise_last_update: false,
             colour_last_t_s: None,
             vignetting: Default::default(),
+            chromatic: Default::default(),
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -805,6 +808,11 @@ impl Calibrator {
         if let Some(v) = self.fit_vignetting_at(current) {
             model.vignetting = v;
             self.stages.add("fit.vignetting", t);
+        }
+        let t = Instant::now();
+        if let Some(c) = self.fit_chromatic_at(current) {
+            model.chromatic_aberration = c;
+            self.stages.add("fit.chromatic", t);
         }
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
