@@ -74,6 +74,16 @@ fn model() -> CameraModel {
             diagnostics: Diagnostics::not_fitted("bench"),
         };
     }
+    // FRAME_BENCH_CHROMATIC=1: with the demo camera's lateral aberration (red 1.002,
+    // blue 0.999; `model::ChromaticAberration`, red and blue resampled in the
+    // composite).
+    if std::env::var("FRAME_BENCH_CHROMATIC").is_ok_and(|v| v == "1") {
+        m.chromatic_aberration = blind_augment::model::ChromaticAberration {
+            present: true,
+            scale_minus_one: Some([0.002, -0.001]),
+            diagnostics: Diagnostics::not_fitted("bench"),
+        };
+    }
     m
 }
 

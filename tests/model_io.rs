@@ -33,7 +33,7 @@ fn sample_model() -> CameraModel {
 fn json_round_trip_and_schema_tag() {
     let m = sample_model();
     let text = m.to_json().expect("valid");
-    assert!(text.contains("\"schema\": \"blind-augment/camera-model/3\""));
+    assert!(text.contains("\"schema\": \"blind-augment/camera-model/4\""));
     assert!(text.contains("\"form\": \"thin_lens\""));
     assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
 }
@@ -102,6 +102,37 @@ fn version_2_files_read_and_vignetting_is_validated() {
     c.vignetting.log_falloff = Some([0.0, f32::NAN, 0.0]);
     let e = c.to_json().expect_err("non-finite").to_string();
     assert!(e.contains("vignetting.log_falloff[1]"), "{e}");
+}
+
+/// Version-3 files (no `chromatic_aberration`) read with the term not fitted; the
+/// term round-trips, and a scale past ±0.01 (8 px at a 1280×960 corner), a
+/// non-finite one or a present term without scales is refused, naming the field.
+#[test]
+fn version_3_files_read_and_chromatic_aberration_is_validated() {
+    let m = sample_model();
+    let mut v = serde_json::to_value(&m).expect("serialises");
+    v["schema"] = serde_json::json!("blind-augment/camera-model/3");
+    v.as_object_mut().expect("object").remove("chromatic_aberration");
+    let old = CameraModel::from_json(&v.to_string()).expect("a version-3 file parses");
+    assert_eq!(old.schema, blind_augment::model::SCHEMA);
+    assert_eq!(old.chromatic_aberration.diagnostics.status, Status::NotFitted);
+    assert_eq!(old.chromatic_aberration.applied(), None);
+    let mut c = sample_model();
+    c.chromatic_aberration = blind_augment::model::ChromaticAberration {
+        present: true,
+        scale_minus_one: Some([0.0012, -0.0004]),
+        diagnostics: Diagnostics::not_fitted("x"),
+    };
+    assert_eq!(CameraModel::from_json(&c.to_json().expect("valid")).expect("parses"), c);
+    for bad in [serde_json::json!([0.02, 0.0]), serde_json::json!([0.0, -0.011]), serde_json::Value::Null] {
+        let mut v = serde_json::to_value(&c).expect("serialises");
+        v["chromatic_aberration"]["scale_minus_one"] = bad.clone();
+        let e = CameraModel::from_json(&v.to_string()).expect_err("refused").to_string();
+        assert!(e.contains("chromatic_aberration"), "{bad}: {e}");
+    }
+    c.chromatic_aberration.scale_minus_one = Some([f32::INFINITY, 0.0]);
+    let e = c.to_json().expect_err("non-finite").to_string();
+    assert!(e.contains("chromatic_aberration.scale_minus_one[0]"), "{e}");
 }
 
 /// The DoF kernel shape round-trips; files written before it existed (no `kernel`)

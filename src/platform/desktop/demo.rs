@@ -103,6 +103,14 @@ fn truth_model(w: usize, h: usize, depth: &Plane) -> CameraModel {
         log_falloff: Some([-0.2, -0.3, 0.14]),
         diagnostics: Diagnostics::not_fitted("ground truth"),
     };
+    // Red magnified 0.2% and blue shrunk 0.1% against green: at the live video's
+    // 320×240, +0.40 px and −0.20 px at the corner (lensfun's strongest red fringe
+    // of an interchangeable lens is 0.16%).
+    m.chromatic_aberration = blind_augment::model::ChromaticAberration {
+        present: true,
+        scale_minus_one: Some([0.002, -0.001]),
+        diagnostics: Diagnostics::not_fitted("ground truth"),
+    };
     m
 }
 
@@ -164,6 +172,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // Vignetting needs video (the same surfaces at two radii): the live worker below
     // fits it; one frame cannot.
     accurate.vignetting = blind_augment::model::Vignetting::not_fitted();
+    // The aberration pools several frames' fringes: the live worker fits it too.
+    accurate.chromatic_aberration = blind_augment::model::ChromaticAberration::not_fitted();
     accurate.reference.frame_interval_s = truth.reference.frame_interval_s;
     let acc_out = FitOutput {
         model: accurate.clone(),
@@ -588,6 +598,24 @@ fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &Camera
     );
     let _ = writeln!(
         r,
+        "| chromatic aberration | {} |",
+        match (fx.chromatic, fitted.chromatic_aberration.applied()) {
+            (Some(_), Some(s)) => format!(
+                "red and blue scaled by 1 {:+.4}, 1 {:+.4} about each eye's principal point (the last live model's; \
+                 truth 1 {:+.4}, 1 {:+.4}, which the photograph's own aberration adds to)",
+                s[0],
+                s[1],
+                truth.chromatic_aberration.scale_minus_one.unwrap_or([0.0; 2])[0],
+                truth.chromatic_aberration.scale_minus_one.unwrap_or([0.0; 2])[1]
+            ),
+            _ => format!(
+                "none (the last live model's aberration is {})",
+                fitted.chromatic_aberration.diagnostics.status_str()
+            ),
+        }
+    );
+    let _ = writeln!(
+        r,
         "\nWall time per frame (render + GPU wait + readback, both eyes): naive {:.1} ms, matched {:.1} ms on {} — a software rasteriser when that is lavapipe; see BENCHMARKS.md for GPU-timed passes.",
         stats.naive_ms / stats.frames as f64,
         stats.matched_ms / stats.frames as f64,
@@ -627,6 +655,16 @@ struct LiveCalibration {
 /// (present or not).
 fn corner_v(m: &CameraModel) -> Option<f32> {
     m.vignetting.log_falloff.map(|a| blind_augment::model::Vignetting::gain_at(a, 1.0))
+}
+
+/// The live video's half-diagonal (px, 320×240, pixel-index convention as
+/// `fit::chromatic`).
+const LIVE_HALF_DIAG_PX: f64 = 199.3;
+
+/// Red's and blue's corner shifts (px) of a model's aberration at a frame with
+/// this half-diagonal (present or not).
+fn ca_shift_px(m: &CameraModel, half_diag_px: f64) -> Option<[f64; 2]> {
+    m.chromatic_aberration.scale_minus_one.map(|s| s.map(|v| v as f64 * half_diag_px))
 }
 
 struct LiveReport {
@@ -735,9 +773,11 @@ impl LiveCalibration {
         );
         let _ = writeln!(
             md,
-            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error | corner V (truth {:.2}) |\n|---|---|---|---|---|---|---|",
+            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error | corner V (truth {:.2}) | red, blue corner shift px (truth {:+.2}, {:+.2}) |\n|---|---|---|---|---|---|---|---|",
             truth.motion_blur.exposure_or_zero(),
-            corner_v(truth).unwrap_or(1.0)
+            corner_v(truth).unwrap_or(1.0),
+            ca_shift_px(truth, LIVE_HALF_DIAG_PX).unwrap_or([0.0; 2])[0],
+            ca_shift_px(truth, LIVE_HALF_DIAG_PX).unwrap_or([0.0; 2])[1]
         );
         // The published illuminant against the true camera's (degrees); none while
         // the worker has not read one.
@@ -750,7 +790,7 @@ impl LiveCalibration {
             let m = &snap.model;
             let _ = writeln!(
                 md,
-                "| {} | {t:.2} s | {} | {} | {} | {} | {} |",
+                "| {} | {t:.2} s | {} | {} | {} | {} | {} | {} |",
                 snap.generation,
                 m.motion_blur.exposure.map_or("—".into(), |l| format!("{l:.3}")),
                 noise_relative_error(&m.noise, &truth.noise).map_or("—".into(), |e| format!("{:.1}%", 100.0 * e)),
@@ -760,6 +800,10 @@ impl LiveCalibration {
                 match (m.vignetting.present, corner_v(m)) {
                     (true, Some(v)) => format!("{v:.3}"),
                     _ => m.vignetting.diagnostics.status_str().into(),
+                },
+                match (m.chromatic_aberration.present, ca_shift_px(m, LIVE_HALF_DIAG_PX)) {
+                    (true, Some(d)) => format!("{:+.2}, {:+.2}", d[0], d[1]),
+                    _ => m.chromatic_aberration.diagnostics.status_str().into(),
                 }
             );
             points.push((*t, exposure_error(m, truth) as f64));

@@ -24,13 +24,18 @@ pub(super) struct ChromaticVideo {
 }
 
 impl Calibrator {
-    /// The aberration term at this frame when its cadence comes (`None`: not
-    /// refitted this update).
-    pub(super) fn fit_chromatic_at(&mut self, current: &Arc<Analysed>) -> Option<crate::model::ChromaticAberration> {
+    /// The aberration term at this frame when its cadence comes and the update is
+    /// not `busy` with another slow term (`None`: not refitted this update; a busy
+    /// update defers it to the next).
+    pub(super) fn fit_chromatic_at(
+        &mut self,
+        current: &Arc<Analysed>,
+        busy: bool,
+    ) -> Option<crate::model::ChromaticAberration> {
         let t_s = current.frame.t_s;
         let c = &mut self.chromatic;
         let due = c.last_t_s.map_or(true, |l| t_s < l || t_s - l >= self.cfg.chromatic_refit_s - 1e-9);
-        if !self.cfg.chromatic_aberration || !due {
+        if !self.cfg.chromatic_aberration || !due || busy {
             return None;
         }
         c.last_t_s = Some(t_s);

@@ -796,9 +796,9 @@ impl Calibrator {
         // Colour at its own cadence: a camera's AE/AWB moves over ~0.5 s, and the
         // window's median follows a change within 1 s at one fit per 0.25 s.
         let t_s = current.frame.t_s;
-        if self.cfg.colour
-            && self.colour_last_t_s.map_or(true, |l| t_s < l || t_s - l >= self.cfg.colour_refit_s - 1e-9)
-        {
+        let colour_due = self.cfg.colour
+            && self.colour_last_t_s.map_or(true, |l| t_s < l || t_s - l >= self.cfg.colour_refit_s - 1e-9);
+        if colour_due {
             let t = Instant::now();
             model.colour = fit::colour::fit_colour(&current.frame.image);
             self.stages.add("fit.colour", t);
@@ -810,7 +810,10 @@ impl Calibrator {
             self.stages.add("fit.vignetting", t);
         }
         let t = Instant::now();
-        if let Some(c) = self.fit_chromatic_at(current) {
+        // The aberration waits for an update neither colour nor vignetting fitted
+        // in, so the three slow terms' costs do not add up in one update.
+        let busy = colour_due || model.vignetting.diagnostics.status != Status::NotFitted;
+        if let Some(c) = self.fit_chromatic_at(current, busy) {
             model.chromatic_aberration = c;
             self.stages.add("fit.chromatic", t);
         }
