@@ -74,7 +74,15 @@ pub fn estimate(image: &Rgb) -> [Option<ScaleEstimate>; 2] {
 
 /// `estimate` reading at most `max_windows` windows (the worker's per-frame budget).
 pub fn estimate_with(image: &Rgb, max_windows: usize) -> [Option<ScaleEstimate>; 2] {
+    estimate_from(image, max_windows, [0.0; 2])
+}
+
+/// `estimate_with` starting the Gauss–Newton passes at `start` = [s_R − 1, s_B − 1]
+/// (the worker's last pooled reading: a lens does not change, so the first pass
+/// usually converges and the frame costs one pass instead of three to six).
+pub fn estimate_from(image: &Rgb, max_windows: usize, start: [f64; 2]) -> [Option<ScaleEstimate>; 2] {
     let max_windows = max_windows.max(MIN_READINGS);
+    let start = start.map(|v| if v.is_finite() && v.abs() <= MAX_CHROMATIC_SCALE_DEVIATION as f64 { v } else { 0.0 });
     let (w, h) = (image.width, image.height);
     let g = &image.channels[1];
     let (cx, cy) = ((w as f32 - 1.0) * 0.5, (h as f32 - 1.0) * 0.5);
@@ -95,8 +103,18 @@ pub fn estimate_with(image: &Rgb, max_windows: usize) -> [Option<ScaleEstimate>;
     };
     // Candidate windows: strong, mostly radial green edges away from the centre.
     let mut centres: Vec<(usize, usize, u8)> = vec![];
+    let min_r2 = (MIN_RADIUS * half_diag).powi(2);
+    let min_g2 = MIN_RADIAL_GRADIENT * MIN_RADIAL_GRADIENT;
     for y in (m..h - m).step_by(STEP) {
         for x in (m..w - m).step_by(STEP) {
+            // Cheap rejections first (inside the central quarter; a gradient under
+            // the radial threshold in any direction): most of the grid.
+            let (dx, dy) = (x as f32 - cx, y as f32 - cy);
+            let gx = 0.5 * (at(g, x + 1, y) - at(g, x - 1, y));
+            let gy = 0.5 * (at(g, x, y + 1) - at(g, x, y - 1));
+            if dx * dx + dy * dy < min_r2 || gx * gx + gy * gy < min_g2 {
+                continue;
+            }
             let (gr, mag, rad) = radial(x, y);
             if rad >= MIN_RADIUS * half_diag && gr.abs() >= MIN_RADIAL_GRADIENT && gr.abs() >= MIN_RADIAL_SHARE * mag {
                 centres.push((x, y, ((4 * y / h).min(3) * 4 + (4 * x / w).min(3)) as u8));
@@ -125,8 +143,8 @@ pub fn estimate_with(image: &Rgb, max_windows: usize) -> [Option<ScaleEstimate>;
         })
         .collect();
     [0usize, 2].map(|c| {
-        let plane = crate::image::Plane::from_vec(w, h, image.channels[c].clone());
-        let mut scale = 1.0f64;
+        let plane = &image.channels[c];
+        let mut scale = 1.0 + start[c / 2];
         for pass in 0..PASSES {
             let s = scale as f32;
             let readings: Vec<Reading> = centres
@@ -138,8 +156,13 @@ pub fn estimate_with(image: &Rgb, max_windows: usize) -> [Option<ScaleEstimate>;
                     for (i, (wx, wy)) in
                         (y - HALF..=y + HALF).flat_map(|wy| (x - HALF..=x + HALF).map(move |wx| (wx, wy))).enumerate()
                     {
-                        cv[i] =
-                            crate::image::sample_bicubic(&plane, cx + s * (wx as f32 - cx), cy + s * (wy as f32 - cy));
+                        cv[i] = crate::image::sample_bicubic_slice(
+                            plane,
+                            w,
+                            h,
+                            cx + s * (wx as f32 - cx),
+                            cy + s * (wy as f32 - cy),
+                        );
                     }
                     window_reading(&cv, gv, dv, tile)
                 })

@@ -18,7 +18,7 @@ pub use pyramid::{
     expand, expand_window9, expand_window9_interior, expand_window9_rows, gaussian_pyramid, gaussian_pyramid_of,
     laplacian_pyramid, reduce, reduce_slice, reduce_slice_visiting, LaplacianPyramid,
 };
-pub use sample::{bicubic_interior, cubic_weights, sample_bicubic, sample_bicubic_rgb_interior};
+pub use sample::{bicubic_interior, cubic_weights, sample_bicubic, sample_bicubic_rgb_interior, sample_bicubic_slice};
 
 /// One channel of floats.
 #[derive(Clone, Debug, PartialEq)]

@@ -17,6 +17,35 @@ pub fn cubic_weights(t: f32) -> [f32; 4] {
 /// Bicubic sample at continuous pixel coordinates (pixel centres at integers),
 /// clamp-to-edge outside the image.
 pub fn sample_bicubic(p: &Plane, x: f32, y: f32) -> f32 {
+    sample_bicubic_slice(&p.data, p.width, p.height, x, y)
+}
+
+/// `sample_bicubic` of a row-major `width`×`height` plane held as a slice (an
+/// `Rgb` channel, without copying it into a `Plane`): in the interior the 4×4
+/// taps straight from the rows, elsewhere clamped — the same taps in the same
+/// order, so the same value.
+pub fn sample_bicubic_slice(data: &[f32], width: usize, height: usize, x: f32, y: f32) -> f32 {
+    if bicubic_interior(width, height, x, y) {
+        // x, y ≥ 1: truncation is the floor.
+        let (ix, iy) = (x as usize, y as usize);
+        let (wx, wy) = (cubic_weights(x - ix as f32), cubic_weights(y - iy as f32));
+        let top = (iy - 1) * width + ix - 1;
+        let mut acc = 0.0;
+        for (j, wyj) in wy.iter().enumerate() {
+            let row = &data[top + j * width..top + j * width + 4];
+            let mut r = 0.0;
+            for (wxi, v) in wx.iter().zip(row) {
+                r += wxi * v;
+            }
+            acc += wyj * r;
+        }
+        return acc;
+    }
+    let get = |x: isize, y: isize| {
+        let xc = x.clamp(0, width as isize - 1) as usize;
+        let yc = y.clamp(0, height as isize - 1) as usize;
+        data[yc * width + xc]
+    };
     let (fx, fy) = (x.floor(), y.floor());
     let (wx, wy) = (cubic_weights(x - fx), cubic_weights(y - fy));
     let (ix, iy) = (fx as isize, fy as isize);
@@ -24,7 +53,7 @@ pub fn sample_bicubic(p: &Plane, x: f32, y: f32) -> f32 {
     for (j, wyj) in wy.iter().enumerate() {
         let mut row = 0.0;
         for (i, wxi) in wx.iter().enumerate() {
-            row += wxi * p.get_clamped(ix + i as isize - 1, iy + j as isize - 1);
+            row += wxi * get(ix + i as isize - 1, iy + j as isize - 1);
         }
         acc += wyj * row;
     }
