@@ -78,8 +78,9 @@ pub fn estimate_with(image: &Rgb, max_windows: usize) -> [Option<ScaleEstimate>;
 }
 
 /// `estimate_with` starting the Gauss–Newton passes at `start` = [s_R − 1, s_B − 1]
-/// (the worker's last pooled reading: a lens does not change, so the first pass
-/// usually converges and the frame costs one pass instead of three to six).
+/// (the worker's newest reading of each channel: a lens does not change, so the
+/// first pass usually converges and the frame costs one pass instead of three to
+/// six).
 pub fn estimate_from(image: &Rgb, max_windows: usize, start: [f64; 2]) -> [Option<ScaleEstimate>; 2] {
     let max_windows = max_windows.max(MIN_READINGS);
     let start = start.map(|v| if v.is_finite() && v.abs() <= MAX_CHROMATIC_SCALE_DEVIATION as f64 { v } else { 0.0 });
