@@ -16,11 +16,11 @@
 mod common;
 
 use blind_augment::fit::chromatic::estimate;
-use blind_augment::image::{Rgb, LUMA_WEIGHTS};
+use blind_augment::image::Rgb;
 use blind_augment::synth::add_lateral_ca;
 use common::lensfun::{attr, entries};
 use common::scenes::name_hash;
-use common::summary;
+use common::{grey, summary};
 
 /// A 1280×960 frame's half-diagonal (px): the corner shifts the profiles are shown at.
 const HALF_DIAG_1280_PX: f32 = 800.0;
@@ -48,15 +48,6 @@ fn profiles(dir: &str) -> Vec<Tca> {
         if (vr - 1.0).abs() <= 0.01 && (vb - 1.0).abs() <= 0.01 && !dup {
             out.push(Tca { lens, focal_mm, v: [vr, vb] });
         }
-    }
-    out
-}
-
-fn grey(img: &Rgb) -> Rgb {
-    let mut out = img.clone();
-    for i in 0..img.width * img.height {
-        let y: f32 = (0..3).map(|c| LUMA_WEIGHTS[c] * img.channels[c][i]).sum();
-        (0..3).for_each(|c| out.channels[c][i] = y);
     }
     out
 }

@@ -6,8 +6,9 @@
 mod common;
 
 use blind_augment::fit::chromatic::{estimate, ScaleEstimate};
-use blind_augment::image::{Rgb, LUMA_WEIGHTS};
+use blind_augment::image::Rgb;
 use blind_augment::synth::add_lateral_ca;
+use common::grey;
 
 fn quantise(img: &Rgb) -> Rgb {
     img.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0)
@@ -21,17 +22,6 @@ fn noisy(img: &Rgb, sigma: f32, seed: u64) -> Rgb {
             let (x, y) = ((i % img.width) as u32, (i / img.width) as u32);
             *v += sigma * blind_augment::synth::gaussian(x, y, c as u32, seed);
         }
-    }
-    out
-}
-
-/// The photograph with every channel its luma: a scene with no colour and no
-/// aberration of its own.
-fn grey(img: &Rgb) -> Rgb {
-    let mut out = img.clone();
-    for i in 0..img.width * img.height {
-        let y: f32 = (0..3).map(|c| LUMA_WEIGHTS[c] * img.channels[c][i]).sum();
-        (0..3).for_each(|c| out.channels[c][i] = y);
     }
     out
 }

@@ -11,27 +11,19 @@
 
 mod common;
 
-use blind_augment::image::{Rgb, LUMA_WEIGHTS};
+use blind_augment::image::Rgb;
 use blind_augment::model::{CameraModel, Status};
 use blind_augment::synth::add_lateral_ca;
 use blind_augment::synth::sequence::SequenceSpec;
 use blind_augment::worker::{CalibrationTier, Calibrator, CalibratorConfig, Event, Providers};
 use common::calibration::{frame, pose, scene};
+use common::grey;
 
 /// lensfun 0.3.3 `slr-nikon.xml`, "Nikon AF-S DX Nikkor 18-300mm f/3.5-5.6G ED VR"
 /// at 18 mm, its "poly3" TCA (r_c = r·(b·r² + c·r + v)) at the corner (r = 1):
 /// s_R = 1.0015667, s_B = 0.9998075 — the database's strongest red fringe of an
 /// interchangeable lens; 0.31 px and −0.04 px at this frame's corner.
 const LENS: [f32; 2] = [1.001_566_7, 0.999_807_5];
-
-fn grey(img: &Rgb) -> Rgb {
-    let mut out = img.clone();
-    for i in 0..img.width * img.height {
-        let y: f32 = (0..3).map(|c| LUMA_WEIGHTS[c] * img.channels[c][i]).sum();
-        (0..3).for_each(|c| out.channels[c][i] = y);
-    }
-    out
-}
 
 /// Each channel's own sensor noise (σ 0.01, the truth's is common to the channels
 /// once made grey), 8-bit quantised: red is not an exact resampling of green.

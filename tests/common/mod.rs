@@ -60,6 +60,17 @@ pub fn mirror_tile(src: &Rgb, w: usize, h: usize) -> Rgb {
 }
 
 /// 8-bit quantisation, as a PNG round trip does.
+/// The image with every channel its luma (Rec. 601): a scene with no colour and
+/// no chromatic aberration of its own.
+pub fn grey(img: &Rgb) -> Rgb {
+    let mut out = img.clone();
+    for i in 0..img.width * img.height {
+        let y: f32 = (0..3).map(|c| blind_augment::image::LUMA_WEIGHTS[c] * img.channels[c][i]).sum();
+        (0..3).for_each(|c| out.channels[c][i] = y);
+    }
+    out
+}
+
 pub fn quantize8(img: &Rgb) -> Rgb {
     img.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0)
 }
