@@ -33,7 +33,7 @@ fn sample_model() -> CameraModel {
 fn json_round_trip_and_schema_tag() {
     let m = sample_model();
     let text = m.to_json().expect("valid");
-    assert!(text.contains("\"schema\": \"blind-augment/camera-model/4\""));
+    assert!(text.contains("\"schema\": \"blind-augment/camera-model/5\""));
     assert!(text.contains("\"form\": \"thin_lens\""));
     assert_eq!(CameraModel::from_json(&text).expect("parses"), m);
 }
@@ -133,6 +133,45 @@ fn version_3_files_read_and_chromatic_aberration_is_validated() {
     c.chromatic_aberration.scale_minus_one = Some([f32::INFINITY, 0.0]);
     let e = c.to_json().expect_err("non-finite").to_string();
     assert!(e.contains("chromatic_aberration.scale_minus_one[0]"), "{e}");
+}
+
+/// Version-4 files (no `sharpening`) read with the term not fitted; the term
+/// round-trips, and an amount or radius outside its range, a non-finite one or a
+/// present term without both is refused, naming the field.
+#[test]
+fn version_4_files_read_and_sharpening_is_validated() {
+    let m = sample_model();
+    let mut v = serde_json::to_value(&m).expect("serialises");
+    v["schema"] = serde_json::json!("blind-augment/camera-model/4");
+    v.as_object_mut().expect("object").remove("sharpening");
+    let old = CameraModel::from_json(&v.to_string()).expect("a version-4 file parses");
+    assert_eq!(old.schema, blind_augment::model::SCHEMA);
+    assert_eq!(old.sharpening.diagnostics.status, Status::NotFitted);
+    assert_eq!(old.sharpening.applied(), None);
+    let mut c = sample_model();
+    c.sharpening = blind_augment::model::Sharpening {
+        present: true,
+        amount: Some(0.8),
+        radius_px: Some(1.2),
+        diagnostics: Diagnostics::not_fitted("x"),
+    };
+    assert_eq!(CameraModel::from_json(&c.to_json().expect("valid")).expect("parses"), c);
+    assert_eq!(c.sharpening.applied(), Some((0.8, 1.2)));
+    for (field, bad) in [
+        ("amount", serde_json::json!(-0.1)),
+        ("amount", serde_json::json!(4.5)),
+        ("radius_px", serde_json::json!(0.1)),
+        ("radius_px", serde_json::json!(9.0)),
+        ("amount", serde_json::Value::Null),
+    ] {
+        let mut v = serde_json::to_value(&c).expect("serialises");
+        v["sharpening"][field] = bad.clone();
+        let e = CameraModel::from_json(&v.to_string()).expect_err("refused").to_string();
+        assert!(e.contains("sharpening"), "{field} {bad}: {e}");
+    }
+    c.sharpening.radius_px = Some(f32::NAN);
+    let e = c.to_json().expect_err("non-finite").to_string();
+    assert!(e.contains("sharpening.radius_px"), "{e}");
 }
 
 /// The DoF kernel shape round-trips; files written before it existed (no `kernel`)

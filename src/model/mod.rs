@@ -1,8 +1,9 @@
 //! The camera model: plain data, one versioned JSON document
-//! (`"schema": "blind-augment/camera-model/4"`; version 1 documents, which have no
-//! `colour`, version 2, which have no `vignetting`, and version 3, which have no
-//! `chromatic_aberration`, still read), with validation on load so that no NaN, Inf
-//! or out-of-range parameter can reach a renderer.
+//! (`"schema": "blind-augment/camera-model/5"`; version 1 documents, which have no
+//! `colour`, version 2, which have no `vignetting`, version 3, which have no
+//! `chromatic_aberration`, and version 4, which have no `sharpening`, still read), with
+//! validation on load so that no NaN, Inf or out-of-range parameter can reach a
+//! renderer.
 //!
 //! Every effect carries `present` (the renderer skips absent effects) and
 //! `diagnostics` (how sure the estimator is, how it got there).
@@ -16,19 +17,30 @@ mod validate;
 use serde::{Deserialize, Serialize};
 pub use validate::ModelError;
 
-pub const SCHEMA: &str = "blind-augment/camera-model/4";
+pub const SCHEMA: &str = "blind-augment/camera-model/5";
 /// Schemas `CameraModel::from_json` reads: version 1 is version 2 without `colour`,
 /// version 2 is version 3 without `vignetting`, version 3 is version 4 without
-/// `chromatic_aberration` (each read as not fitted); files are always written as
-/// `SCHEMA`.
-pub const READABLE_SCHEMAS: [&str; 4] =
-    ["blind-augment/camera-model/1", "blind-augment/camera-model/2", "blind-augment/camera-model/3", SCHEMA];
+/// `chromatic_aberration`, version 4 is version 5 without `sharpening` (each read as not
+/// fitted); files are always written as `SCHEMA`.
+pub const READABLE_SCHEMAS: [&str; 5] = [
+    "blind-augment/camera-model/1",
+    "blind-augment/camera-model/2",
+    "blind-augment/camera-model/3",
+    "blind-augment/camera-model/4",
+    SCHEMA,
+];
 /// Largest |s − 1| of a channel's lateral-aberration scale: 0.01 moves a 1280×960
 /// frame's corner by 8 px. lensfun's TCA profiles stay far inside it (their 3 588
 /// "linear"/"poly3" profiles at 1280×960: corner shifts of a few pixels at most,
 /// median 0.1 px, `benches/chromatic.rs`); past it a reading is a failed fit, not a
 /// lens.
 pub const MAX_CHROMATIC_SCALE_DEVIATION: f32 = 0.01;
+/// Range of the ISP's unsharp-mask amount k: 0 (none) to 4 (an edge overshooting by
+/// over a third of its step; phone ISPs' strongest presets stay near 1–2).
+pub const SHARPENING_AMOUNT_RANGE: [f32; 2] = [0.0, 4.0];
+/// Range of the unsharp mask's Gaussian σ (reference px): under 0.3 px a 3×3
+/// kernel cannot express it; past 4 px it is local contrast, not sharpening.
+pub const SHARPENING_RADIUS_RANGE_PX: [f32; 2] = [0.3, 4.0];
 /// Bounds of the vignetting gain V(r) over the frame (r in [0, 1]): a lens that
 /// passes under 1/20 of the centre's light at its corner is outside any headset
 /// camera (lensfun's 19 920 "pa" profiles: the darkest corner passes 0.13), and a
@@ -87,6 +99,30 @@ pub struct CameraModel {
     /// (read as not fitted).
     #[serde(default = "ChromaticAberration::not_fitted")]
     pub chromatic_aberration: ChromaticAberration,
+    /// The ISP's edge sharpening; absent from version-1 to -4 files (read as not
+    /// fitted).
+    #[serde(default = "Sharpening::not_fitted")]
+    pub sharpening: Sharpening,
+}
+
+/// The ISP's sharpening as an unsharp mask on the encoded image:
+/// out = in + k·(in − G_σ ∗ in), G_σ the discrete Gaussian of std `radius_px`
+/// (reference px; `model::kernels::discrete_gaussian_kernel`). A step edge of
+/// blur σ_e comes out as (1 + k)·Φ(t/σ_e) − k·Φ(t/√(σ_e² + σ²)): an overshoot on
+/// its bright side and an undershoot on its dark side (the halo). Applied after the
+/// white balance and exposure, before the noise (the ISP's order).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sharpening {
+    pub present: bool,
+    /// k, within `SHARPENING_AMOUNT_RANGE`. `null` when not identifiable.
+    pub amount: Option<f32>,
+    /// σ (reference px), within `SHARPENING_RADIUS_RANGE_PX`. `null` when not
+    /// identifiable.
+    pub radius_px: Option<f32>,
+    /// `diagnostics.stderr`: one-sigma uncertainty of the overshoot of an edge of
+    /// blur 1 px (`Sharpening::overshoot`), as a fraction of its step.
+    pub diagnostics: Diagnostics,
 }
 
 /// Lateral chromatic aberration: the lens images red and blue at other
@@ -559,6 +595,40 @@ impl Vignetting {
     }
 }
 
+impl Sharpening {
+    pub fn absent(diagnostics: Diagnostics) -> Self {
+        Self { present: false, amount: None, radius_px: None, diagnostics }
+    }
+
+    pub fn not_fitted() -> Self {
+        Self::absent(Diagnostics::not_fitted("not fitted"))
+    }
+
+    /// (k, σ px) the renderer applies: `None` when absent or unknown.
+    pub fn applied(&self) -> Option<(f32, f32)> {
+        self.amount.zip(self.radius_px).filter(|_| self.present)
+    }
+
+    /// The edge profile after sharpening: a unit step at t = 0 blurred by
+    /// `edge_sigma_px`, then the unsharp mask (k, σ), at offset `t_px`.
+    pub fn edge_profile(amount: f64, radius_px: f64, edge_sigma_px: f64, t_px: f64) -> f64 {
+        let phi = |x: f64| 0.5 * (1.0 + libm::erf(x / std::f64::consts::SQRT_2));
+        let s1 = edge_sigma_px.max(1e-6);
+        let s2 = (s1 * s1 + radius_px * radius_px).sqrt();
+        (1.0 + amount) * phi(t_px / s1) - amount * phi(t_px / s2)
+    }
+
+    /// The overshoot of a unit step of blur `edge_sigma_px` past its bright side's
+    /// level (fraction of the step): the halo's visible size.
+    pub fn overshoot(amount: f64, radius_px: f64, edge_sigma_px: f64) -> f64 {
+        let reach = 4.0 * (edge_sigma_px * edge_sigma_px + radius_px * radius_px).sqrt() + 1.0;
+        (0..=400)
+            .map(|i| Self::edge_profile(amount, radius_px, edge_sigma_px, reach * i as f64 / 400.0))
+            .fold(1.0f64, f64::max)
+            - 1.0
+    }
+}
+
 impl ChromaticAberration {
     pub fn absent(diagnostics: Diagnostics) -> Self {
         Self { present: false, scale_minus_one: None, diagnostics }
@@ -586,6 +656,7 @@ impl CameraModel {
             colour: Colour::not_fitted(),
             vignetting: Vignetting::not_fitted(),
             chromatic_aberration: ChromaticAberration::not_fitted(),
+            sharpening: Sharpening::not_fitted(),
         }
     }
 

@@ -64,7 +64,27 @@ impl CameraModel {
         self.validate_dof()?;
         self.validate_colour()?;
         self.validate_vignetting()?;
-        self.validate_chromatic()
+        self.validate_chromatic()?;
+        self.validate_sharpening()
+    }
+
+    fn validate_sharpening(&self) -> Result<(), ModelError> {
+        let s = &self.sharpening;
+        check_diagnostics("sharpening", &s.diagnostics)?;
+        for (name, value, [lo, hi]) in [
+            ("sharpening.amount", s.amount, SHARPENING_AMOUNT_RANGE),
+            ("sharpening.radius_px", s.radius_px, SHARPENING_RADIUS_RANGE_PX),
+        ] {
+            if let Some(v) = value {
+                if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                    return Err(bad(name, format!("must be finite and in [{lo}, {hi}], got {v}")));
+                }
+            }
+        }
+        if s.present && (s.amount.is_none() || s.radius_px.is_none()) {
+            return Err(bad("sharpening", "amount and radius_px must be set when present is true"));
+        }
+        Ok(())
     }
 
     fn validate_chromatic(&self) -> Result<(), ModelError> {

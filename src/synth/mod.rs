@@ -62,6 +62,9 @@ pub fn apply_camera_model(
     if model.colour.present {
         img = add_colour(&img, model.colour.gains_or_one());
     }
+    if let Some((k, sigma)) = model.sharpening.applied() {
+        img = add_sharpening(&img, k, sigma);
+    }
     if model.noise.present {
         img = add_noise(&img, &model.noise, seed);
     }
@@ -84,6 +87,21 @@ pub fn add_vignetting(img: &Rgb, log_falloff: [f32; 3]) -> Rgb {
                 let v = &mut ch[y * w + x];
                 *v = crate::image::yuv::linear_to_srgb(decode(*v) * g);
             }
+        }
+    }
+    out
+}
+
+/// The ISP's sharpening on an encoded frame (`model::Sharpening`): every channel
+/// plus `amount` times itself minus its discrete Gaussian blur of std `radius_px`
+/// (borders clamped), unclipped.
+pub fn add_sharpening(img: &Rgb, amount: f32, radius_px: f32) -> Rgb {
+    let kernel = crate::model::kernels::discrete_gaussian_kernel(radius_px * radius_px);
+    let mut out = img.clone();
+    for (c, ch) in out.channels.iter_mut().enumerate() {
+        let blurred = crate::image::blur_separable(&Plane::from_vec(img.width, img.height, img.channels[c].clone()), &kernel);
+        for (v, b) in ch.iter_mut().zip(&blurred.data) {
+            *v += amount * (*v - b);
         }
     }
     out
