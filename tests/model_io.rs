@@ -153,6 +153,7 @@ fn version_4_files_read_and_sharpening_is_validated() {
         present: true,
         amount: Some(0.8),
         radius_px: Some(1.2),
+        overshoot: Some(0.04),
         diagnostics: Diagnostics::not_fitted("x"),
     };
     assert_eq!(CameraModel::from_json(&c.to_json().expect("valid")).expect("parses"), c);
@@ -163,6 +164,7 @@ fn version_4_files_read_and_sharpening_is_validated() {
         ("radius_px", serde_json::json!(0.1)),
         ("radius_px", serde_json::json!(9.0)),
         ("amount", serde_json::Value::Null),
+        ("overshoot", serde_json::json!(-0.01)),
     ] {
         let mut v = serde_json::to_value(&c).expect("serialises");
         v["sharpening"][field] = bad.clone();

@@ -19,6 +19,7 @@ mod isotropy_pool;
 mod motion_blur;
 mod noise;
 pub mod noise_correlation;
+pub mod sharpening;
 pub mod streak_spectrum;
 pub mod vignetting;
 
@@ -119,6 +120,9 @@ impl<'a> FitInputs<'a> {
     }
 }
 
+/// Most edges one frame's sharpening fit reads (`FitOptions::sharpening`).
+pub const SHARPENING_MAX_EDGES: usize = 400;
+
 #[derive(Clone, Debug)]
 pub struct FitOptions {
     /// `None`: accurate where the effect's reference image is given, fast otherwise.
@@ -129,6 +133,11 @@ pub struct FitOptions {
     /// in each of its per-effect fits; the `fit` command turns it on (unless
     /// `--only` leaves `colour` out).
     pub colour: bool,
+    /// Fit the ISP's sharpening (`model::Sharpening`, `sharpening::estimate` over at
+    /// most `SHARPENING_MAX_EDGES` edges): the frame alone whatever the tier. Off by
+    /// default, like `colour`; the `fit` command turns it on (unless `--only` leaves
+    /// `sharpening` out).
+    pub sharpening: bool,
     /// Largest noise sample stride at level 0 in pixels, halved per level (paper: 32);
     /// small frames use a finer one to keep ~1000 samples.
     pub noise_stride_px: usize,
@@ -215,6 +224,7 @@ impl Default for FitOptions {
             tier: None,
             effects: Effects::ALL,
             colour: false,
+            sharpening: false,
             noise_stride_px: noise::DEFAULT_STRIDE_PX,
             dof_node_spacing_px: dof::DEFAULT_NODE_SPACING_PX,
             dof_max_sigma_px: crate::model::MAX_DOF_SIGMA_PX,
@@ -673,8 +683,9 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
     // the wall time on several cores is the slowest effect, not the sum.
     // Tiers (and missing-reference errors) only for the effects asked for.
     let noise_luma = blind_reads_luma.then_some(&luma);
-    // The colour term reads the frame alone and joins them (5.6 ms at 1280×960).
-    let (((noise, mb), dof), colour) = rayon::join(
+    // The colour and sharpening terms read the frame alone and join them (colour:
+    // 5.6 ms at 1280×960).
+    let (((noise, mb), dof), (colour, sharpening)) = rayon::join(
         || {
             rayon::join(
                 || {
@@ -686,13 +697,21 @@ pub fn fit(inp: &FitInputs, opts: &FitOptions) -> Result<FitOutput, FitError> {
                 || fit_depth_of_field(inp, opts, dof_tier, &luma),
             )
         },
-        || opts.colour.then(|| colour::fit_colour(inp.image)),
+        || {
+            (
+                opts.colour.then(|| colour::fit_colour(inp.image)),
+                opts.sharpening.then(|| sharpening::estimate(inp.image, SHARPENING_MAX_EDGES)),
+            )
+        },
     );
     (model.noise, plots.noise) = noise;
     (model.motion_blur, plots.motion_blur) = mb;
     (model.depth_of_field, plots.depth_of_field) = dof;
     if let Some(c) = colour {
         model.colour = c;
+    }
+    if let Some(s) = sharpening {
+        model.sharpening = s;
     }
     // The luma, built with the input check, has its build time added to the fit
     // stage that would otherwise build it (~0 there with the luma prebuilt): the

@@ -120,8 +120,12 @@ pub struct Sharpening {
     /// σ (reference px), within `SHARPENING_RADIUS_RANGE_PX`. `null` when not
     /// identifiable.
     pub radius_px: Option<f32>,
-    /// `diagnostics.stderr`: one-sigma uncertainty of the overshoot of an edge of
-    /// blur 1 px (`Sharpening::overshoot`), as a fraction of its step.
+    /// The halo the frames' own edges show: the overshoot of their pooled profile
+    /// past its bright level, as a fraction of the step (model-free: a blur alone
+    /// leaves a step monotone), in [0, 1]. `null` when not measured.
+    #[serde(default)]
+    pub overshoot: Option<f32>,
+    /// `diagnostics.stderr`: one-sigma uncertainty of `overshoot`.
     pub diagnostics: Diagnostics,
 }
 
@@ -597,7 +601,7 @@ impl Vignetting {
 
 impl Sharpening {
     pub fn absent(diagnostics: Diagnostics) -> Self {
-        Self { present: false, amount: None, radius_px: None, diagnostics }
+        Self { present: false, amount: None, radius_px: None, overshoot: None, diagnostics }
     }
 
     pub fn not_fitted() -> Self {

@@ -81,6 +81,11 @@ impl CameraModel {
                 }
             }
         }
+        if let Some(o) = s.overshoot {
+            if !(o.is_finite() && (0.0..=1.0).contains(&o)) {
+                return Err(bad("sharpening.overshoot", format!("must be finite and in [0, 1], got {o}")));
+            }
+        }
         if s.present && (s.amount.is_none() || s.radius_px.is_none()) {
             return Err(bad("sharpening", "amount and radius_px must be set when present is true"));
         }

@@ -99,7 +99,8 @@ pub fn add_sharpening(img: &Rgb, amount: f32, radius_px: f32) -> Rgb {
     let kernel = crate::model::kernels::discrete_gaussian_kernel(radius_px * radius_px);
     let mut out = img.clone();
     for (c, ch) in out.channels.iter_mut().enumerate() {
-        let blurred = crate::image::blur_separable(&Plane::from_vec(img.width, img.height, img.channels[c].clone()), &kernel);
+        let blurred =
+            crate::image::blur_separable(&Plane::from_vec(img.width, img.height, img.channels[c].clone()), &kernel);
         for (v, b) in ch.iter_mut().zip(&blurred.data) {
             *v += amount * (*v - b);
         }

@@ -173,6 +173,7 @@ pub fn run(args: FitArgs) -> Result<()> {
         tier: super::tier(args.tier),
         effects: super::effects(&args.only),
         colour: super::colour_wanted(&args.only),
+        sharpening: super::sharpening_wanted(&args.only),
         fast_effort: args.fast_effort,
         ..Default::default()
     };
@@ -267,6 +268,8 @@ pub fn summarize(m: &blind_augment::model::CameraModel) {
     let c = &m.chromatic_aberration;
     let d = &c.diagnostics;
     eprintln!("  aberration:     {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
+    let d = &m.sharpening.diagnostics;
+    eprintln!("  sharpening:     {:<17} {} ({:.1} ms)", d.status_str(), d.reason, d.fit_time_s * 1e3);
 }
 
 pub fn write_plots(dir: &Path, out: &FitOutput) -> Result<()> {

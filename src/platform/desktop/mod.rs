@@ -49,6 +49,14 @@ pub enum EffectArg {
     /// The lens's lateral chromatic aberration (`model::ChromaticAberration`;
     /// `calibrate` only: it pools several frames' fringes).
     ChromaticAberration,
+    /// The ISP's edge sharpening (`model::Sharpening`; `fit` only: one frame's
+    /// straight edges).
+    Sharpening,
+}
+
+/// Whether `--only` asks for the sharpening term (all effects without it).
+pub fn sharpening_wanted(only: &Option<Vec<EffectArg>>) -> bool {
+    only.as_ref().map_or(true, |l| l.contains(&EffectArg::Sharpening))
 }
 
 /// Whether `--only` asks for the aberration term (all effects without it).
