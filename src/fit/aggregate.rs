@@ -220,6 +220,19 @@ pub fn aggregate_models(models: &[CameraModel]) -> Result<CameraModel, FitError>
     if let Some(m) = models.iter().rev().find(|m| m.chromatic_aberration.diagnostics.status != Status::NotFitted) {
         out.chromatic_aberration = m.chromatic_aberration.clone();
     }
+    // Sharpening is read from each frame alone: the newest confident reading
+    // (present or absent) stands, and a not-identifiable one only where no frame
+    // was confident — it never hides an earlier one.
+    let sharpening = |confident: bool| {
+        models.iter().rev().find(|m| match m.sharpening.diagnostics.status {
+            Status::Present | Status::Absent => true,
+            Status::NotIdentifiable => !confident,
+            Status::NotFitted => false,
+        })
+    };
+    if let Some(m) = sharpening(true).or_else(|| sharpening(false)) {
+        out.sharpening = m.sharpening.clone();
+    }
     out.validate().map_err(|e| FitError::Option { option: "aggregate", problem: e.to_string() })?;
     Ok(out)
 }
@@ -331,5 +344,26 @@ mod tests {
         let agg = aggregate_models(&w).expect("valid");
         assert!(!agg.motion_blur.present);
         assert_eq!(agg.motion_blur.diagnostics.status, NotIdentifiable);
+    }
+
+    /// The frames' sharpening: the newest confident reading stands; a later
+    /// not-identifiable frame does not replace it; with none confident the newest
+    /// not-identifiable one.
+    #[test]
+    fn a_not_identifiable_sharpening_does_not_hide_a_confident_one() {
+        use Status::*;
+        let frame = |status: Status, amount: f32| {
+            let mut m = CameraModel::empty(64, 48);
+            m.sharpening.present = status == Present;
+            m.sharpening.amount = Some(amount);
+            m.sharpening.radius_px = Some(1.0);
+            m.sharpening.diagnostics.status = status;
+            m
+        };
+        let agg =
+            aggregate_models(&[frame(Absent, 0.1), frame(Present, 1.0), frame(NotIdentifiable, 2.0)]).expect("valid");
+        assert_eq!((agg.sharpening.diagnostics.status, agg.sharpening.amount), (Present, Some(1.0)));
+        let agg = aggregate_models(&[frame(NotIdentifiable, 0.5), frame(NotIdentifiable, 2.0)]).expect("valid");
+        assert_eq!((agg.sharpening.diagnostics.status, agg.sharpening.amount), (NotIdentifiable, Some(2.0)));
     }
 }
