@@ -163,6 +163,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     cfg.colour = super::colour_wanted(&args.only);
     cfg.vignetting = super::vignetting_wanted(&args.only);
     cfg.chromatic_aberration = super::chromatic_wanted(&args.only);
+    cfg.sharpening = super::sharpening_wanted(&args.only);
     cfg.fast_effort = args.fast_effort;
     let mut cal = Calibrator::new(cfg, providers)?;
     let mut timeline = match &args.timeline {

@@ -49,8 +49,8 @@ pub enum EffectArg {
     /// The lens's lateral chromatic aberration (`model::ChromaticAberration`;
     /// `calibrate` only: it pools several frames' fringes).
     ChromaticAberration,
-    /// The ISP's edge sharpening (`model::Sharpening`; `fit` only: one frame's
-    /// straight edges).
+    /// The ISP's edge sharpening (`model::Sharpening`; `fit` reads one frame's
+    /// straight edges, `calibrate` pools 8 s of frames).
     Sharpening,
 }
 

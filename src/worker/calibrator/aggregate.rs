@@ -206,6 +206,12 @@ impl Calibrator {
                 agg.chromatic_aberration = p.chromatic_aberration.clone();
             }
         }
+        // Sharpening likewise: a view without isolated straight edges shows no halo.
+        if agg.sharpening.amount.is_none() {
+            if let Some(p) = prev.as_ref().filter(|p| p.sharpening.amount.is_some()) {
+                agg.sharpening = p.sharpening.clone();
+            }
+        }
         if on[2] != agg.depth_of_field.present {
             match (&prev, on[2] && dp == 0) {
                 (Some(p), true) => agg.depth_of_field = p.depth_of_field.clone(),

@@ -120,6 +120,12 @@ pub struct CalibratorConfig {
     /// lens does not change, so a slow cadence (16 frames in its 8 s window) keeps
     /// its ~4 ms at 1280×960 off most updates.
     pub chromatic_refit_s: f64,
+    /// Fit the ISP's sharpening (`fit::sharpening`, the frame alone) ...
+    pub sharpening: bool,
+    /// ... on the first update at least this long (video s) after the last and
+    /// not taken by another slow term: an ISP does not change, so one frame per
+    /// second keeps its ~10 ms off most updates.
+    pub sharpening_refit_s: f64,
 }
 
 impl CalibratorConfig {
@@ -180,6 +186,8 @@ impl CalibratorConfig {
             vignetting_refit_s: 0.25,
             chromatic_aberration: true,
             chromatic_refit_s: 0.5,
+            sharpening: true,
+            sharpening_refit_s: 1.0,
         }
     }
 }

@@ -38,6 +38,7 @@ mod dof_pool;
 mod mb_pool;
 mod noise_fit;
 mod report;
+mod sharpening;
 mod tnr;
 mod vignetting;
 
@@ -152,6 +153,7 @@ pub struct Calibrator {
     colour_last_t_s: Option<f64>,
     vignetting: vignetting::VignettingVideo,
     chromatic: chromatic::ChromaticVideo,
+    sharpening: sharpening::SharpeningVideo,
     after_change: bool,
     presence: [Presence; 3],
     published: Option<CameraModel>,
@@ -228,6 +230,7 @@ impl Calibrator {
             colour_last_t_s: None,
             vignetting: Default::default(),
             chromatic: Default::default(),
+            sharpening: Default::default(),
             after_change: false,
             presence: Default::default(),
             published: None,
@@ -813,9 +816,17 @@ impl Calibrator {
         // The aberration waits for an update neither colour nor vignetting fitted
         // in, so the three slow terms' costs do not add up in one update.
         let busy = colour_due || model.vignetting.diagnostics.status != Status::NotFitted;
+        let mut busy = busy;
         if let Some(c) = self.fit_chromatic_at(current, busy) {
             model.chromatic_aberration = c;
             self.stages.add("fit.chromatic", t);
+            busy = true;
+        }
+        // Sharpening likewise waits for an update none of the others fitted in.
+        let t = Instant::now();
+        if let Some(s) = self.fit_sharpening_at(current, busy) {
+            model.sharpening = s;
+            self.stages.add("fit.sharpening", t);
         }
         model.reference.frame_interval_s = Some(self.cfg.frame_interval_s as f32);
         model.reference.pixels_per_radian = self.cfg.intrinsics.map(|k| k.fx);
