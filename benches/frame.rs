@@ -84,6 +84,17 @@ fn model() -> CameraModel {
             diagnostics: Diagnostics::not_fitted("bench"),
         };
     }
+    // FRAME_BENCH_SHARPENING=1: with an ISP's unsharp mask (k 1, σ 1.5 camera px;
+    // `model::Sharpening`, two separable passes on the layer before the composite).
+    if std::env::var("FRAME_BENCH_SHARPENING").is_ok_and(|v| v == "1") {
+        m.sharpening = blind_augment::model::Sharpening {
+            present: true,
+            amount: Some(1.0),
+            radius_px: Some(1.5),
+            overshoot: None,
+            diagnostics: Diagnostics::not_fitted("bench"),
+        };
+    }
     m
 }
 

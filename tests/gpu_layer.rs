@@ -790,3 +790,82 @@ fn composite_chromatic_aberration_matches_cpu_twin() {
         assert_eq!(off.chromatic, None);
     }
 }
+
+/// The ISP's unsharp mask (k 1.5, σ 1.5 px: a halo of several 8-bit steps at every
+/// edge of the content) against its twin, `synth::layer::sharpen`: on the raw
+/// layer, through the composite over an opaque background (the mask's output goes
+/// to the DoF buffer), and in place on the MB output (the chain's output before the
+/// mask read back from the same run without it). The deterministic passes'
+/// tolerance. Not vacuous: the masked composite differs from the plain one by more
+/// than 2 steps on average at the content's alpha edges; off in the settings, or
+/// absent in the model, it costs nothing.
+#[test]
+fn layer_sharpening_matches_cpu_twin() {
+    let Some(ctx) = gpu_context("layer_sharpening") else { return };
+    let layers = [test_layer(0), test_layer(1)];
+    let bg = vec![[0.3f32, 0.4, 0.5, 1.0]; W * H];
+    let rig = rig(&ctx, &layers, &bg);
+    let settings = LayerSettings { dof_half_res: false, ..LayerSettings::default() };
+    let fxs = chain(&ctx, &rig, settings);
+    let full = Rect::full(W, H);
+    let n = W * H;
+    let sharp = Sharpening {
+        present: true,
+        amount: Some(1.5),
+        radius_px: Some(1.5),
+        overshoot: Some(0.05),
+        diagnostics: Diagnostics::not_fitted("test"),
+    };
+    // On the raw layer, through the composite.
+    let mut m = model(false, false, false);
+    let fx = run(&ctx, &rig, &fxs, &m, 2);
+    assert_eq!(fx.sharpening, None, "no sharpening term: none applied");
+    let plain = output_8bit(&rig);
+    m.sharpening = sharp.clone();
+    m.validate().expect("valid model");
+    let fx = run(&ctx, &rig, &fxs, &m, 2);
+    let sh = fx.sharpening.expect("a present sharpening term is applied");
+    assert!(fx.margin_px(&settings) > sh.radius_px);
+    let gpu = output_8bit(&rig);
+    let bg8: Vec<[f32; 4]> = bg.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+    let (mut moved, mut edges) = (0.0f64, 0usize);
+    for e in 0..2 {
+        let masked =
+            blind_augment::synth::layer::sharpen(&layers[e].colour, W, full, &sh.taps, sh.radius_px, sh.amount);
+        let gain = fx.eye_gain(e, W as u32, H as u32);
+        let cpu = composite(&bg8, &layers[e].colour, Some(&masked), None, W, full, false, &gain);
+        let cpu8: Vec<[f32; 4]> = cpu.iter().map(|p| p.map(|v| (v * 255.0).round() / 255.0)).collect();
+        check(&format!("sharpen_composite_eye{e}"), &gpu[e * n..(e + 1) * n], &cpu8);
+        for i in 0..n {
+            let (x, y) = (i % W, i / W);
+            let a = |x: usize| layers[e].colour[y * W + x][3];
+            if x > 0 && x + 1 < W && (a(x + 1) - a(x - 1)).abs() > 0.5 {
+                moved += (0..3).map(|c| (gpu[e * n + i][c] - plain[e * n + i][c]).abs() as f64).sum::<f64>() / 3.0;
+                edges += 1;
+            }
+        }
+    }
+    let mean = moved / edges.max(1) as f64;
+    assert!(edges > 10 && mean > 2.0 / 255.0, "{edges} edge pixels moved {:.1}/255", mean * 255.0);
+    // In place on the MB output.
+    let mut m = model(false, true, false);
+    run(&ctx, &rig, &fxs, &m, 3);
+    let before = from_f16_bytes(&fxs.mb_out.download().expect("download"));
+    m.sharpening = sharp;
+    let fx = run(&ctx, &rig, &fxs, &m, 3);
+    let sh = fx.sharpening.expect("applied");
+    let after = from_f16_bytes(&fxs.mb_out.download().expect("download"));
+    for e in 0..2 {
+        let cpu = blind_augment::synth::layer::sharpen(
+            &before[e * n..(e + 1) * n],
+            W,
+            full,
+            &sh.taps,
+            sh.radius_px,
+            sh.amount,
+        );
+        check(&format!("sharpen_in_place_mb_eye{e}"), &after[e * n..(e + 1) * n], &cpu);
+    }
+    let off = FrameEffects::from_model(&m, None, None, &LayerSettings { sharpening: false, ..settings });
+    assert_eq!(off.sharpening, None);
+}

@@ -111,6 +111,30 @@ pub fn disc_tap(dx: f32, dy: f32, h: f32, sigma_px: f32) -> f32 {
     disc_cell_area(dx, dy, h, r) / (std::f32::consts::PI * r * r)
 }
 
+/// One-sided taps of the sharpening's blur as the renderer applies it
+/// (`render::layer`, its twin `synth::layer::sharpen`): the discrete Gaussian of
+/// variance σ² (`discrete_gaussian_kernel`), cut at `SHARPENING_TAPS` − 1 px and
+/// renormalised so w₀ + 2·Σ wᵢ = 1 (the cut drops under 2·10⁻⁴ of the mass up to σ 4
+/// px). Entry i is the weight of offsets ±i; the rest are 0.
+pub fn sharpening_taps(sigma_px: f32) -> [f32; SHARPENING_TAPS] {
+    let k = discrete_gaussian_kernel(sigma_px * sigma_px);
+    let r = k.len() / 2;
+    let mut w = [0.0f32; SHARPENING_TAPS];
+    for (i, v) in w.iter_mut().enumerate().take(r.min(SHARPENING_TAPS - 1) + 1) {
+        *v = k[r + i];
+    }
+    let sum = w[0] + 2.0 * w[1..].iter().sum::<f32>();
+    if sum > 0.0 {
+        for v in &mut w {
+            *v /= sum;
+        }
+    }
+    w
+}
+
+/// Taps of `sharpening_taps` (offsets 0..=15 px): what fits the pass's push block.
+pub const SHARPENING_TAPS: usize = 16;
+
 #[cfg(test)]
 mod tests {
     use super::*;

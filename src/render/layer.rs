@@ -2,6 +2,7 @@
 //! command buffer after the G-buffer pass: DoF (separable scatter, `layer_dof_h/v`,
 //! or the 2-D disc scatter `layer_dof_disc` when the model's kernel is a disc)
 //! → MB (McGuire 2012 tile-max / neighbour-max reconstruction, `layer_mb_*`) →
+//! the ISP's sharpening (an unsharp mask, `layer_sharpen`, two separable passes) →
 //! grain (the paper's Laplacian synthesis at the content's luma, `GrainRecorder`)
 //! → composite over the background with the blurred alpha (`composite.comp`).
 //! CPU twins: `synth::layer`.
@@ -34,6 +35,7 @@ const MB_NEIGHBOUR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_n
 const MB_GATHER: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_mb_gather.spv"));
 const LUMA: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_luma.spv"));
 const COMPOSITE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/composite.spv"));
+const SHARPEN: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/layer_sharpen.spv"));
 
 /// Timestamp slots of a profiled frame: frame start, G-buffer done, then each stage.
 pub const STAMP_START: u32 = 0;
@@ -92,6 +94,24 @@ const _: () = assert!(std::mem::offset_of!(LumaPush, vignette) == 80);
 const _: () = assert!(std::mem::offset_of!(LumaPush, seed) == 48);
 const _: () = assert!(std::mem::offset_of!(LumaPush, gain) == 64);
 
+/// `layer_sharpen.comp`'s push block.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct SharpenPush {
+    rect: [[i32; 4]; 2],
+    size: [i32; 2],
+    source: i32,
+    pass: i32,
+    radius: i32,
+    amount: f32,
+    pad: [i32; 2],
+    w: [[f32; 4]; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<SharpenPush>() == 128);
+const _: () = assert!(std::mem::offset_of!(SharpenPush, amount) == 52);
+const _: () = assert!(std::mem::offset_of!(SharpenPush, w) == 64);
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 struct CompositePush {
@@ -148,6 +168,9 @@ pub struct LayerSettings {
     /// Apply the lens's lateral chromatic aberration (`model::ChromaticAberration`;
     /// off = none even where the model has it).
     pub chromatic_aberration: bool,
+    /// Apply the ISP's sharpening (`model::Sharpening`; off = none even where the
+    /// model has it).
+    pub sharpening: bool,
     /// Store the composite with straight (unpremultiplied) alpha: the colour divided
     /// by the output alpha. The headset's projection layer uses it with
     /// XR_COMPOSITION_LAYER_UNPREMULTIPLIED_ALPHA_BIT, so the compositor, which
@@ -173,8 +196,31 @@ impl Default for LayerSettings {
             colour: true,
             vignetting: true,
             chromatic_aberration: true,
+            sharpening: true,
             straight_alpha: false,
         }
+    }
+}
+
+/// The unsharp mask one frame applies to the chain's output:
+/// out = L + amount·(L − G ∗ L), G the separable kernel `taps` (one-sided,
+/// `model::kernels::sharpening_taps`), reaching `radius_px`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sharpen {
+    pub amount: f32,
+    pub taps: [f32; crate::model::kernels::SHARPENING_TAPS],
+    pub radius_px: i32,
+}
+
+impl Sharpen {
+    /// The mask for amount k and σ in eye pixels; `None` where it does nothing.
+    pub fn new(amount: f32, sigma_eye_px: f32) -> Option<Self> {
+        if !(amount.is_finite() && amount > 0.0 && sigma_eye_px.is_finite() && sigma_eye_px > 0.0) {
+            return None;
+        }
+        let taps = crate::model::kernels::sharpening_taps(sigma_eye_px);
+        let radius_px = taps.iter().rposition(|&w| w > 0.0).unwrap_or(0) as i32;
+        (radius_px > 0).then_some(Self { amount, taps, radius_px })
     }
 }
 
@@ -197,6 +243,9 @@ pub struct FrameEffects {
     /// it: [1/s_R − 1, 1/s_B − 1] and 1 / the camera's half-diagonal in eye pixels.
     /// `None`: no cost.
     pub chromatic: Option<([f32; 2], f32)>,
+    /// The ISP's unsharp mask where the model has it and the settings apply it (its
+    /// σ scaled to eye pixels). `None`: no cost.
+    pub sharpening: Option<Sharpen>,
     /// Each eye's principal point in its buffer (px), where the passthrough
     /// camera's optical axis lands: `gbuffer::Eye::centre_px` (the XR view's
     /// asymmetric frustum; `StereoRenderer::render_to` sets it). `None`: the
@@ -286,6 +335,12 @@ impl FrameEffects {
                 .map(|d| d.map(|v| 1.0 / (1.0 + v) - 1.0))
                 .filter(|d| d.iter().all(|v| v.is_finite()) && *d != [0.0; 2])
                 .zip(inv_half_diag_eye_px),
+            // σ is in the camera's pixels: the eye buffer's are `ppr_ratio` of them.
+            sharpening: model
+                .sharpening
+                .applied()
+                .filter(|_| settings.sharpening)
+                .and_then(|(k, sigma)| Sharpen::new(k, sigma * ppr_ratio)),
             eye_centres_px: None,
             ppr_ratio,
             exposure_ratio: if exposure_ratio.is_finite() { exposure_ratio } else { 0.0 },
@@ -329,6 +384,10 @@ impl FrameEffects {
             let shift = d[0].abs().max(d[1].abs()) / inv;
             m += (shift.ceil() as i32).clamp(0, MAX_CHROMATIC_MARGIN_PX);
         }
+        // The mask's halo spreads as far as its blur reaches.
+        if let Some(sh) = self.sharpening {
+            m += sh.radius_px;
+        }
         m
     }
 }
@@ -356,6 +415,7 @@ pub struct LayerEffects<'a> {
     mb_gather: ComputePipeline<'a>,
     luma: ComputePipeline<'a>,
     composite: ComputePipeline<'a>,
+    sharpen: ComputePipeline<'a>,
     grain: GrainRecorder<'a>,
     dof_sigma: ComputePipeline<'a>,
     dof_reach: ComputePipeline<'a>,
@@ -472,6 +532,14 @@ impl<'a> LayerEffects<'a> {
                 1,
                 "composite",
             )?,
+            sharpen: ComputePipeline::with_layout(
+                ctx,
+                SHARPEN,
+                &[st, st, st, st],
+                size_of::<SharpenPush>() as u32,
+                1,
+                "layer sharpen",
+            )?,
             // Both eyes' rectangles stacked: at most the full eye, twice as tall.
             grain: GrainRecorder::new(ctx, w as usize, 2 * h as usize, grain_nodes)?,
             params: crate::gpu::Buffer::new(
@@ -519,6 +587,9 @@ impl<'a> LayerEffects<'a> {
         me.mb_neighbour.bind_resources(0, &[I(&me.tiles), I(&me.neighbour)])?;
         me.mb_gather.bind_resources(0, &[I(colour), I(&me.dof_out), I(motion), I(&me.neighbour), I(&me.mb_out)])?;
         me.luma.bind_resources(0, &[I(colour), I(&me.dof_out), I(&me.mb_out), B(me.grain.level0())])?;
+        // The DoF's horizontal buffer is free once the chain is past DoF: the
+        // mask's horizontal blur goes there.
+        me.sharpen.bind_resources(0, &[I(colour), I(&me.dof_out), I(&me.mb_out), I(&me.dof_tmp)])?;
         me.composite.bind_resources(
             0,
             &[I(colour), I(&me.dof_out), I(&me.mb_out), I(background), B(me.grain.field()), I(output)],
@@ -649,6 +720,27 @@ impl<'a> LayerEffects<'a> {
             self.mb_gather.record(cmd, bytemuck::bytes_of(&push), groups(gw, gh));
             source = 2;
         }
+        if let (true, Some(sh)) = (any, fx.sharpening) {
+            let mut w = [[0.0f32; 4]; 4];
+            for (i, v) in sh.taps.iter().enumerate() {
+                w[i / 4][i % 4] = *v;
+            }
+            let mut sp = SharpenPush {
+                rect: [to4(rects[0]), to4(rects[1])],
+                size: [self.width as i32, self.height as i32],
+                source,
+                pass: 0,
+                radius: sh.radius_px,
+                amount: sh.amount,
+                pad: [0; 2],
+                w,
+            };
+            self.sharpen.record(cmd, bytemuck::bytes_of(&sp), groups(gw, gh));
+            sp.pass = 1;
+            self.sharpen.record(cmd, bytemuck::bytes_of(&sp), groups(gw, gh));
+            // Raw colour is never written: the masked layer is in the DoF output.
+            source = source.max(1);
+        }
         stamp(STAMP_MB);
         let gain4 = fx.colour_gain.map_or([1.0, 1.0, 1.0, 0.0], |g| [g[0], g[1], g[2], 1.0]);
         let vignette4 = fx.vignette.map_or([0.0; 4], |(a, inv)| [a[0], a[1], a[2], inv]);
@@ -759,5 +851,33 @@ mod tests {
         assert_eq!(fx.margin_px(&s), base + 4);
         let off = LayerSettings { chromatic_aberration: false, ..s };
         assert_eq!(FrameEffects::from_model(&m, Some(2000.0), None, &off).margin_px(&off), base);
+    }
+
+    /// The mask's σ is in camera pixels: at twice the camera's pixels per radian a
+    /// σ of 1.5 px is 3 eye px, whose taps (cut at 15 px, w₀ + 2Σwᵢ = 1) widen the
+    /// margin by their reach; off in the settings, nothing.
+    #[test]
+    fn sharpening_scales_to_eye_pixels_and_widens_the_margin() {
+        let mut m = CameraModel::empty(1280, 960);
+        m.reference.pixels_per_radian = Some(1000.0);
+        let s = LayerSettings::default();
+        let base = FrameEffects::from_model(&m, Some(2000.0), None, &s).margin_px(&s);
+        m.sharpening = crate::model::Sharpening {
+            present: true,
+            amount: Some(1.0),
+            radius_px: Some(1.5),
+            overshoot: None,
+            diagnostics: Diagnostics::not_fitted("test"),
+        };
+        let fx = FrameEffects::from_model(&m, Some(2000.0), None, &s);
+        let sh = fx.sharpening.expect("applied");
+        assert_eq!(sh.radius_px, 15, "σ 3 eye px reaches past the 15-px cut");
+        let sum = sh.taps[0] + 2.0 * sh.taps[1..].iter().sum::<f32>();
+        assert!((sum - 1.0).abs() < 1e-6, "{sum}");
+        let var: f32 = 2.0 * sh.taps.iter().enumerate().map(|(i, w)| (i * i) as f32 * w).sum::<f32>();
+        assert!((var - 9.0).abs() < 0.05, "variance {var} for σ 3 px");
+        assert_eq!(fx.margin_px(&s), base + 15);
+        let off = LayerSettings { sharpening: false, ..s };
+        assert_eq!(FrameEffects::from_model(&m, Some(2000.0), None, &off).sharpening, None);
     }
 }

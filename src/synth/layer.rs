@@ -512,6 +512,50 @@ pub fn motion_blur_layer(
     out
 }
 
+/// The ISP's unsharp mask on the chain's output `layer` (premultiplied colour and
+/// alpha, `width` wide), inside `rect` (nothing outside it):
+/// out = L + amount·(L − G ∗ L), G separable with the one-sided `taps` (offsets
+/// 0..=`radius`, `model::kernels::sharpening_taps`), the horizontal pass first and
+/// the sums in the order of `layer_sharpen.comp`. Pixels outside `rect` keep their
+/// value. Twin of `render::layer`'s sharpening passes.
+pub fn sharpen(layer: &[[f32; 4]], width: usize, rect: Rect, taps: &[f32], radius: i32, amount: f32) -> Vec<[f32; 4]> {
+    let height = layer.len() / width.max(1);
+    let inside =
+        |x: i32, y: i32| x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height && rect.contains(x, y);
+    let at = |v: &[[f32; 4]], x: i32, y: i32| if inside(x, y) { v[y as usize * width + x as usize] } else { [0.0; 4] };
+    let tap = |i: i32| taps.get(i.unsigned_abs() as usize).copied().unwrap_or(0.0);
+    let mut tmp = vec![[0.0f32; 4]; layer.len()];
+    for (i, t) in tmp.iter_mut().enumerate() {
+        let (x, y) = ((i % width) as i32, (i / width) as i32);
+        if inside(x, y) {
+            let mut acc = [0.0f32; 4];
+            for d in -radius..=radius {
+                let v = at(layer, x + d, y);
+                for c in 0..4 {
+                    acc[c] += tap(d) * v[c];
+                }
+            }
+            *t = acc;
+        }
+    }
+    let mut out = layer.to_vec();
+    for (i, o) in out.iter_mut().enumerate() {
+        let (x, y) = ((i % width) as i32, (i / width) as i32);
+        if inside(x, y) {
+            let mut acc = [0.0f32; 4];
+            for d in -radius..=radius {
+                let v = at(&tmp, x, y + d);
+                for c in 0..4 {
+                    acc[c] += tap(d) * v[c];
+                }
+            }
+            let l = layer[i];
+            *o = std::array::from_fn(|c| l[c] + amount * (l[c] - acc[c]));
+        }
+    }
+    out
+}
+
 /// The camera's colour gain (`model::Colour::gains_or_one`, linear light) on one
 /// premultiplied encoded (sRGB) pixel: its straight colour decoded, multiplied,
 /// re-encoded and clamped to [0, 1]; unchanged where alpha ≤ 1e-3

@@ -616,6 +616,11 @@ fn render_demo(out: &std::path::Path, clean: &Rgb, depth: &Plane, truth: &Camera
     );
     let _ = writeln!(
         r,
+        "| sharpening | not applied by the renderer; the last live model's reading: {} |",
+        sharpening_cell(&fitted.sharpening)
+    );
+    let _ = writeln!(
+        r,
         "\nWall time per frame (render + GPU wait + readback, both eyes): naive {:.1} ms, matched {:.1} ms on {} — a software rasteriser when that is lavapipe; see BENCHMARKS.md for GPU-timed passes.",
         stats.naive_ms / stats.frames as f64,
         stats.matched_ms / stats.frames as f64,
@@ -660,6 +665,15 @@ fn corner_v(m: &CameraModel) -> Option<f32> {
 /// The live video's half-diagonal (px, 320×240, pixel-index convention as
 /// `fit::chromatic`).
 const LIVE_HALF_DIAG_PX: f64 = 199.3;
+
+/// A model's sharpening as the report shows it: its state, and the halo read where
+/// there is one.
+fn sharpening_cell(s: &blind_augment::model::Sharpening) -> String {
+    match s.overshoot {
+        Some(o) => format!("{} ({:.1}%)", s.diagnostics.status_str(), 100.0 * o),
+        None => s.diagnostics.status_str().into(),
+    }
+}
 
 /// Red's and blue's corner shifts (px) of a model's aberration at a frame with
 /// this half-diagonal (present or not).
@@ -773,7 +787,7 @@ impl LiveCalibration {
         );
         let _ = writeln!(
             md,
-            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error | corner V (truth {:.2}) | red, blue corner shift px (truth {:+.2}, {:+.2}) |\n|---|---|---|---|---|---|---|---|",
+            "| generation | seen at video time | λ (truth {:.2}) | noise error | δ RMSE (px) | white balance error | corner V (truth {:.2}) | red, blue corner shift px (truth {:+.2}, {:+.2}) | sharpening halo (truth none) |\n|---|---|---|---|---|---|---|---|---|",
             truth.motion_blur.exposure_or_zero(),
             corner_v(truth).unwrap_or(1.0),
             ca_shift_px(truth, LIVE_HALF_DIAG_PX).unwrap_or([0.0; 2])[0],
@@ -790,7 +804,7 @@ impl LiveCalibration {
             let m = &snap.model;
             let _ = writeln!(
                 md,
-                "| {} | {t:.2} s | {} | {} | {} | {} | {} | {} |",
+                "| {} | {t:.2} s | {} | {} | {} | {} | {} | {} | {} |",
                 snap.generation,
                 m.motion_blur.exposure.map_or("—".into(), |l| format!("{l:.3}")),
                 noise_relative_error(&m.noise, &truth.noise).map_or("—".into(), |e| format!("{:.1}%", 100.0 * e)),
@@ -804,7 +818,8 @@ impl LiveCalibration {
                 match (m.chromatic_aberration.present, ca_shift_px(m, LIVE_HALF_DIAG_PX)) {
                     (true, Some(d)) => format!("{:+.2}, {:+.2}", d[0], d[1]),
                     _ => m.chromatic_aberration.diagnostics.status_str().into(),
-                }
+                },
+                sharpening_cell(&m.sharpening)
             );
             points.push((*t, exposure_error(m, truth) as f64));
         }
