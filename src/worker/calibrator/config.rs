@@ -124,7 +124,7 @@ pub struct CalibratorConfig {
     pub sharpening: bool,
     /// ... on the first update at least this long (video s) after the last and
     /// not taken by another slow term: an ISP does not change, so one frame per
-    /// second keeps its ~10 ms off most updates.
+    /// second keeps its 35–45 ms at 1280×960 off most updates.
     pub sharpening_refit_s: f64,
 }
 

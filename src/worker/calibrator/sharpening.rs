@@ -11,7 +11,8 @@ use crate::fit::sharpening::{self, SharpeningCosts};
 /// Frames pooled: the last this many seconds of video (8 frames at one per 1 s).
 pub(super) const SHARPENING_WINDOW_S: f64 = 8.0;
 /// Candidate edges fitted per frame: ~0.4 ms each on one core, so 60 keep a refit
-/// near 25 ms (BENCHMARKS.md "Sharpening"); 8 s of frames pool up to 480.
+/// at 22–47 ms (320×240 to 1280×960; BENCHMARKS.md "Sharpening"); 8 s of frames
+/// pool up to 480.
 pub(super) const EDGES_PER_FRAME: usize = 60;
 
 /// The sharpening fit's state: the frames' tables of the window and the last
