@@ -17,6 +17,8 @@
 
 use super::grain::GrainRecorder;
 use super::params::EffectParams;
+pub use super::sharpen::Sharpen;
+use super::sharpen::SharpenPush;
 use crate::gpu::{Buffer, ComputePipeline, GpuContext, GpuError, Image, QueryPool, Resource, EYES};
 use crate::model::{half_rect, tile_rect, EyeChromatic, EyeGain, EyeVignette, Rect};
 use crate::model::{CameraModel, DepthUnits, MAX_DOF_SIGMA_PX};
@@ -93,24 +95,6 @@ const _: () = assert!(std::mem::size_of::<LumaPush>() == 112);
 const _: () = assert!(std::mem::offset_of!(LumaPush, vignette) == 80);
 const _: () = assert!(std::mem::offset_of!(LumaPush, seed) == 48);
 const _: () = assert!(std::mem::offset_of!(LumaPush, gain) == 64);
-
-/// `layer_sharpen.comp`'s push block.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-struct SharpenPush {
-    rect: [[i32; 4]; 2],
-    size: [i32; 2],
-    source: i32,
-    pass: i32,
-    radius: i32,
-    amount: f32,
-    pad: [i32; 2],
-    w: [[f32; 4]; 4],
-}
-
-const _: () = assert!(std::mem::size_of::<SharpenPush>() == 128);
-const _: () = assert!(std::mem::offset_of!(SharpenPush, amount) == 52);
-const _: () = assert!(std::mem::offset_of!(SharpenPush, w) == 64);
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -199,28 +183,6 @@ impl Default for LayerSettings {
             sharpening: true,
             straight_alpha: false,
         }
-    }
-}
-
-/// The unsharp mask one frame applies to the chain's output:
-/// out = L + amount·(L − G ∗ L), G the separable kernel `taps` (one-sided,
-/// `model::kernels::sharpening_taps`), reaching `radius_px`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Sharpen {
-    pub amount: f32,
-    pub taps: [f32; crate::model::kernels::SHARPENING_TAPS],
-    pub radius_px: i32,
-}
-
-impl Sharpen {
-    /// The mask for amount k and σ in eye pixels; `None` where it does nothing.
-    pub fn new(amount: f32, sigma_eye_px: f32) -> Option<Self> {
-        if !(amount.is_finite() && amount > 0.0 && sigma_eye_px.is_finite() && sigma_eye_px > 0.0) {
-            return None;
-        }
-        let taps = crate::model::kernels::sharpening_taps(sigma_eye_px);
-        let radius_px = taps.iter().rposition(|&w| w > 0.0).unwrap_or(0) as i32;
-        (radius_px > 0).then_some(Self { amount, taps, radius_px })
     }
 }
 

@@ -8,6 +8,7 @@ pub mod grain;
 pub mod layer;
 pub mod motion_blur;
 pub mod params;
+pub mod sharpen;
 pub mod spacewarp;
 pub mod stereo;
 
