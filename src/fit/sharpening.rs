@@ -88,10 +88,10 @@ pub const PRESENT_SIGMAS: f64 = 3.0;
 pub const STDERR_FLOOR: f64 = 0.003;
 
 /// The summed profile log-likelihood tables of one or more frames: n_e·ln SSR per
-/// (radius, amount), in total and per jackknife group. Frames add (`add`).
+/// (radius, amount), per jackknife group (their sum is the whole table). Frames
+/// add (`add`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SharpeningCosts {
-    total: Vec<f64>,
     groups: Vec<Vec<f64>>,
     /// Per group, the edges' profiles normalised to their fits' far levels (0 dark,
     /// 1 bright), summed per `ESF_BIN_PX` bin of t: (sum, count).
@@ -106,7 +106,6 @@ impl Default for SharpeningCosts {
     fn default() -> Self {
         let n = RADII.len() * AMOUNT_STEPS;
         Self {
-            total: vec![0.0; n],
             groups: vec![vec![0.0; n]; GROUPS],
             esf: vec![vec![(0.0, 0.0); ESF_BINS]; GROUPS],
             edges: 0,
@@ -118,9 +117,6 @@ impl Default for SharpeningCosts {
 impl SharpeningCosts {
     /// Pool another frame's tables (frames' noise independent: log-likelihoods add).
     pub fn add(&mut self, other: &SharpeningCosts) {
-        for (a, b) in self.total.iter_mut().zip(&other.total) {
-            *a += b;
-        }
         for (g, o) in self.groups.iter_mut().zip(&other.groups) {
             for (a, b) in g.iter_mut().zip(o) {
                 *a += b;
@@ -196,7 +192,6 @@ pub fn frame_costs(image: &Rgb, max_edges: usize) -> SharpeningCosts {
         let floor = n * 1e-9;
         for (j, ssr) in table.iter().enumerate() {
             let c = n * (ssr + floor).ln();
-            costs.total[j] += c;
             costs.groups[g][j] += c;
         }
         costs.edges += 1;
@@ -232,7 +227,8 @@ pub fn decide(costs: &SharpeningCosts, method: &str, started: std::time::Instant
             None,
         ));
     }
-    let (k, radius) = minimum(&costs.total);
+    let total: Vec<f64> = (0..costs.groups[0].len()).map(|j| costs.groups.iter().map(|g| g[j]).sum()).collect();
+    let (k, radius) = minimum(&total);
     let observed = costs.observed_overshoot(|_| true);
     let jack: Vec<f64> = (0..GROUPS).map(|g| costs.observed_overshoot(|h| h != g)).collect();
     let mean = jack.iter().sum::<f64>() / GROUPS as f64;
@@ -503,23 +499,12 @@ fn edge_table(e: &Edge) -> (Vec<f64>, f64, (usize, f64)) {
     let mut table = vec![f64::INFINITY; RADII.len() * AMOUNT_STEPS];
     let mut best = (f64::INFINITY, 0.0, (0usize, 0.0f64));
     for (r, &radius) in RADII.iter().enumerate() {
-        let var_m = radius * radius;
-        let (k4, k6) = (var_m * e.kappa4, var_m * e.kappa6);
         for (ei, t0) in t0.iter().enumerate() {
             let se = edge_sigma(ei);
-            let big_s = (se * se + var_m).sqrt();
-            let (c4, c6, c44) =
-                (k4 / (24.0 * big_s.powi(4)), k6 / (720.0 * big_s.powi(6)), k4 * k4 / (1152.0 * big_s.powi(8)));
+            let mask = MaskBlur::new(e, se, radius);
             let (mut s0, mut s1, mut s00, mut s01, mut s11, mut sy0, mut sy1) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
             for (&(w, t, y), &v0) in bins.iter().zip(t0) {
-                let z = t / big_s;
-                let z2 = z * z;
-                let he3 = z * (z2 - 3.0);
-                let he5 = z * (z2 * (z2 - 10.0) + 15.0);
-                let he7 = z * (z2 * (z2 * (z2 - 21.0) + 105.0) - 105.0);
-                let (cdf, pdf) = table_n.at(z);
-                let blurred = cdf - pdf * (c4 * he3 + c6 * he5 + c44 * he7);
-                let v1 = v0 - blurred;
+                let v1 = v0 - mask.at(t, table_n);
                 s0 += w * v0;
                 s1 += w * v1;
                 s00 += w * v0 * v0;
@@ -550,24 +535,45 @@ fn edge_table(e: &Edge) -> (Vec<f64>, f64, (usize, f64)) {
     (table, best.1, best.2)
 }
 
+/// G ∗ v of an edge of blur σ_e under the mask of radius σ, at distance t: the
+/// Edgeworth series of the module's doc, its coefficients fixed per (edge, σ_e, σ).
+struct MaskBlur {
+    big_s: f64,
+    c4: f64,
+    c6: f64,
+    c44: f64,
+}
+
+impl MaskBlur {
+    fn new(e: &Edge, edge_sigma_px: f64, radius_px: f64) -> Self {
+        let var_m = radius_px * radius_px;
+        let (k4, k6) = (var_m * e.kappa4, var_m * e.kappa6);
+        let big_s = (edge_sigma_px * edge_sigma_px + var_m).sqrt();
+        Self {
+            big_s,
+            c4: k4 / (24.0 * big_s.powi(4)),
+            c6: k6 / (720.0 * big_s.powi(6)),
+            c44: k4 * k4 / (1152.0 * big_s.powi(8)),
+        }
+    }
+
+    #[inline]
+    fn at(&self, t: f64, table: &NormalTable) -> f64 {
+        let z = t / self.big_s;
+        let z2 = z * z;
+        let he3 = z * (z2 - 3.0);
+        let he5 = z * (z2 * (z2 - 10.0) + 15.0);
+        let he7 = z * (z2 * (z2 * (z2 - 21.0) + 105.0) - 105.0);
+        let (cdf, pdf) = table.at(z);
+        cdf - pdf * (self.c4 * he3 + self.c6 * he5 + self.c44 * he7)
+    }
+}
+
 /// The mask's profile T₀ + k·T₁ of an edge at distance t (`edge_table`'s template).
 fn template(e: &Edge, t: f64, edge_sigma_px: f64, radius_px: f64, k: f64) -> f64 {
-    let var_m = radius_px * radius_px;
-    let (k4, k6) = (var_m * e.kappa4, var_m * e.kappa6);
-    let big_s = (edge_sigma_px * edge_sigma_px + var_m).sqrt();
-    let z = t / big_s;
-    let z2 = z * z;
-    let he3 = z * (z2 - 3.0);
-    let he5 = z * (z2 * (z2 - 10.0) + 15.0);
-    let he7 = z * (z2 * (z2 * (z2 - 21.0) + 105.0) - 105.0);
-    let pdf = (-0.5 * z2).exp() * 0.398_942_280_401_432_7;
-    let blurred = phi_cdf(z)
-        - pdf
-            * (k4 / (24.0 * big_s.powi(4)) * he3
-                + k6 / (720.0 * big_s.powi(6)) * he5
-                + k4 * k4 / (1152.0 * big_s.powi(8)) * he7);
-    let v0 = phi_cdf(t / edge_sigma_px);
-    v0 + k * (v0 - blurred)
+    let table = normal_table();
+    let v0 = table.at(t / edge_sigma_px).0;
+    v0 + k * (v0 - MaskBlur::new(e, edge_sigma_px, radius_px).at(t, table))
 }
 
 /// RMS residual of the edge's best fit (α + β·template) over its samples past
